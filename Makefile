@@ -1,0 +1,40 @@
+# vical: every target creates/reuses the local virtual environment first.
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.vical-installed
+export MUJOCO_GL ?= egl
+
+.PHONY: venv test test-slow lint train demo bench clean
+
+venv: $(STAMP)
+
+# torch first (the CPU wheel on this machine's disk); then the project with a torch range 2.13.0 satisfies.
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q torch==2.13.0
+	$(PY) -m pip install -q -e '.[dev]'
+	touch $(STAMP)
+
+lint: venv
+	$(VENV)/bin/ruff check .
+
+test: lint
+	$(VENV)/bin/pytest
+
+test-slow: venv
+	$(VENV)/bin/pytest -m slow
+
+train: venv
+	$(VENV)/bin/vical-train
+
+demo: venv
+	$(VENV)/bin/vical-sim-demo
+
+bench: venv
+	$(PY) -m pip install -q -e '.[dev,bench]'
+	for b in experiments/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache outputs runs

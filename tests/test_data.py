@@ -1,0 +1,61 @@
+"""Shared data containers: validation, target geometry in Kalibr's numbering."""
+
+import numpy as np
+import pytest
+
+from vical.data import CameraFrames, DataError, ImuSamples, SensorTruth, Target, TargetError, seconds_since
+from vical.geometry import CameraModel
+
+
+def test_checkerboard_points_follow_kalibr_numbering():
+    t = Target.checkerboard(rows=6, cols=7, square=0.07)
+    p = t.points
+    assert p.shape == (42, 3)
+    # id = r * cols + c at (r * row_spacing, c * col_spacing, 0)
+    assert np.allclose(p[7 * 2 + 3], [0.14, 0.21, 0.0])
+    assert np.allclose(t.center, [0.175, 0.21, 0.0])
+    assert np.allclose(t.outline[2], p[-1])
+
+
+def test_target_rejects_bad_geometry():
+    with pytest.raises(TargetError, match="spacing"):
+        Target.checkerboard(6, 7, -0.07)
+    with pytest.raises(TargetError, match="2 x 2"):
+        Target.checkerboard(1, 7, 0.07)
+
+
+def test_imu_samples_validate_time_and_shape():
+    t = np.arange(5, dtype=np.int64) * 5_000_000
+    ImuSamples(t, np.zeros((5, 3)), np.zeros((5, 3)))
+    with pytest.raises(DataError, match="strictly increasing"):
+        ImuSamples(t[::-1], np.zeros((5, 3)), np.zeros((5, 3)))
+    with pytest.raises(DataError, match="integer nanoseconds"):
+        ImuSamples(t.astype(float), np.zeros((5, 3)), np.zeros((5, 3)))
+    with pytest.raises(DataError, match="shape"):
+        ImuSamples(t, np.zeros((4, 3)), np.zeros((5, 3)))
+    with pytest.raises(DataError, match="NaN"):
+        ImuSamples(t, np.full((5, 3), np.nan), np.zeros((5, 3)))
+
+
+def test_camera_frames_ragged_detections():
+    f = CameraFrames(np.array([0, 100], dtype=np.int64), [np.zeros((3, 2)), np.zeros((0, 2))], [[0, 1, 2], []])
+    assert f.num_detections.tolist() == [3, 0]
+    assert len(f.select(f.num_detections > 0)) == 1
+    with pytest.raises(DataError, match="ids"):
+        CameraFrames(np.array([0], dtype=np.int64), [np.zeros((3, 2))], [[0, 1]])
+
+
+def test_seconds_since_keeps_nanoseconds_on_epoch_times():
+    t0 = 1_700_000_000_123_456_789
+    assert seconds_since(np.array([t0 + 1]), t0)[0] == pytest.approx(1e-9, abs=1e-18)
+
+
+def test_sensor_truth_dict_roundtrip_and_rotation_check():
+    cam = CameraModel.from_hfov(1.0, dist=[0.01, -0.02, 0, 0])
+    truth = SensorTruth(cam, np.eye(4), time_offset=0.0123)
+    back = SensorTruth.from_dict(truth.to_dict())
+    assert back.camera == cam and back.time_offset == 0.0123
+    bad = np.eye(4)
+    bad[0, 0] = 2.0
+    with pytest.raises(DataError, match="rotation"):
+        SensorTruth(cam, bad)

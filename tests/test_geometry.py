@@ -1,0 +1,125 @@
+"""Geometry: rotations and transforms against closed forms, camera models against OpenCV."""
+
+import cv2
+import numpy as np
+import pytest
+
+from vical.geometry import (
+    CameraModel,
+    CameraModelError,
+    euler_to_matrix,
+    invert_transform,
+    make_transform,
+    matrix_to_euler,
+    matrix_to_quat,
+    quat_to_matrix,
+    so3_exp,
+    so3_log,
+    transform_points,
+)
+
+
+def random_rotations(n, seed=0):
+    rng = np.random.default_rng(seed)
+    return [so3_exp(rng.normal(size=3) * 1.2) for _ in range(n)]
+
+
+def test_so3_exp_log_roundtrip_including_near_pi():
+    rng = np.random.default_rng(1)
+    for w in [*list(rng.normal(size=(20, 3))), np.array([np.pi - 1e-6, 0, 0]), np.array([0, 0, 1e-10])]:
+        R = so3_exp(w)
+        assert np.allclose(R @ R.T, np.eye(3), atol=1e-12)
+        assert np.allclose(so3_exp(so3_log(R)), R, atol=1e-9)
+
+
+def test_so3_exp_matches_rodrigues_of_opencv():
+    w = np.array([0.3, -1.1, 0.7])
+    assert np.allclose(so3_exp(w), cv2.Rodrigues(w)[0], atol=1e-12)
+
+
+def test_quaternion_roundtrip_and_known_value():
+    for R in random_rotations(20):
+        q = matrix_to_quat(R)
+        assert q[0] >= 0
+        assert np.allclose(quat_to_matrix(q), R, atol=1e-12)
+    # 90 deg about z: [w, x, y, z] = [cos 45, 0, 0, sin 45]
+    Rz = quat_to_matrix([np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)])
+    assert np.allclose(Rz @ [1, 0, 0], [0, 1, 0])
+
+
+def test_euler_order_is_rz_ry_rx():
+    roll, pitch, yaw = 0.1, -0.2, 1.57
+    Rx = so3_exp([roll, 0, 0])
+    Ry = so3_exp([0, pitch, 0])
+    Rz = so3_exp([0, 0, yaw])
+    assert np.allclose(euler_to_matrix([roll, pitch, yaw]), Rz @ Ry @ Rx)
+    for R in random_rotations(20, seed=3):
+        assert np.allclose(euler_to_matrix(matrix_to_euler(R)), R, atol=1e-10)
+
+
+def test_transform_inverse_and_points():
+    R = so3_exp([0.2, 0.3, -0.4])
+    T_a_b = make_transform(R, [1.0, -2.0, 0.5])
+    p_b = np.array([[0.1, 0.2, 0.3], [1.0, 0.0, 0.0]])
+    p_a = transform_points(T_a_b, p_b)
+    assert np.allclose(p_a, (R @ p_b.T).T + [1.0, -2.0, 0.5])
+    assert np.allclose(transform_points(invert_transform(T_a_b), p_a), p_b)
+
+
+@pytest.fixture
+def points_cam():
+    rng = np.random.default_rng(5)
+    p = rng.uniform([-0.8, -0.6, 1.0], [0.8, 0.6, 2.0], size=(200, 3))
+    return p
+
+
+def test_radtan_projection_matches_opencv(points_cam):
+    cam = CameraModel.from_hfov(1.0, dist=[0.03, -0.02, 0.001, -0.0008])
+    uv, front = cam.project(points_cam)
+    ref, _ = cv2.projectPoints(points_cam, np.zeros(3), np.zeros(3), cam.K, np.r_[cam.dist, 0.0])
+    assert front.all()
+    assert np.abs(uv - ref[:, 0]).max() < 1e-9
+
+
+def test_equidistant_projection_matches_opencv_fisheye(points_cam):
+    cam = CameraModel.from_hfov(1.2, dist=[0.01, -0.005, 0.002, -0.001], distortion="equidistant")
+    uv, _ = cam.project(points_cam)
+    ref, _ = cv2.fisheye.projectPoints(points_cam[:, None, :], np.zeros(3), np.zeros(3), cam.K, cam.dist)
+    assert np.abs(uv - ref[:, 0]).max() < 1e-9
+
+
+@pytest.mark.parametrize("distortion", ["radtan", "equidistant"])
+def test_unproject_inverts_project(points_cam, distortion):
+    cam = CameraModel.from_hfov(
+        1.0, dist=[0.02, 0.01, 0.0, 0.0], distortion=distortion, distortion_center_offset=[12.0, -8.0]
+    )
+    uv, _ = cam.project(points_cam)
+    rays = cam.unproject(uv)
+    assert np.abs(rays[:, :2] - points_cam[:, :2] / points_cam[:, 2:]).max() < 1e-11
+
+
+def test_from_hfov_focal_and_centre():
+    cam = CameraModel.from_hfov(1.0, 640, 480)
+    assert cam.fx == pytest.approx(320.0 / np.tan(0.5))
+    assert (cam.cx, cam.cy) == (319.5, 239.5)
+    assert cam.hfov == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "message"),
+    [
+        ({"hfov": 0.0}, "FOV"),
+        ({"hfov": np.pi}, "FOV"),
+        ({"hfov": 1.0, "dist": [np.nan, 0, 0, 0]}, "finite"),
+        ({"hfov": 1.0, "distortion": "fov"}, "unknown"),
+    ],
+)
+def test_impossible_cameras_are_rejected(kwargs, message):
+    with pytest.raises(CameraModelError, match=message):
+        CameraModel.from_hfov(**kwargs)
+
+
+def test_folding_distortion_is_reported():
+    CameraModel.from_hfov(1.0, dist=[-0.05, 0.02, 0, 0]).check_invertible()
+    with pytest.raises(CameraModelError, match="not invertible"):
+        CameraModel.from_hfov(1.0, dist=[-2.0, 0.0, 0, 0]).check_invertible()

@@ -1,0 +1,28 @@
+"""Typed containers shared by the simulator, the calibrator and the file formats."""
+
+from vical.data.target import Target, TargetError
+from vical.data.types import (
+    NS_PER_S,
+    CameraFrames,
+    DataError,
+    ImuNoise,
+    ImuSamples,
+    Recording,
+    SensorTruth,
+    Trajectory,
+    seconds_since,
+)
+
+__all__ = [
+    "NS_PER_S",
+    "CameraFrames",
+    "DataError",
+    "ImuNoise",
+    "ImuSamples",
+    "Recording",
+    "SensorTruth",
+    "Target",
+    "TargetError",
+    "Trajectory",
+    "seconds_since",
+]

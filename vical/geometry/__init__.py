@@ -1,0 +1,39 @@
+"""Pure geometry: rigid transforms, rotation parameterisations and camera models."""
+
+from vical.geometry.camera import DISTORTION_MODELS, CameraModel, CameraModelError
+from vical.geometry.transforms import (
+    euler_to_matrix,
+    interpolate_transform,
+    invert_transform,
+    make_transform,
+    matrix_to_euler,
+    matrix_to_quat,
+    quat_to_matrix,
+    rotation_angle,
+    skew,
+    slerp_rotation,
+    so3_exp,
+    so3_log,
+    transform_error,
+    transform_points,
+)
+
+__all__ = [
+    "DISTORTION_MODELS",
+    "CameraModel",
+    "CameraModelError",
+    "euler_to_matrix",
+    "interpolate_transform",
+    "invert_transform",
+    "make_transform",
+    "matrix_to_euler",
+    "matrix_to_quat",
+    "quat_to_matrix",
+    "rotation_angle",
+    "skew",
+    "slerp_rotation",
+    "so3_exp",
+    "so3_log",
+    "transform_error",
+    "transform_points",
+]

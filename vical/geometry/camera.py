@@ -1,0 +1,277 @@
+"""Camera models: pinhole projection with radial-tangential or equidistant (fisheye) distortion.
+
+Frames and units: points ``p_cam`` (N, 3) [m] are in the OpenCV/Kalibr camera frame (+z along
+the optical axis, +x right, +y down in the image); pixels ``uv`` (N, 2) [px] with the centre of the
+top-left pixel at (0, 0).
+
+Projection of a point: normalised coordinates ``x = p[:2] / p[2]``, distortion ``x_d = d(x)``,
+pixels ``u = fx * x_d + cx``, ``v = fy * x_d[1] + cy``. The distortion functions follow Kalibr,
+OpenCV and GTSAM exactly:
+
+- ``radtan`` (coefficients ``[k1, k2, p1, p2]``): OpenCV's model with ``k3 = 0``
+  (``Cal3DS2`` in GTSAM).
+- ``equidistant`` (coefficients ``[k1, k2, k3, k4]``): ``theta = atan(r)``,
+  ``theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)``,
+  ``x_d = theta_d / r * x`` (OpenCV ``fisheye``, GTSAM ``Cal3Fisheye``).
+
+The simulator can also place the centre of distortion away from the principal point
+(``distortion_center_offset`` [px], the paper's "asymmetric distortion"): distortion is then
+applied to the normalised coordinates relative to that centre. The calibrator's models always
+have the centre at the principal point, so such a lens cannot be fitted exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+DISTORTION_MODELS = {"radtan": 4, "equidistant": 4}
+
+
+class CameraModelError(ValueError):
+    """Camera parameters that cannot describe a physical camera."""
+
+
+@dataclass(frozen=True)
+class CameraModel:
+    """A pinhole camera with lens distortion.
+
+    Attributes:
+        distortion: ``"radtan"`` or ``"equidistant"``.
+        width, height: image size [px].
+        fx, fy: focal lengths [px]; cx, cy: principal point [px].
+        dist: (4,) distortion coefficients (``[k1, k2, p1, p2]`` or ``[k1, k2, k3, k4]``).
+        distortion_center_offset: (2,) [px] centre of distortion minus principal point
+            (simulation of asymmetric lenses; zero for every calibrated model).
+    """
+
+    distortion: str
+    width: int
+    height: int
+    fx: float
+    fy: float
+    cx: float
+    cy: float
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(4))
+    distortion_center_offset: np.ndarray = field(default_factory=lambda: np.zeros(2))
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "dist", np.asarray(self.dist, dtype=float).reshape(-1).copy())
+        offset = np.asarray(self.distortion_center_offset, dtype=float).reshape(-1).copy()
+        object.__setattr__(self, "distortion_center_offset", offset)
+        self.validate()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_hfov(
+        cls,
+        hfov: float,
+        width: int = 640,
+        height: int = 480,
+        dist: np.ndarray | None = None,
+        distortion: str = "radtan",
+        distortion_center_offset: np.ndarray | None = None,
+    ) -> CameraModel:
+        """Square-pixel camera with horizontal field of view ``hfov`` [rad]: ``fx = (W/2) / tan(hfov/2)``.
+
+        The principal point is the image centre ``((W-1)/2, (H-1)/2)`` in pixel-centre coordinates.
+        """
+        if not np.isfinite(hfov) or not 0.0 < hfov < np.pi:
+            raise CameraModelError(f"horizontal FOV must be in (0, pi) rad, got {hfov}")
+        f = (width / 2.0) / np.tan(hfov / 2.0)
+        return cls(
+            distortion=distortion,
+            width=int(width),
+            height=int(height),
+            fx=f,
+            fy=f,
+            cx=(width - 1) / 2.0,
+            cy=(height - 1) / 2.0,
+            dist=np.zeros(4) if dist is None else dist,
+            distortion_center_offset=np.zeros(2) if distortion_center_offset is None else distortion_center_offset,
+        )
+
+    def with_intrinsics(self, fx: float, fy: float, cx: float, cy: float, dist: np.ndarray) -> CameraModel:
+        """Same model and image size with other parameters (centre of distortion at the principal point)."""
+        return replace(
+            self, fx=fx, fy=fy, cx=cx, cy=cy, dist=np.asarray(dist, float), distortion_center_offset=np.zeros(2)
+        )
+
+    # ------------------------------------------------------------------ parameters
+    @property
+    def intrinsics(self) -> np.ndarray:
+        """``[fx, fy, cx, cy]`` [px]."""
+        return np.array([self.fx, self.fy, self.cx, self.cy])
+
+    @property
+    def K(self) -> np.ndarray:
+        """(3, 3) camera matrix."""
+        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def hfov(self) -> float:
+        """Horizontal field of view [rad] of the undistorted pinhole (``2 atan(W / (2 fx))``)."""
+        return float(2.0 * np.arctan(self.width / (2.0 * self.fx)))
+
+    def validate(self) -> None:
+        """Raise ``CameraModelError`` naming the field when the parameters are impossible."""
+        if self.distortion not in DISTORTION_MODELS:
+            raise CameraModelError(
+                f"distortion model {self.distortion!r} unknown; use one of {sorted(DISTORTION_MODELS)}"
+            )
+        if self.dist.shape != (DISTORTION_MODELS[self.distortion],):
+            raise CameraModelError(f"{self.distortion} needs 4 distortion coefficients, got {self.dist.shape}")
+        if self.distortion_center_offset.shape != (2,):
+            raise CameraModelError("distortion_center_offset must have 2 entries [px]")
+        if self.width <= 0 or self.height <= 0:
+            raise CameraModelError(f"image size must be positive, got {self.width} x {self.height}")
+        values = {"fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy}
+        for name, value in values.items():
+            if not np.isfinite(value):
+                raise CameraModelError(f"{name} must be finite, got {value}")
+        if self.fx <= 0 or self.fy <= 0:
+            raise CameraModelError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
+        if not np.all(np.isfinite(self.dist)) or not np.all(np.isfinite(self.distortion_center_offset)):
+            raise CameraModelError(f"distortion coefficients must be finite, got {self.dist}")
+
+    # ------------------------------------------------------------------ distortion
+    def _centre_shift(self) -> np.ndarray:
+        return self.distortion_center_offset / np.array([self.fx, self.fy])
+
+    def distort(self, xy: np.ndarray) -> np.ndarray:
+        """Distorted normalised coordinates (N, 2) of undistorted normalised ``xy`` (N, 2)."""
+        shift = self._centre_shift()
+        x = np.atleast_2d(np.asarray(xy, dtype=float)) - shift
+        if self.distortion == "radtan":
+            xd = _radtan(x, self.dist)
+        else:
+            xd = _equidistant(x, self.dist)
+        return xd + shift
+
+    def undistort(self, xy_d: np.ndarray, iterations: int = 30) -> np.ndarray:
+        """Undistorted normalised coordinates (N, 2) of distorted ``xy_d`` (N, 2) (Newton's method).
+
+        Accurate to ~1e-12 wherever the distortion is invertible (see ``check_invertible``).
+        """
+        target = np.atleast_2d(np.asarray(xy_d, dtype=float))
+        x = target.copy()
+        eps = 1e-7
+        for _ in range(iterations):
+            r = self.distort(x) - target
+            jx = (self.distort(x + [eps, 0.0]) - self.distort(x - [eps, 0.0])) / (2 * eps)
+            jy = (self.distort(x + [0.0, eps]) - self.distort(x - [0.0, eps])) / (2 * eps)
+            det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+            det = np.where(np.abs(det) < 1e-12, 1e-12, det)
+            dx = (jy[:, 1] * r[:, 0] - jy[:, 0] * r[:, 1]) / det
+            dy = (-jx[:, 1] * r[:, 0] + jx[:, 0] * r[:, 1]) / det
+            x = x - np.stack([dx, dy], axis=1)
+            if np.max(np.abs(r)) < 1e-14:
+                break
+        return x
+
+    def check_invertible(self, margin: float = 1.15) -> None:
+        """Raise ``CameraModelError`` when the distortion folds over within the image.
+
+        The radial map must be monotonic over every radius the image (enlarged by ``margin``)
+        can reach, else undistortion and image warping are ill-defined.
+        """
+        corners_px = np.array([[0, 0], [self.width - 1, 0], [0, self.height - 1], [self.width - 1, self.height - 1]])
+        xn = (corners_px - [self.cx, self.cy]) / [self.fx, self.fy] - self._centre_shift()
+        r_max = float(np.max(np.linalg.norm(xn, axis=1))) * margin
+        r = np.linspace(0.0, r_max, 400)[1:]
+        xd = self.distort(np.stack([r, np.zeros_like(r)], axis=1) + self._centre_shift()) - self._centre_shift()
+        yd = self.distort(np.stack([np.zeros_like(r), r], axis=1) + self._centre_shift()) - self._centre_shift()
+        if np.any(np.diff(xd[:, 0]) <= 0) or np.any(np.diff(yd[:, 1]) <= 0):
+            raise CameraModelError(
+                f"{self.distortion} coefficients {self.dist.tolist()} are not invertible over the image "
+                "(the radial map folds back); use smaller distortion coefficients"
+            )
+
+    # ------------------------------------------------------------------ projection
+    def normalized_to_pixels(self, xy_d: np.ndarray) -> np.ndarray:
+        """Pixels (N, 2) of distorted normalised coordinates (N, 2)."""
+        xy_d = np.atleast_2d(xy_d)
+        return np.stack([self.fx * xy_d[:, 0] + self.cx, self.fy * xy_d[:, 1] + self.cy], axis=1)
+
+    def pixels_to_normalized(self, uv: np.ndarray) -> np.ndarray:
+        """Distorted normalised coordinates (N, 2) of pixels (N, 2)."""
+        uv = np.atleast_2d(np.asarray(uv, dtype=float))
+        return np.stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy], axis=1)
+
+    def project(self, p_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (N, 2) of camera-frame points (N, 3) [m], and a mask (N,) of points in front (z > 0)."""
+        p = np.atleast_2d(np.asarray(p_cam, dtype=float))
+        in_front = p[:, 2] > 1e-9
+        z = np.where(in_front, p[:, 2], 1.0)
+        return self.normalized_to_pixels(self.distort(p[:, :2] / z[:, None])), in_front
+
+    def unproject(self, uv: np.ndarray) -> np.ndarray:
+        """Unit-depth rays (N, 3) (``[x, y, 1]``) of pixels (N, 2)."""
+        xy = self.undistort(self.pixels_to_normalized(uv))
+        return np.hstack([xy, np.ones((len(xy), 1))])
+
+    def in_image(self, uv: np.ndarray, border: float = 0.0) -> np.ndarray:
+        """Mask (N,) of pixels inside the image, at least ``border`` [px] from its edge."""
+        uv = np.atleast_2d(uv)
+        return (
+            (uv[:, 0] >= border - 0.5)
+            & (uv[:, 0] <= self.width - 0.5 - border)
+            & (uv[:, 1] >= border - 0.5)
+            & (uv[:, 1] <= self.height - 0.5 - border)
+        )
+
+    def to_dict(self) -> dict:
+        """Plain-python description (for YAML)."""
+        return {
+            "distortion": self.distortion,
+            "resolution": [self.width, self.height],
+            "intrinsics": [float(v) for v in self.intrinsics],
+            "distortion_coeffs": [float(v) for v in self.dist],
+            "distortion_center_offset": [float(v) for v in self.distortion_center_offset],
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> CameraModel:
+        """Inverse of ``to_dict``."""
+        fx, fy, cx, cy = d["intrinsics"]
+        return cls(
+            distortion=d["distortion"],
+            width=int(d["resolution"][0]),
+            height=int(d["resolution"][1]),
+            fx=float(fx),
+            fy=float(fy),
+            cx=float(cx),
+            cy=float(cy),
+            dist=np.asarray(d["distortion_coeffs"], dtype=float),
+            distortion_center_offset=np.asarray(d.get("distortion_center_offset", [0.0, 0.0]), dtype=float),
+        )
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, CameraModel):
+            return NotImplemented
+        return self.to_dict() == other.to_dict()
+
+    def __hash__(self) -> int:
+        return hash(str(self.to_dict()))
+
+
+def _radtan(x: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+    k1, k2, p1, p2 = coeffs
+    u, v = x[:, 0], x[:, 1]
+    r2 = u * u + v * v
+    radial = 1.0 + k1 * r2 + k2 * r2 * r2
+    du = 2.0 * p1 * u * v + p2 * (r2 + 2.0 * u * u)
+    dv = p1 * (r2 + 2.0 * v * v) + 2.0 * p2 * u * v
+    return np.stack([u * radial + du, v * radial + dv], axis=1)
+
+
+def _equidistant(x: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
+    k1, k2, k3, k4 = coeffs
+    r = np.linalg.norm(x, axis=1)
+    theta = np.arctan(r)
+    t2 = theta * theta
+    theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+    # theta_d / r -> 1 as r -> 0 (theta ~ r).
+    scale = np.where(r > 1e-12, theta_d / np.where(r > 1e-12, r, 1.0), 1.0)
+    return x * scale[:, None]
