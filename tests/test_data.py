@@ -59,3 +59,15 @@ def test_sensor_truth_dict_roundtrip_and_rotation_check():
     bad[0, 0] = 2.0
     with pytest.raises(DataError, match="rotation"):
         SensorTruth(cam, bad)
+
+
+def test_pattern_image_colours_follow_square_convention():
+    t = Target.checkerboard(rows=6, cols=7, square=0.07)
+    img = t.pattern_image(px_per_square=10, border_squares=1.0)
+    assert img.shape == ((6 + 1 + 2) * 10, (7 + 1 + 2) * 10)
+    assert img[0, 0] == 255  # border
+    assert img[15, 15] == 0  # square (0, 0), diagonally outside point id 0, is black
+    assert img[15, 25] == 255  # square (0, 1)
+    assert img[25, 25] == 0  # square (1, 1)
+    # The board is not half-turn symmetric: the last square (rows, cols) = (6, 7) is white.
+    assert img[-15, -15] == 255

@@ -6,7 +6,12 @@ for a checkerboard with ``rows x cols`` inner corners the point of grid row ``r`
 [m]; the board frame's z axis is ``x cross y``. Seen with grid rows going down the image and
 columns going right, z points out of the printed side towards the camera. ``cv2.findChessboardCorners`` with
 ``patternSize = (cols, rows)`` returns corners in this id order (up to the pattern's 180 deg
-symmetry, which the detector resolves with a fixed convention).
+symmetry, which the detector resolves with the colour convention below).
+
+Checkerboard colours: the square diagonally outside point id 0 (board coordinates x < 0, y < 0)
+is black, and colours alternate from there (``Target.square_is_black``). A board with an odd
+number of squares along one side and an even number along the other (the paper's 8 x 7) is not
+symmetric under a half-turn, so this fixes which corner is id 0.
 """
 
 from __future__ import annotations
@@ -77,6 +82,32 @@ class Target:
         """(4, 3) [m] the grid's outer points (ids 0, cols-1, N-1, N-cols), in order around the grid."""
         n, c = self.num_points, self.cols
         return self.points[[0, c - 1, n - 1, n - c]]
+
+    def square_is_black(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        """Colour of checkerboard square ``(i, j)``, ``i`` in [0, rows], ``j`` in [0, cols].
+
+        Square ``(i, j)`` spans x in [(i - 1) row_spacing, i row_spacing] and y in
+        [(j - 1) col_spacing, j col_spacing]; square (0, 0) is black.
+        """
+        return (np.asarray(i) + np.asarray(j)) % 2 == 0
+
+    def pattern_image(self, px_per_square: int = 100, border_squares: float = 1.0) -> np.ndarray:
+        """Grey image (uint8) of the printed checkerboard with a white border.
+
+        Image row index grows with board x (grid rows), column index with board y (grid
+        columns); pixel ``(a, b)``'s centre lies at board coordinates
+        ``x = (a + 0.5) / px_per_square * row_spacing - (1 + border_squares) * row_spacing``
+        (likewise y with ``b`` and ``col_spacing``). ``border_squares`` of white surround the
+        ``(rows + 1) x (cols + 1)`` squares.
+        """
+        if self.kind != "checkerboard":
+            raise TargetError(f"pattern_image draws checkerboards only, not {self.kind!r}")
+        border = round(border_squares * px_per_square)
+        a = np.arange((self.rows + 1) * px_per_square)
+        b = np.arange((self.cols + 1) * px_per_square)
+        black = self.square_is_black(a[:, None] // px_per_square, b[None, :] // px_per_square)
+        squares = np.where(black, 0, 255).astype(np.uint8)
+        return np.pad(squares, border, constant_values=255)
 
     def to_dict(self) -> dict:
         return {
