@@ -1,0 +1,62 @@
+"""Config validation shared by every component: errors that name the key and the allowed range."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import fields, is_dataclass
+from typing import Any, get_type_hints
+
+
+class ConfigError(ValueError):
+    """A config value that is missing, malformed or out of range."""
+
+
+def require(ok: bool, key: str, allowed: str, value: Any) -> None:
+    """Raise ``ConfigError`` ``"<key> must be <allowed>, got <value>"`` unless ``ok``."""
+    if not ok:
+        raise ConfigError(f"{key} must be {allowed}, got {value!r}")
+
+
+def require_range(
+    key: str,
+    value: float,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+) -> None:
+    """Check ``low <= value <= high`` (``<`` where open); names the key and the interval on failure."""
+    ok = isinstance(value, int | float) and value == value
+    if ok and low is not None:
+        ok = value > low if low_open else value >= low
+    if ok and high is not None:
+        ok = value < high if high_open else value <= high
+    lo = "-inf" if low is None else f"{low}"
+    hi = "inf" if high is None else f"{high}"
+    interval = f"{'(' if low_open or low is None else '['}{lo}, {hi}{')' if high_open or high is None else ']'}"
+    require(ok, key, f"a number in {interval}", value)
+
+
+def from_mapping(cls: type, cfg: Mapping[str, Any], key: str) -> Any:
+    """Build the dataclass ``cls`` from a config mapping, refusing unknown keys by name.
+
+    Nested dataclass fields are built recursively; ``key`` is the dotted config path used in
+    error messages (e.g. ``"sim.physics"``).
+    """
+    if not is_dataclass(cls):
+        raise TypeError(f"{cls} is not a dataclass")
+    if not isinstance(cfg, Mapping):
+        raise ConfigError(f"{key} must be a mapping of settings, got {cfg!r}")
+    known = {f.name: f for f in fields(cls)}
+    unknown = sorted(set(cfg) - set(known))
+    if unknown:
+        raise ConfigError(f"{key}: unknown setting(s) {unknown}; known settings are {sorted(known)}")
+    hints = get_type_hints(cls)
+    kwargs = {}
+    for name, value in cfg.items():
+        target = hints.get(name)
+        if isinstance(target, type) and is_dataclass(target):
+            kwargs[name] = from_mapping(target, value, f"{key}.{name}")
+        else:
+            kwargs[name] = value
+    return cls(**kwargs)
