@@ -1,0 +1,41 @@
+"""Every option of every config group composes with Hydra (and root configs with their defaults)."""
+
+from pathlib import Path
+
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+GROUPS = sorted(p.name for p in CONF.iterdir() if p.is_dir() and p.name != "experiment")
+OPTIONS = [(g, f.stem) for g in GROUPS for f in sorted((CONF / g).glob("*.yaml"))]
+ROOTS = sorted(f.stem for f in CONF.glob("*.yaml"))
+
+
+def test_every_group_has_options():
+    assert {"sim", "sensor", "task", "env", "agent"} <= set(GROUPS)
+    for group in ("task", "env"):
+        assert any(g == group for g, _ in OPTIONS), f"conf/{group}/ has no options"
+
+
+@pytest.mark.parametrize(("group", "option"), OPTIONS)
+def test_group_option_composes(group, option):
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(overrides=[f"+{group}={option}"])
+    node = OmegaConf.to_container(cfg[group], resolve=True)
+    assert isinstance(node, dict) and node
+
+
+@pytest.mark.parametrize("root", ROOTS)
+def test_root_config_composes(root):
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name=root)
+    OmegaConf.to_container(cfg, resolve=True)
+
+
+def test_task_files_name_themselves_and_a_metric():
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        for task in ("intrinsic", "extrinsic", "joint"):
+            cfg = compose(overrides=[f"+task={task}"]).task
+            assert cfg.name == task
+            assert cfg.error_metric in ("intrinsic_relative", "extrinsic_relative")
