@@ -1,1 +1,24 @@
-"""vical.io"""
+"""File formats: vical recordings, Kalibr YAML, EuRoC folders, ROS1 bags, corner CSV, image folders.
+
+See ``docs/formats.md``. This package depends only on ``vical.geometry`` and ``vical.data``.
+"""
+
+from vical.io.errors import (
+    BagFormatError,
+    CsvFormatError,
+    FormatError,
+    KalibrFormatError,
+    RecordingFormatError,
+)
+from vical.io.recording import is_recording_dir, load_recording, save_recording
+
+__all__ = [
+    "BagFormatError",
+    "CsvFormatError",
+    "FormatError",
+    "KalibrFormatError",
+    "RecordingFormatError",
+    "is_recording_dir",
+    "load_recording",
+    "save_recording",
+]

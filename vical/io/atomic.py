@@ -1,0 +1,89 @@
+"""Atomic writes: outputs appear at their final path complete or not at all.
+
+Files are written to a temporary sibling and moved into place with ``os.replace``; directories
+are built in a temporary sibling directory and renamed. A crash mid-write leaves at most a
+hidden ``.<name>.tmp-*`` sibling, never a partial file or directory at the final path.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+
+def _fsync_file(path: Path) -> None:
+    with open(path, "rb") as f:
+        os.fsync(f.fileno())
+
+
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success it replaces ``path`` atomically.
+
+    The caller writes the whole file to the yielded path. If the body raises, the temporary file
+    is removed and ``path`` is left untouched.
+    """
+    final = Path(path)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{final.name}.tmp-", dir=final.parent)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        _fsync_file(tmp)
+        os.replace(tmp, final)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` atomically."""
+    with atomic_file(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def check_can_write_dir(path: str | os.PathLike, overwrite: bool) -> Path:
+    """Raise ``FileExistsError`` when ``path`` exists and ``overwrite`` is false; return it as a Path."""
+    final = Path(path)
+    if final.exists() and not overwrite:
+        raise FileExistsError(f"{final} already exists; pass overwrite=True to replace it")
+    if final.exists() and not final.is_dir():
+        raise FileExistsError(f"{final} exists and is not a directory; remove it or choose another path")
+    return final
+
+
+@contextlib.contextmanager
+def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterator[Path]:
+    """Yield a temporary sibling directory; on success it is renamed to ``path``.
+
+    With ``overwrite`` an existing directory at ``path`` is replaced: it is first renamed aside,
+    the new directory renamed into place, then the old one deleted, so ``path`` always holds
+    either the old or the complete new content. If the body raises, the temporary directory is
+    deleted and ``path`` is untouched.
+    """
+    final = check_can_write_dir(path, overwrite)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
+    try:
+        yield tmp
+        _replace_directory(tmp, final, overwrite)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _replace_directory(tmp: Path, final: Path, overwrite: bool) -> None:
+    if not final.exists():
+        os.rename(tmp, final)
+        return
+    check_can_write_dir(final, overwrite)
+    old = Path(tempfile.mkdtemp(prefix=f".{final.name}.old-", dir=final.parent))
+    os.rmdir(old)
+    os.rename(final, old)
+    os.rename(tmp, final)
+    shutil.rmtree(old, ignore_errors=True)
