@@ -10,6 +10,14 @@ from vical.io.errors import (
     KalibrFormatError,
     RecordingFormatError,
 )
+from vical.io.kalibr import (
+    read_camchain,
+    read_imu_yaml,
+    read_target_yaml,
+    write_camchain_imucam,
+    write_imu_yaml,
+    write_target_yaml,
+)
 from vical.io.recording import is_recording_dir, load_recording, save_recording
 
 __all__ = [
@@ -20,5 +28,11 @@ __all__ = [
     "RecordingFormatError",
     "is_recording_dir",
     "load_recording",
+    "read_camchain",
+    "read_imu_yaml",
+    "read_target_yaml",
     "save_recording",
+    "write_camchain_imucam",
+    "write_imu_yaml",
+    "write_target_yaml",
 ]

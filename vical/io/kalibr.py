@@ -1,0 +1,274 @@
+"""Kalibr YAML files: camchain / camchain-imucam, IMU noise, calibration targets.
+
+Writers produce exactly the keys Kalibr's ``ConfigReader`` reads (floats where it checks for
+floats), atomically. ``read_camchain`` is tolerant: besides Kalibr's ``T_cam_imu`` it accepts the
+variants other VIO systems write and logs (logger ``vical.io.kalibr``) which one it found:
+
+=====================  ======================  ===========================================
+key                    written by              meaning
+=====================  ======================  ===========================================
+``T_cam_imu``          Kalibr                  IMU -> camera (used as is)
+``T_imu_cam``          OpenVINS, Kalibr users  camera -> IMU (inverted)
+``T_BS``               EuRoC ``sensor.yaml``   camera -> body = IMU (inverted)
+``T_SC``               OKVIS                   camera -> sensor = IMU (inverted)
+``body_T_cam0``        VINS-Mono/Fusion        camera -> body = IMU (inverted)
+``timeshift_cam_imu``  Kalibr, OpenVINS        ``t_imu = t_cam + shift`` [s]
+``td``                 VINS-Mono/Fusion        same sign as Kalibr [s]
+=====================  ======================  ===========================================
+
+Matrices may be nested 4 x 4 lists, flat lists of 16, or ``{rows, cols, data}`` mappings.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import warnings
+from typing import Any
+
+import numpy as np
+
+from vical.data import ImuNoise, Target, TargetError
+from vical.geometry.camera import CameraModel, CameraModelError
+from vical.geometry.transforms import invert_transform
+from vical.io.errors import KalibrFormatError
+from vical.io.yamlfile import as_floats, dump_yaml, load_mapping, require
+
+logger = logging.getLogger(__name__)
+
+DISTORTION_ALIASES = {
+    "radtan": "radtan",
+    "radial-tangential": "radtan",
+    "radial_tangential": "radtan",
+    "plumb_bob": "radtan",
+    "equidistant": "equidistant",
+    "equi": "equidistant",
+    "fisheye": "equidistant",
+}
+# (key, whether the stored matrix is T_imu_cam and must be inverted)
+EXTRINSIC_KEYS = (("T_cam_imu", False), ("T_imu_cam", True), ("T_BS", True), ("T_SC", True), ("body_T_cam0", True))
+TIMESHIFT_KEYS = ("timeshift_cam_imu", "td")
+
+
+# ------------------------------------------------------------------------------- camchain
+def camera_entry(
+    camera: CameraModel,
+    T_cam_imu: np.ndarray | None = None,
+    timeshift_cam_imu: float | None = None,
+    rostopic: str = "/cam0/image_raw",
+) -> dict[str, Any]:
+    """The Kalibr ``cam0`` mapping of a camera (plus extrinsic and time shift when given)."""
+    if np.any(camera.distortion_center_offset != 0):
+        warnings.warn(
+            "Kalibr's pinhole models have the distortion centre at the principal point; the camera's "
+            f"distortion_center_offset {camera.distortion_center_offset.tolist()} px is not written",
+            stacklevel=3,
+        )
+    entry: dict[str, Any] = {
+        "camera_model": "pinhole",
+        "intrinsics": [float(v) for v in camera.intrinsics],
+        "distortion_model": camera.distortion,
+        "distortion_coeffs": [float(v) for v in camera.dist],
+        "resolution": [int(camera.width), int(camera.height)],
+        "rostopic": str(rostopic),
+        "cam_overlaps": [],
+    }
+    if T_cam_imu is not None:
+        entry["T_cam_imu"] = np.asarray(T_cam_imu, dtype=np.float64).reshape(4, 4).tolist()
+    if timeshift_cam_imu is not None:
+        entry["timeshift_cam_imu"] = float(timeshift_cam_imu)
+    return entry
+
+
+def write_camchain_imucam(
+    path: str | os.PathLike,
+    camera: CameraModel,
+    T_cam_imu: np.ndarray | None,
+    timeshift_cam_imu: float | None,
+    rostopic: str = "/cam0/image_raw",
+) -> None:
+    """Write a one-camera Kalibr ``camchain-imucam.yaml`` (or ``camchain.yaml`` when both are None).
+
+    Args:
+        camera: pinhole camera with radtan or equidistant distortion.
+        T_cam_imu: (4, 4) maps IMU points into the camera frame, or None.
+        timeshift_cam_imu: [s] ``t_imu = t_cam + timeshift_cam_imu``, or None.
+        rostopic: the image topic Kalibr associates with ``cam0``.
+    """
+    dump_yaml(path, {"cam0": camera_entry(camera, T_cam_imu, timeshift_cam_imu, rostopic)})
+
+
+def read_camchain(path: str | os.PathLike, camera: str = "cam0") -> tuple[CameraModel, np.ndarray | None, float | None]:
+    """Camera model, ``T_cam_imu`` (4, 4) or None, and time shift [s] or None from a camchain file.
+
+    ``camera`` selects the ``camN`` section; a file without ``camN`` sections (EuRoC's
+    ``cam0/sensor.yaml``, single-camera VIO configs) is read as one flat camera section.
+    """
+    data = load_mapping(path, KalibrFormatError)
+    if camera in data:
+        entry, where = data[camera], f"{path} [{camera}]"
+    elif any(k.startswith("cam") and k[3:].isdigit() for k in data):
+        raise KalibrFormatError(f"{path}: no section {camera!r}; the file has {sorted(data)}")
+    else:
+        entry, where = data, str(path)
+    if not isinstance(entry, dict):
+        raise KalibrFormatError(f"{where} is not a mapping")
+    return _camera_model(entry, where), _extrinsic(entry, where), _timeshift(entry, where)
+
+
+def _camera_model(entry: dict[str, Any], where: str) -> CameraModel:
+    model = entry.get("camera_model", "pinhole")
+    if model != "pinhole":
+        raise KalibrFormatError(f"{where}: camera_model {model!r} is not supported; vical models 'pinhole' cameras")
+    fx, fy, cx, cy = _floats(entry, "intrinsics", 4, where)
+    dist_name = str(require(entry, "distortion_model", where, KalibrFormatError))
+    if dist_name not in DISTORTION_ALIASES:
+        raise KalibrFormatError(
+            f"{where}: distortion_model {dist_name!r} is not supported; use one of {sorted(DISTORTION_ALIASES)}"
+        )
+    key = "distortion_coeffs" if "distortion_coeffs" in entry else "distortion_coefficients"
+    dist = _floats(entry, key, 4, where)
+    width, height = _floats(entry, "resolution", 2, where)
+    try:
+        return CameraModel(DISTORTION_ALIASES[dist_name], int(width), int(height), fx, fy, cx, cy, dist)
+    except CameraModelError as exc:
+        raise KalibrFormatError(f"{where}: {exc}") from exc
+
+
+def _floats(entry: dict[str, Any], key: str, n: int, where: str) -> np.ndarray:
+    return as_floats(require(entry, key, where, KalibrFormatError), n, key, where, KalibrFormatError)
+
+
+def _extrinsic(entry: dict[str, Any], where: str) -> np.ndarray | None:
+    found = [(key, inverted) for key, inverted in EXTRINSIC_KEYS if key in entry]
+    if not found:
+        logger.info("%s: no camera-IMU extrinsic (looked for %s)", where, [k for k, _ in EXTRINSIC_KEYS])
+        return None
+    if len(found) > 1:
+        raise KalibrFormatError(f"{where}: several extrinsics {[k for k, _ in found]}; keep exactly one")
+    key, inverted = found[0]
+    T = parse_transform(entry[key], key, where)
+    logger.info("%s: camera-IMU extrinsic from %r%s", where, key, " (camera -> IMU, inverted)" if inverted else "")
+    return invert_transform(T) if inverted else T
+
+
+def parse_transform(value: Any, key: str, where: str) -> np.ndarray:
+    """(4, 4) rigid transform from a nested list, a flat list of 16 or a ``{rows, cols, data}`` mapping."""
+    if isinstance(value, dict):
+        value = require(value, "data", f"{where} [{key}]", KalibrFormatError)
+    T = as_floats(value, 16, key, where, KalibrFormatError).reshape(4, 4)
+    R = T[:3, :3]
+    if not np.allclose(T[3], [0, 0, 0, 1]) or not np.allclose(R @ R.T, np.eye(3), atol=1e-5):
+        raise KalibrFormatError(f"{where}: {key} is not a rigid transform (rotation block not orthonormal)")
+    if np.linalg.det(R) < 0:
+        raise KalibrFormatError(f"{where}: {key} has a reflection (det < 0), not a rotation")
+    return T
+
+
+def _timeshift(entry: dict[str, Any], where: str) -> float | None:
+    for key in TIMESHIFT_KEYS:
+        if key in entry:
+            value = _floats(entry, key, 1, where)[0]
+            logger.info("%s: camera-IMU time shift from %r (t_imu = t_cam + shift)", where, key)
+            return float(value)
+    return None
+
+
+# ------------------------------------------------------------------------------- IMU
+def write_imu_yaml(path: str | os.PathLike, noise: ImuNoise, rostopic: str = "/imu0") -> None:
+    """Write Kalibr's IMU configuration (``imu.yaml``) for ``noise``, atomically."""
+    dump_yaml(
+        path,
+        {
+            "accelerometer_noise_density": float(noise.accel_noise_density),
+            "accelerometer_random_walk": float(noise.accel_random_walk),
+            "gyroscope_noise_density": float(noise.gyro_noise_density),
+            "gyroscope_random_walk": float(noise.gyro_random_walk),
+            "update_rate": float(noise.rate_hz),
+            "rostopic": str(rostopic),
+        },
+    )
+
+
+def read_imu_yaml(path: str | os.PathLike) -> ImuNoise:
+    """``ImuNoise`` from a Kalibr IMU file, Kalibr's ``imu-*.yaml`` result (``imu0`` section) or EuRoC's
+    ``imu0/sensor.yaml`` (``rate_hz`` instead of ``update_rate``)."""
+    data = load_mapping(path, KalibrFormatError)
+    entry, where = (data["imu0"], f"{path} [imu0]") if isinstance(data.get("imu0"), dict) else (data, str(path))
+    rate_key = "update_rate" if "update_rate" in entry else "rate_hz"
+    keys = {
+        "accel_noise_density": "accelerometer_noise_density",
+        "accel_random_walk": "accelerometer_random_walk",
+        "gyro_noise_density": "gyroscope_noise_density",
+        "gyro_random_walk": "gyroscope_random_walk",
+        "rate_hz": rate_key,
+    }
+    values = {}
+    for field_name, key in keys.items():
+        value = _floats(entry, key, 1, where)[0]
+        if value <= 0:
+            raise KalibrFormatError(f"{where}: {key} must be positive, got {value}")
+        values[field_name] = float(value)
+    return ImuNoise(**values)
+
+
+# ------------------------------------------------------------------------------- targets
+def write_target_yaml(path: str | os.PathLike, target: Target) -> None:
+    """Write Kalibr's target file (``checkerboard`` or ``aprilgrid``) for ``target``, atomically.
+
+    An aprilgrid ``Target`` stores ``tagRows = rows``, ``tagCols = cols``, ``tagSize = row_spacing``
+    [m] and ``tagSpacing = tag_spacing`` (gap / tag size).
+    """
+    if target.kind == "checkerboard":
+        data = {
+            "target_type": "checkerboard",
+            "targetRows": int(target.rows),
+            "targetCols": int(target.cols),
+            "rowSpacingMeters": float(target.row_spacing),
+            "colSpacingMeters": float(target.col_spacing),
+        }
+    else:
+        data = {
+            "target_type": "aprilgrid",
+            "tagRows": int(target.rows),
+            "tagCols": int(target.cols),
+            "tagSize": float(target.row_spacing),
+            "tagSpacing": float(target.tag_spacing),
+        }
+    dump_yaml(path, data)
+
+
+def read_target_yaml(path: str | os.PathLike) -> Target:
+    """``Target`` from a Kalibr target file (``checkerboard`` or ``aprilgrid``)."""
+    data = load_mapping(path, KalibrFormatError)
+    where = str(path)
+    kind = require(data, "target_type", where, KalibrFormatError)
+    try:
+        if kind == "checkerboard":
+            rows, cols = _count(data, "targetRows", where), _count(data, "targetCols", where)
+            row_sp, col_sp = _length(data, "rowSpacingMeters", where), _length(data, "colSpacingMeters", where)
+            return Target("checkerboard", rows, cols, row_sp, col_sp)
+        if kind == "aprilgrid":
+            size = _length(data, "tagSize", where)
+            spacing = _length(data, "tagSpacing", where)
+            rows, cols = _count(data, "tagRows", where), _count(data, "tagCols", where)
+            return Target("aprilgrid", rows, cols, size, size, spacing)
+    except TargetError as exc:
+        raise KalibrFormatError(f"{where}: {exc}") from exc
+    raise KalibrFormatError(f"{where}: target_type {kind!r} is not supported; use 'checkerboard' or 'aprilgrid'")
+
+
+def _count(data: dict[str, Any], key: str, where: str) -> int:
+    value = require(data, key, where, KalibrFormatError)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise KalibrFormatError(f"{where}: {key} must be an integer, got {value!r}")
+    return value
+
+
+def _length(data: dict[str, Any], key: str, where: str) -> float:
+    value = _floats(data, key, 1, where)[0]
+    if value <= 0:
+        raise KalibrFormatError(f"{where}: {key} must be positive, got {value}")
+    if (key.endswith("Meters") or key == "tagSize") and value > 5.0:
+        raise KalibrFormatError(f"{where}: {key} = {value} m is implausibly large; is it in mm? Give meters")
+    return float(value)

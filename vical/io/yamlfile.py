@@ -1,0 +1,69 @@
+"""Reading YAML mappings with errors that name the file, line and key."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from vical.io.atomic import write_text_atomic
+from vical.io.errors import FormatError
+
+
+def load_mapping(path: str | os.PathLike, error: type[FormatError]) -> dict[str, Any]:
+    """The top-level mapping of the YAML file ``path``; ``error`` names the file and line on failure.
+
+    OpenCV ``FileStorage`` files (``%YAML:1.0`` header, ``!!opencv-matrix`` tags, as VINS-Mono
+    writes) are accepted: the header is skipped and the tagged matrices read as plain mappings.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise error(f"{path} does not exist or is not a file")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{path} cannot be read as UTF-8 text: {exc}") from exc
+    if text.startswith("%YAML:1.0"):
+        text = text.split("\n", 1)[1] if "\n" in text else ""
+    try:
+        data = yaml.load(text, Loader=_TolerantLoader)
+    except yaml.YAMLError as exc:
+        raise error(f"{path} is not valid YAML (truncated or corrupt?): {exc}") from exc
+    if not isinstance(data, dict):
+        raise error(f"{path} does not hold a YAML mapping (got {type(data).__name__}); is the file truncated?")
+    return data
+
+
+class _TolerantLoader(yaml.SafeLoader):
+    """SafeLoader that reads OpenCV's ``!!opencv-matrix`` tags as plain mappings."""
+
+
+_TolerantLoader.add_constructor(
+    "tag:yaml.org,2002:opencv-matrix", lambda loader, node: loader.construct_mapping(node, deep=True)
+)
+
+
+def dump_yaml(path: str | os.PathLike, data: dict[str, Any]) -> None:
+    """Write ``data`` as block YAML with inline lists (Kalibr's look), atomically."""
+    write_text_atomic(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+
+
+def require(d: dict[str, Any], key: str, where: str, error: type[FormatError]) -> Any:
+    """``d[key]``, or ``error`` naming ``where`` (file and section) and the missing key."""
+    if key not in d:
+        raise error(f"{where}: required key {key!r} is missing (found keys: {sorted(d)})")
+    return d[key]
+
+
+def as_floats(value: Any, n: int, key: str, where: str, error: type[FormatError]) -> np.ndarray:
+    """``value`` as a finite float64 array of ``n`` entries, else ``error`` naming the key."""
+    try:
+        arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise error(f"{where}: {key} must be a list of {n} numbers, got {value!r}") from exc
+    if arr.size != n or not np.all(np.isfinite(arr)):
+        raise error(f"{where}: {key} must hold {n} finite numbers, got {value!r}")
+    return arr
