@@ -1,0 +1,191 @@
+"""IMU simulation: physics readings at the physics rate -> IMU samples at the IMU rate + noise.
+
+The physics gives the ideal specific force and angular rate of the IMU site at every physics
+step (MuJoCo ``accelerometer`` and ``gyro`` sensors). An IMU sample at time ``t`` is either the
+reading at ``t`` (``instant``) or the mean of the readings over the sample interval centred on
+``t`` (``average``, a real IMU's anti-aliasing: what moves faster than the IMU rate is averaged
+out instead of folding into the samples; centring keeps the samples free of a group delay, which
+would otherwise masquerade as a camera-IMU time offset). ``docs/sensors.md`` has the measured
+effect of the choice.
+
+Noise (Kalibr's model, ``vical.data.ImuNoise``): per axis, the measurement is
+``truth + bias_k + n_k`` with white ``n_k ~ N(0, density^2 * rate)`` and a bias random walk
+``bias_{k+1} = bias_k + w_k``, ``w_k ~ N(0, random_walk^2 / rate)``; ``bias_0`` is the sensor's
+initial bias.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vical.data import ImuNoise, ImuSamples
+from vical.sim.sampling import IMU_SAMPLING
+
+
+class ImuSimulationError(RuntimeError):
+    """IMU readings that do not arrive at every physics step."""
+
+
+def window_weights(steps_per_sample: int, sampling: str) -> tuple[np.ndarray, np.ndarray]:
+    """Physics-step offsets and weights that turn readings into one IMU sample.
+
+    Args:
+        steps_per_sample: physics steps per IMU period ``n``.
+        sampling: ``instant`` (offset 0, weight 1) or ``average`` (the mean over
+            ``[t - n/2, t + n/2]`` steps: midpoint rule for odd ``n``, trapezoid rule for even ``n``).
+
+    Returns:
+        offsets (L,) int [steps] relative to the sample instant, weights (L,) summing to 1.
+    """
+    if sampling not in IMU_SAMPLING:
+        raise ValueError(f"IMU sampling must be one of {IMU_SAMPLING}, got {sampling!r}")
+    n = int(steps_per_sample)
+    if n < 1:
+        raise ValueError(f"steps_per_sample must be >= 1, got {n}")
+    if sampling == "instant" or n == 1:
+        return np.zeros(1, dtype=np.int64), np.ones(1)
+    if n % 2:
+        half = (n - 1) // 2
+        return np.arange(-half, half + 1), np.full(n, 1.0 / n)
+    weights = np.full(n + 1, 1.0 / n)
+    weights[[0, -1]] = 0.5 / n
+    return np.arange(-n // 2, n // 2 + 1), weights
+
+
+def discrete_sigmas(noise: ImuNoise) -> dict[str, float]:
+    """Per-sample sigmas of Kalibr's densities at ``noise.rate_hz``.
+
+    Returns ``accel_white`` [m/s^2], ``gyro_white`` [rad/s] (density * sqrt(rate)) and
+    ``accel_walk`` [m/s^2], ``gyro_walk`` [rad/s] (bias increment per sample: random_walk / sqrt(rate)).
+    """
+    root = float(np.sqrt(noise.rate_hz))
+    return {
+        "accel_white": noise.accel_noise_density * root,
+        "gyro_white": noise.gyro_noise_density * root,
+        "accel_walk": noise.accel_random_walk / root,
+        "gyro_walk": noise.gyro_random_walk / root,
+    }
+
+
+class ImuNoiseProcess:
+    """White noise + bias random walk, applied chunk by chunk with the bias carried over.
+
+    The generator is drawn in sample order, 12 normals per sample, so the noise of a sample does
+    not depend on how the stream is split into chunks.
+    """
+
+    def __init__(
+        self, noise: ImuNoise, rng: np.random.Generator, gyro_bias: np.ndarray, accel_bias: np.ndarray
+    ) -> None:
+        sig = discrete_sigmas(noise)
+        self._white = np.array([sig["gyro_white"]] * 3 + [sig["accel_white"]] * 3)
+        self._walk = np.array([sig["gyro_walk"]] * 3 + [sig["accel_walk"]] * 3)
+        self._rng = rng
+        self._bias = np.concatenate([np.asarray(gyro_bias, float), np.asarray(accel_bias, float)])
+
+    @property
+    def bias(self) -> np.ndarray:
+        """(6,) current ``[gyro (3) rad/s, accel (3) m/s^2]`` bias (the next sample's)."""
+        return self._bias.copy()
+
+    def apply(self, gyro: np.ndarray, accel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Noisy gyro (N, 3) [rad/s] and accel (N, 3) [m/s^2] of ideal ones, and the biases (N, 6) used."""
+        n = len(gyro)
+        draws = self._rng.standard_normal((n, 12))
+        increments = draws[:, 6:] * self._walk
+        # Sample k carries the bias before increment k: bias_0 is the initial bias.
+        biases = self._bias + np.concatenate([np.zeros((1, 6)), np.cumsum(increments, axis=0)[:-1]])
+        if n:
+            self._bias = biases[-1] + increments[-1]
+        noisy = np.hstack([gyro, accel]) + biases + draws[:, :6] * self._white
+        return noisy[:, :3], noisy[:, 3:], biases
+
+
+class ImuSimulator:
+    """Turns physics-step readings into noisy IMU samples (streaming).
+
+    Args:
+        step_ns: physics step [ns].
+        steps_per_sample: physics steps per IMU period (``vical.sim.sampling.steps_per_sample``).
+        sampling: ``average`` or ``instant`` (see the module docstring).
+        noise: Kalibr noise model (None: noise-free, bias-free samples).
+        rng: generator for the noise (needed when ``noise`` is given).
+        gyro_bias, accel_bias: (3,) initial biases [rad/s], [m/s^2].
+
+    Samples fall on multiples of the IMU period in the physics clock; a sample is complete once
+    every reading of its window has arrived.
+    """
+
+    def __init__(
+        self,
+        step_ns: int,
+        steps_per_sample: int,
+        sampling: str = "average",
+        noise: ImuNoise | None = None,
+        rng: np.random.Generator | None = None,
+        gyro_bias: np.ndarray | None = None,
+        accel_bias: np.ndarray | None = None,
+    ) -> None:
+        self.step_ns = int(step_ns)
+        self.period_steps = int(steps_per_sample)
+        self._offsets, self._weights = window_weights(steps_per_sample, sampling)
+        if noise is not None and rng is None:
+            raise ValueError("ImuSimulator needs a seeded numpy Generator to draw IMU noise")
+        self._noise = None
+        if noise is not None:
+            zero = np.zeros(3)
+            gyro_bias = zero if gyro_bias is None else gyro_bias
+            accel_bias = zero if accel_bias is None else accel_bias
+            self._noise = ImuNoiseProcess(noise, rng, gyro_bias, accel_bias)
+        # Readings (6,) [gyro, accel] of consecutive physics steps from ``_base_step`` on; older
+        # ones are dropped once no pending sample needs them.
+        self._readings: list[np.ndarray] = []
+        self._base_step: int | None = None
+        self._next_step: int | None = None  # index (in physics steps) of the next sample instant
+        self._t: list[np.ndarray] = []
+        self._gyro: list[np.ndarray] = []
+        self._accel: list[np.ndarray] = []
+
+    def add_reading(self, t_ns: int, gyro: np.ndarray, accel: np.ndarray) -> None:
+        """Record the ideal readings (3,) [rad/s], (3,) [m/s^2] of the physics state at ``t_ns``."""
+        step, rem = divmod(int(t_ns), self.step_ns)
+        if rem:
+            raise ImuSimulationError(f"IMU reading at t = {t_ns} ns is not on the physics grid ({self.step_ns} ns)")
+        if self._base_step is None:
+            self._base_step = step
+            first_center = step - int(self._offsets[0])
+            self._next_step = -(-first_center // self.period_steps) * self.period_steps
+        elif step != self._base_step + len(self._readings):
+            expected = (self._base_step + len(self._readings)) * self.step_ns
+            raise ImuSimulationError(
+                f"IMU readings must arrive at every physics step: expected t = {expected} ns, got {t_ns} ns"
+            )
+        self._readings.append(np.concatenate([gyro, accel]).astype(float))
+        self._emit_complete()
+
+    def _emit_complete(self) -> None:
+        last_step = self._base_step + len(self._readings) - 1
+        centers = []
+        while self._next_step + int(self._offsets[-1]) <= last_step:
+            centers.append(self._next_step)
+            self._next_step += self.period_steps
+        if not centers:
+            return
+        readings = np.asarray(self._readings)
+        idx = np.asarray(centers)[:, None] + self._offsets[None, :] - self._base_step
+        ideal = np.einsum("l,klc->kc", self._weights, readings[idx])
+        drop = min(self._next_step + int(self._offsets[0]) - self._base_step, len(self._readings))
+        del self._readings[:drop]
+        self._base_step += drop
+        gyro, accel = ideal[:, :3], ideal[:, 3:]
+        if self._noise is not None:
+            gyro, accel, _ = self._noise.apply(gyro, accel)
+        self._t.append(np.asarray(centers, dtype=np.int64) * self.step_ns)
+        self._gyro.append(gyro)
+        self._accel.append(accel)
+
+    def samples(self) -> ImuSamples:
+        """All complete IMU samples so far."""
+        if not self._t:
+            return ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+        return ImuSamples(np.concatenate(self._t), np.concatenate(self._gyro), np.concatenate(self._accel))

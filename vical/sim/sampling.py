@@ -1,0 +1,294 @@
+"""Per-episode sensor sampling: camera intrinsics, camera-IMU extrinsic, time offset, IMU noise.
+
+The distributions mirror ``conf/sensor/paper.yaml`` (the paper's simulation settings). Every
+draw goes through an explicit ``numpy.random.Generator``; the result is a ``SensorTruth`` that
+travels with the recorded data.
+
+Frames (``docs/conventions.md``): the IMU pose is sampled in the camera *body* frame
+(x forward along the optical axis, y left, z up) as ``T_body_imu`` with position ``[x, y, z]``
+[m] and Euler angles ``[roll, pitch, yaw]`` [rad], ``R = Rz(yaw) Ry(pitch) Rx(roll)``; the
+extrinsic the calibrator estimates is ``T_cam_imu = T_cam_body @ T_body_imu``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from vical.config import ConfigError, from_mapping, require, require_range
+from vical.data import NS_PER_S, ImuNoise, SensorTruth
+from vical.geometry import CameraModel, CameraModelError, euler_to_matrix, invert_transform, make_transform
+
+# Optical frame from camera body frame: body forward -> optical z, body left -> -x, body up -> -y.
+R_CAM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+T_CAM_BODY = make_transform(R_CAM_BODY, np.zeros(3))
+
+NOISE_UNITS = ("continuous", "discrete")
+IMU_SAMPLING = ("average", "instant")
+CAMERA_BACKENDS = ("project", "render")
+# Redraws of a camera whose distortion folds over inside the image before giving up.
+_MAX_CAMERA_DRAWS = 100
+
+
+@dataclass(frozen=True)
+class Normal:
+    """A scalar normal distribution ``N(mean, std)`` (units of the quantity it describes)."""
+
+    mean: float = 0.0
+    std: float = 0.0
+
+    def check(self, key: str) -> None:
+        """Raise ``ConfigError`` naming ``key`` unless mean is finite and std >= 0."""
+        require(bool(np.isfinite(self.mean)), f"{key}.mean", "a finite number", self.mean)
+        require_range(f"{key}.std", self.std, 0.0)
+
+    def draw(self, rng: np.random.Generator) -> float:
+        return float(self.mean + self.std * rng.standard_normal())
+
+
+@dataclass(frozen=True)
+class CameraSampling:
+    """Camera distribution.
+
+    Attributes:
+        width, height: image size [px].
+        rate_hz: frame rate [Hz].
+        distortion: ``radtan`` (k1, k2 sampled; p1, p2 only with asymmetric distortion) or
+            ``equidistant`` (k1, k2 sampled; k3 = k4 = 0).
+        hfov: horizontal field of view [rad]; ``fx = fy = (W/2) / tan(hfov/2)``.
+        k1, k2: radial distortion coefficients [-].
+        tangential_std: sigma of p1, p2 [-] (radtan, asymmetric distortion only).
+        center_offset_std: sigma of the distortion-centre offset from the principal point, in
+            units of the image width (x) and height (y) (asymmetric distortion only).
+    """
+
+    width: int = 640
+    height: int = 480
+    rate_hz: float = 10.0
+    distortion: str = "radtan"
+    hfov: Normal = field(default_factory=lambda: Normal(1.0, 0.05))
+    k1: Normal = field(default_factory=lambda: Normal(0.0, 0.02))
+    k2: Normal = field(default_factory=lambda: Normal(0.0, 0.02))
+    tangential_std: float = 0.0
+    center_offset_std: float = 0.05
+
+    def __post_init__(self) -> None:
+        key = "sensor.camera"
+        require(isinstance(self.width, int) and self.width > 0, f"{key}.width", "a positive integer [px]", self.width)
+        require(
+            isinstance(self.height, int) and self.height > 0, f"{key}.height", "a positive integer [px]", self.height
+        )
+        require_range(f"{key}.rate_hz", self.rate_hz, 0.0, None, low_open=True)
+        require(
+            self.distortion in ("radtan", "equidistant"), f"{key}.distortion", "radtan or equidistant", self.distortion
+        )
+        self.hfov.check(f"{key}.hfov")
+        require_range(f"{key}.hfov.mean", self.hfov.mean, 0.0, np.pi, low_open=True, high_open=True)
+        self.k1.check(f"{key}.k1")
+        self.k2.check(f"{key}.k2")
+        require_range(f"{key}.tangential_std", self.tangential_std, 0.0)
+        require_range(f"{key}.center_offset_std", self.center_offset_std, 0.0)
+
+
+@dataclass(frozen=True)
+class ExtrinsicSampling:
+    """IMU pose in the camera body frame: position [m] and Euler angles [roll, pitch, yaw] [rad]."""
+
+    position_mean: tuple[float, float, float] = (0.06, 0.0, -0.10)
+    position_std: tuple[float, float, float] = (0.01, 0.01, 0.01)
+    rpy_mean: tuple[float, float, float] = (0.0, 0.0, 1.57)
+    rpy_std: tuple[float, float, float] = (0.1, 0.1, 0.1)
+
+    def __post_init__(self) -> None:
+        for name in ("position_mean", "position_std", "rpy_mean", "rpy_std"):
+            value = np.asarray(getattr(self, name), dtype=float)
+            key = f"sensor.extrinsic.{name}"
+            require(value.shape == (3,) and bool(np.all(np.isfinite(value))), key, "3 finite numbers", value.tolist())
+            if name.endswith("std"):
+                require(bool(np.all(value >= 0)), key, "non-negative", value.tolist())
+            object.__setattr__(self, name, tuple(float(v) for v in value))
+
+
+@dataclass(frozen=True)
+class ImuSampling:
+    """IMU rate, noise and biases.
+
+    Attributes:
+        rate_hz: sample rate [Hz].
+        sampling: ``average`` (each sample is the mean of the physics readings over the sample
+            interval centred on its timestamp, a real IMU's anti-aliasing) or ``instant`` (the
+            physics reading at the sample instant).
+        noise_units: ``continuous``: the four values are Kalibr densities (white noise
+            [unit/sqrt(Hz)], bias random walk [unit/s/sqrt(Hz)]); ``discrete``: they are the
+            per-sample sigmas of the white noise and of the bias increment.
+        accel_noise, accel_random_walk: accelerometer noise (m/s^2 based units above).
+        gyro_noise, gyro_random_walk: gyro noise (rad/s based units above).
+        accel_bias_std: sigma of the initial accelerometer bias [m/s^2] (0: no bias).
+        gyro_bias_std: sigma of the initial gyro bias [rad/s] (0: no bias).
+    """
+
+    rate_hz: float = 200.0
+    sampling: str = "average"
+    noise_units: str = "continuous"
+    accel_noise: float = 0.004
+    accel_random_walk: float = 0.006
+    gyro_noise: float = 0.0003394
+    gyro_random_walk: float = 0.000038785
+    accel_bias_std: float = 0.0
+    gyro_bias_std: float = 0.0
+
+    def __post_init__(self) -> None:
+        key = "sensor.imu"
+        require_range(f"{key}.rate_hz", self.rate_hz, 0.0, None, low_open=True)
+        require(self.sampling in IMU_SAMPLING, f"{key}.sampling", f"one of {IMU_SAMPLING}", self.sampling)
+        require(self.noise_units in NOISE_UNITS, f"{key}.noise_units", f"one of {NOISE_UNITS}", self.noise_units)
+        for name in ("accel_noise", "accel_random_walk", "gyro_noise", "gyro_random_walk"):
+            require_range(f"{key}.{name}", getattr(self, name), 0.0)
+        require_range(f"{key}.accel_bias_std", self.accel_bias_std, 0.0)
+        require_range(f"{key}.gyro_bias_std", self.gyro_bias_std, 0.0)
+
+    def kalibr_noise(self) -> ImuNoise:
+        """The noise model as Kalibr densities (converting per-sample sigmas when ``discrete``)."""
+        if self.noise_units == "continuous":
+            scale_white, scale_walk = 1.0, 1.0
+        else:
+            # sigma_white = density * sqrt(f); sigma_increment = random_walk * sqrt(1 / f).
+            scale_white, scale_walk = 1.0 / np.sqrt(self.rate_hz), np.sqrt(self.rate_hz)
+        return ImuNoise(
+            accel_noise_density=self.accel_noise * scale_white,
+            accel_random_walk=self.accel_random_walk * scale_walk,
+            gyro_noise_density=self.gyro_noise * scale_white,
+            gyro_random_walk=self.gyro_random_walk * scale_walk,
+            rate_hz=float(self.rate_hz),
+        )
+
+
+@dataclass(frozen=True)
+class SensorSampling:
+    """The whole per-episode sensor distribution (``conf/sensor/*.yaml``).
+
+    Attributes:
+        camera, extrinsic, imu: see their classes.
+        time_offset: Kalibr's ``timeshift_cam_imu`` [s] (``t_imu = t_cam + time_offset``).
+        pixel_noise_px: sigma [px] of the Gaussian corner noise of the ``project`` backend.
+        backend: camera observation backend, ``project`` (analytic) or ``render`` (MuJoCo image +
+            detector).
+    """
+
+    camera: CameraSampling = field(default_factory=CameraSampling)
+    extrinsic: ExtrinsicSampling = field(default_factory=ExtrinsicSampling)
+    imu: ImuSampling = field(default_factory=ImuSampling)
+    time_offset: Normal = field(default_factory=Normal)
+    pixel_noise_px: float = 0.25
+    backend: str = "project"
+
+    def __post_init__(self) -> None:
+        self.time_offset.check("sensor.time_offset")
+        require_range("sensor.pixel_noise_px", self.pixel_noise_px, 0.0)
+        require(self.backend in CAMERA_BACKENDS, "sensor.backend", f"one of {CAMERA_BACKENDS}", self.backend)
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> SensorSampling:
+        """Build from a plain mapping (e.g. ``OmegaConf.to_container(cfg.sensor)``); unknown keys are refused."""
+        return from_mapping(cls, cfg, "sensor")
+
+
+def sample_camera(cfg: CameraSampling, rng: np.random.Generator, asymmetric: bool = False) -> CameraModel:
+    """Draw a camera; draws whose distortion is not invertible over the image are redrawn.
+
+    Args:
+        cfg: the camera distribution.
+        rng: seeded generator.
+        asymmetric: also draw the distortion-centre offset and (radtan) tangential terms
+            (the paper's joint task); otherwise they are zero.
+    """
+    for _ in range(_MAX_CAMERA_DRAWS):
+        camera = _draw_camera(cfg, rng, asymmetric)
+        if camera is not None:
+            return camera
+    raise ConfigError(
+        f"sensor.camera: {_MAX_CAMERA_DRAWS} draws gave no valid camera (FOV outside (0, pi) or distortion "
+        f"not invertible over the image); reduce sensor.camera.k1.std / k2.std (now {cfg.k1.std}, {cfg.k2.std}) "
+        f"or sensor.camera.hfov.std (now {cfg.hfov.std})"
+    )
+
+
+def _draw_camera(cfg: CameraSampling, rng: np.random.Generator, asymmetric: bool) -> CameraModel | None:
+    hfov = cfg.hfov.draw(rng)
+    k1, k2 = cfg.k1.draw(rng), cfg.k2.draw(rng)
+    if asymmetric:
+        p = cfg.tangential_std * rng.standard_normal(2) if cfg.distortion == "radtan" else np.zeros(2)
+        offset = cfg.center_offset_std * rng.standard_normal(2) * [cfg.width, cfg.height]
+    else:
+        p, offset = np.zeros(2), np.zeros(2)
+    dist = np.array([k1, k2, p[0], p[1]])
+    try:
+        camera = CameraModel.from_hfov(hfov, cfg.width, cfg.height, dist, cfg.distortion, offset)
+        camera.check_invertible()
+    except CameraModelError:
+        return None
+    return camera
+
+
+def sample_imu_pose(cfg: ExtrinsicSampling, rng: np.random.Generator) -> np.ndarray:
+    """Draw ``T_body_imu`` (4, 4): the IMU pose in the camera body frame."""
+    position = np.asarray(cfg.position_mean) + np.asarray(cfg.position_std) * rng.standard_normal(3)
+    rpy = np.asarray(cfg.rpy_mean) + np.asarray(cfg.rpy_std) * rng.standard_normal(3)
+    return make_transform(euler_to_matrix(rpy), position)
+
+
+def sample_sensor(cfg: SensorSampling, rng: np.random.Generator, asymmetric: bool = False) -> SensorTruth:
+    """Draw one sensor (camera, extrinsic, time offset, initial IMU biases) from ``cfg``.
+
+    The draws happen in a fixed order, so one seed gives one sensor.
+    """
+    camera = sample_camera(cfg.camera, rng, asymmetric)
+    T_body_imu = sample_imu_pose(cfg.extrinsic, rng)
+    time_offset = cfg.time_offset.draw(rng)
+    gyro_bias = cfg.imu.gyro_bias_std * rng.standard_normal(3)
+    accel_bias = cfg.imu.accel_bias_std * rng.standard_normal(3)
+    return SensorTruth(
+        camera=camera,
+        T_cam_imu=T_CAM_BODY @ T_body_imu,
+        time_offset=time_offset,
+        imu_noise=cfg.imu.kalibr_noise(),
+        gyro_bias=gyro_bias,
+        accel_bias=accel_bias,
+    )
+
+
+def mean_sensor(cfg: SensorSampling) -> SensorTruth:
+    """The sensor at the distributions' means (no distortion-centre offset, no biases)."""
+    camera = CameraModel.from_hfov(
+        cfg.camera.hfov.mean,
+        cfg.camera.width,
+        cfg.camera.height,
+        [cfg.camera.k1.mean, cfg.camera.k2.mean, 0.0, 0.0],
+        cfg.camera.distortion,
+    )
+    T_body_imu = make_transform(euler_to_matrix(cfg.extrinsic.rpy_mean), np.asarray(cfg.extrinsic.position_mean))
+    return SensorTruth(camera, T_CAM_BODY @ T_body_imu, cfg.time_offset.mean, cfg.imu.kalibr_noise())
+
+
+def imu_pose_in_body(truth: SensorTruth) -> np.ndarray:
+    """``T_body_imu`` (4, 4) of a sensor: the IMU pose in the camera body frame."""
+    return invert_transform(T_CAM_BODY) @ truth.T_cam_imu
+
+
+def steps_per_sample(physics_step_ns: int, rate_hz: float, key: str) -> int:
+    """Physics steps per sample of a sensor at ``rate_hz``; ``ConfigError`` naming ``key`` unless it is an integer.
+
+    The physics rate must be an integer multiple of every sensor rate, so that each sample
+    instant falls on a physics step.
+    """
+    require_range(key, rate_hz, 0.0, None, low_open=True)
+    ratio = NS_PER_S / (physics_step_ns * rate_hz)
+    if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+        raise ConfigError(
+            f"{key} = {rate_hz} Hz: the physics rate ({NS_PER_S / physics_step_ns:g} Hz) must be an integer "
+            f"multiple of it; choose a rate that divides the physics rate or change the physics timestep"
+        )
+    return round(ratio)
