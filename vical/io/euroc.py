@@ -1,0 +1,196 @@
+"""EuRoC / ASL dataset folders.
+
+Layout (as the EuRoC MAV dataset ships it; ``<root>/mav0`` or the ``mav0`` folder itself)::
+
+    mav0/cam0/data/<t_ns>.png   8-bit grey images
+    mav0/cam0/data.csv          #timestamp [ns],filename
+    mav0/cam0/sensor.yaml       camera: T_BS (camera -> body = IMU), intrinsics, distortion, rate_hz
+    mav0/cam0/corners.csv       (vical) detections as a corner CSV, see ``vical.io.csvfiles``
+    mav0/imu0/data.csv          #timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_z [m s^-2]
+    mav0/imu0/sensor.yaml       IMU noise densities, random walks, rate_hz
+
+vical writes ``timeshift_cam_imu`` [s] (Kalibr's sign) into ``cam0/sensor.yaml`` when the time
+offset is known. The reference calibration in the ``sensor.yaml`` files, when complete, becomes
+the recording's ``truth``.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vical.data import NS_PER_S, CameraFrames, ImuSamples, Recording, SensorTruth, Target
+from vical.geometry.transforms import invert_transform
+from vical.io.atomic import atomic_directory
+from vical.io.checks import check_sampling, sort_and_dedupe, warn
+from vical.io.csvfiles import parse_times, read_corners_csv, read_imu_csv, read_rows, write_corners_csv, write_imu_csv
+from vical.io.errors import CsvFormatError, FormatError, KalibrFormatError
+from vical.io.images import Detector, frames_from_images, read_gray, write_png
+from vical.io.kalibr import read_camchain, read_imu_yaml
+from vical.io.yamlfile import dump_yaml, load_mapping
+
+EUROC_DISTORTION_NAMES = {"radtan": "radial-tangential", "equidistant": "equidistant"}
+
+
+def find_euroc_root(path: str | os.PathLike) -> Path | None:
+    """The folder holding ``cam0/data.csv`` (``path`` or ``path/mav0``), or None."""
+    for root in (Path(path) / "mav0", Path(path)):
+        if (root / "cam0" / "data.csv").is_file():
+            return root
+    return None
+
+
+# ------------------------------------------------------------------------------------ write
+def write_euroc(recording: Recording, path: str | os.PathLike, overwrite: bool = False) -> Path:
+    """Write ``recording`` as an EuRoC folder ``path/mav0/...`` atomically; return ``path``.
+
+    The frames must carry images. Detections go to ``cam0/corners.csv``; the truth (if any) to
+    the ``sensor.yaml`` files.
+    """
+    frames = recording.frames
+    if frames.images is None:
+        raise FormatError("an EuRoC folder holds images, but the recording has none; record it with images")
+    with atomic_directory(path, overwrite=overwrite) as tmp:
+        cam, imu = tmp / "mav0" / "cam0", tmp / "mav0" / "imu0"
+        (cam / "data").mkdir(parents=True)
+        imu.mkdir(parents=True)
+        _write_images(frames, cam)
+        write_corners_csv(frames, cam / "corners.csv")
+        write_imu_csv(recording.imu, imu / "data.csv")
+        dump_yaml(cam / "sensor.yaml", _camera_sensor_yaml(recording))
+        dump_yaml(imu / "sensor.yaml", _imu_sensor_yaml(recording))
+    return Path(path)
+
+
+def _write_images(frames: CameraFrames, cam: Path) -> None:
+    lines = ["#timestamp [ns],filename"]
+    for t, image in zip(frames.t.tolist(), frames.images, strict=True):
+        write_png(cam / "data" / f"{t}.png", image)
+        lines.append(f"{t},{t}.png")
+    (cam / "data.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _rate_hz(t: np.ndarray) -> float:
+    return float(NS_PER_S / np.median(np.diff(t))) if len(t) > 1 else 0.0
+
+
+def _matrix(T: np.ndarray) -> dict[str, Any]:
+    return {"cols": 4, "rows": 4, "data": [float(v) for v in np.asarray(T).reshape(-1)]}
+
+
+def _camera_sensor_yaml(rec: Recording) -> dict[str, Any]:
+    height, width = rec.frames.images.shape[1:]
+    data: dict[str, Any] = {"sensor_type": "camera", "comment": "written by vical", "rate_hz": _rate_hz(rec.frames.t)}
+    data["resolution"] = [int(width), int(height)]
+    if rec.truth is not None:
+        cam = rec.truth.camera
+        data["T_BS"] = _matrix(invert_transform(rec.truth.T_cam_imu))
+        data["camera_model"] = "pinhole"
+        data["intrinsics"] = [float(v) for v in cam.intrinsics]
+        data["distortion_model"] = EUROC_DISTORTION_NAMES[cam.distortion]
+        data["distortion_coefficients"] = [float(v) for v in cam.dist]
+        data["timeshift_cam_imu"] = float(rec.truth.time_offset)
+    return data
+
+
+def _imu_sensor_yaml(rec: Recording) -> dict[str, Any]:
+    data: dict[str, Any] = {"sensor_type": "imu", "comment": "written by vical", "T_BS": _matrix(np.eye(4))}
+    data["rate_hz"] = _rate_hz(rec.imu.t)
+    if rec.truth is not None:
+        noise = rec.truth.imu_noise
+        data["rate_hz"] = float(noise.rate_hz)
+        data["gyroscope_noise_density"] = noise.gyro_noise_density
+        data["gyroscope_random_walk"] = noise.gyro_random_walk
+        data["accelerometer_noise_density"] = noise.accel_noise_density
+        data["accelerometer_random_walk"] = noise.accel_random_walk
+    return data
+
+
+# ------------------------------------------------------------------------------------ read
+def read_euroc(
+    path: str | os.PathLike,
+    target: Target,
+    detector: Detector | None = None,
+    keep_images: bool = True,
+    gyro_unit: str = "rad/s",
+    accel_unit: str = "m/s^2",
+) -> Recording:
+    """Read an EuRoC folder (``path`` or ``path/mav0``).
+
+    Corners come from ``detector`` when given, else from ``cam0/corners.csv`` when present,
+    else the frames have no detections. Images are checked against the resolution in
+    ``cam0/sensor.yaml`` (or the first image). ``keep_images=False`` decodes images only for
+    detection, bounding memory on long sequences.
+    """
+    root = find_euroc_root(path)
+    if root is None:
+        raise FormatError(f"{path} is not an EuRoC folder: neither it nor its mav0/ holds cam0/data.csv")
+    truth, resolution = _read_reference(root)
+    t, files = _read_image_list(root / "cam0")
+    images = ((str(p), read_gray(p)) for p in files)
+    frames = frames_from_images(t, images, target, detector, keep_images, resolution, desc="EuRoC cam0")
+    if detector is None and (root / "cam0" / "corners.csv").is_file():
+        frames = _attach_corners(frames, read_corners_csv(root / "cam0" / "corners.csv", target), root)
+    return Recording(
+        imu=_read_imu(root, gyro_unit, accel_unit),
+        frames=frames,
+        target=target,
+        truth=truth,
+        metadata={"source": "euroc", "path": str(Path(path).resolve())},
+    )
+
+
+def _read_image_list(cam: Path) -> tuple[np.ndarray, list[Path]]:
+    csv = cam / "data.csv"
+    rows, lines = read_rows(csv, 2)
+    if not rows:
+        raise CsvFormatError(f"{csv} lists no images")
+    t = parse_times(rows, lines, csv)
+    names = np.array([r[1] for r in rows])
+    try:
+        order = sort_and_dedupe(t, names[:, None], str(csv), np.asarray(lines))
+        check_sampling(t[order], str(csv))
+    except FormatError as exc:
+        raise CsvFormatError(str(exc)) from exc
+    return t[order], [cam / "data" / str(n) for n in names[order]]
+
+
+def _read_imu(root: Path, gyro_unit: str, accel_unit: str) -> ImuSamples:
+    csv = root / "imu0" / "data.csv"
+    if not csv.is_file():
+        warn(f"{csv} is missing: the recording has no IMU data (intrinsic calibration only)")
+        return ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+    return read_imu_csv(csv, gyro_unit, accel_unit)
+
+
+def _read_reference(root: Path) -> tuple[SensorTruth | None, tuple[int, int] | None]:
+    """Reference calibration from the sensor.yaml files (None unless complete) and the resolution."""
+    cam_yaml, imu_yaml = root / "cam0" / "sensor.yaml", root / "imu0" / "sensor.yaml"
+    if not cam_yaml.is_file():
+        return None, None
+    data = load_mapping(cam_yaml, KalibrFormatError)
+    resolution = tuple(int(v) for v in data["resolution"]) if "resolution" in data else None
+    has_noise = imu_yaml.is_file() and "gyroscope_noise_density" in load_mapping(imu_yaml, KalibrFormatError)
+    if "intrinsics" not in data or not has_noise:
+        return None, resolution
+    camera, T_cam_imu, shift = read_camchain(cam_yaml)
+    if T_cam_imu is None:
+        return None, resolution
+    truth = SensorTruth(camera, T_cam_imu, 0.0 if shift is None else shift, read_imu_yaml(imu_yaml))
+    return truth, (camera.width, camera.height)
+
+
+def _attach_corners(frames: CameraFrames, detections: CameraFrames, root: Path) -> CameraFrames:
+    """``frames`` with the corner CSV's detections matched by timestamp (frames not listed: none)."""
+    index = {t: k for k, t in enumerate(detections.t.tolist())}
+    unknown = sorted(set(index) - set(frames.t.tolist()))
+    if unknown:
+        raise CsvFormatError(f"{root / 'cam0' / 'corners.csv'}: timestamp {unknown[0]} ns matches no image in data.csv")
+    empty = (np.zeros((0, 2)), np.zeros(0, np.int64))
+    pairs = [
+        (detections.corners[index[t]], detections.ids[index[t]]) if t in index else empty for t in frames.t.tolist()
+    ]
+    return CameraFrames(frames.t, [p[0] for p in pairs], [p[1] for p in pairs], frames.images)
