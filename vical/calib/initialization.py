@@ -1,0 +1,96 @@
+"""Closed-form starting points: focal length from plane homographies, frame poses from PnP."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from vical.calib.errors import CalibrationError
+from vical.calib.observations import FrameObservation
+from vical.geometry import CameraModel, make_transform
+
+MIN_INIT_CORNERS = 12  # frames with fewer corners gave metre-level PnP errors; skip them for initialisation
+MAX_PNP_RMS_PX = 20.0  # [px] a PnP pose that reprojects worse than this is not used as a starting point
+
+
+def _homography(obs: FrameObservation, centre: np.ndarray) -> np.ndarray | None:
+    """(3, 3) homography from board (x, y) [m] to pixels relative to ``centre``, or None if degenerate."""
+    H, _ = cv2.findHomography(obs.points[:, :2], obs.uv - centre, method=0)
+    if H is None or not np.all(np.isfinite(H)):
+        return None
+    return H / np.linalg.norm(H[:, 0])
+
+
+def focal_from_homographies(observations: list[FrameObservation], centre: np.ndarray) -> tuple[float, float]:
+    """Zhang's closed form with the principal point fixed at ``centre`` (2,) [px] and zero skew.
+
+    With ``B = diag(1/fx^2, 1/fy^2, 1)`` the homography columns satisfy ``h1' B h2 = 0`` and
+    ``h1' B h1 = h2' B h2``, two linear equations in ``(1/fx^2, 1/fy^2)`` per view.
+
+    Returns:
+        (fx, fy) [px].
+    """
+    rows, rhs = [], []
+    for obs in observations:
+        H = _homography(obs, centre)
+        if H is None:
+            continue
+        h1, h2 = H[:, 0], H[:, 1]
+        rows += [[h1[0] * h2[0], h1[1] * h2[1]], [h1[0] ** 2 - h2[0] ** 2, h1[1] ** 2 - h2[1] ** 2]]
+        rhs += [-h1[2] * h2[2], -(h1[2] ** 2 - h2[2] ** 2)]
+    if len(rows) < 4:
+        raise CalibrationError(
+            f"intrinsic initialisation needs at least 2 views of the target with >= {MIN_INIT_CORNERS} corners"
+        )
+    ab, *_ = np.linalg.lstsq(np.asarray(rows), np.asarray(rhs), rcond=None)
+    if np.any(ab <= 0):
+        raise CalibrationError(
+            "the target views do not determine the focal length (the board is seen almost head-on in every "
+            "frame); tilt the board by 20-60 deg relative to the camera in some views"
+        )
+    return float(1.0 / np.sqrt(ab[0])), float(1.0 / np.sqrt(ab[1]))
+
+
+def initial_camera(observations: list[FrameObservation], model: str, size: tuple[int, int]) -> CameraModel:
+    """A distortion-free camera of ``model`` with Zhang's focal lengths and the image centre as principal point."""
+    w, h = size
+    centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
+    usable = [o for o in observations if len(o.ids) >= MIN_INIT_CORNERS] or observations
+    fx, fy = focal_from_homographies(usable, centre)
+    return CameraModel(model, w, h, fx, fy, centre[0], centre[1], np.zeros(4))
+
+
+def pnp(camera: CameraModel, obs: FrameObservation) -> tuple[np.ndarray, float] | None:
+    """Pose ``T_cam_target`` (4, 4) of one frame and its reprojection RMS [px], or None when PnP fails.
+
+    Pixels are undistorted with the camera model first, so both distortion models share one path.
+    """
+    xy = camera.undistort(camera.pixels_to_normalized(obs.uv))
+    obj = np.ascontiguousarray(obs.points, dtype=np.float64)
+    img = np.ascontiguousarray(xy, dtype=np.float64)
+    flag = cv2.SOLVEPNP_IPPE if len(obs.ids) >= 4 else cv2.SOLVEPNP_ITERATIVE
+    ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=flag)
+    if not ok:
+        return None
+    R = cv2.Rodrigues(rvec)[0]
+    T = make_transform(R, tvec.ravel())
+    p_cam = obs.points @ R.T + tvec.ravel()
+    if np.any(p_cam[:, 2] <= 0):
+        return None
+    uv, _ = camera.project(p_cam)
+    rms = float(np.sqrt(np.mean(np.sum((uv - obs.uv) ** 2, axis=1))))
+    return T, rms
+
+
+def frame_poses(
+    camera: CameraModel, observations: list[FrameObservation], min_corners: int = MIN_INIT_CORNERS
+) -> dict[int, tuple[np.ndarray, float]]:
+    """PnP poses ``{observation index: (T_cam_target, rms [px])}`` of frames good enough to start from."""
+    poses = {}
+    for k, obs in enumerate(observations):
+        if len(obs.ids) < min_corners:
+            continue
+        result = pnp(camera, obs)
+        if result is not None and result[1] < MAX_PNP_RMS_PX:
+            poses[k] = result
+    return poses

@@ -1,0 +1,182 @@
+"""Intrinsic calibration (pinhole + radtan or equidistant) from target observations.
+
+Graph: one ``Pose3`` per frame (the camera pose in the target frame, ``T_target_cam``), one
+calibration (``Cal3DS2`` / ``Cal3Fisheye``, skew pinned to zero) and the target points pinned by
+tight priors; one ``GeneralSFMFactor2`` per corner. Initialisation: Zhang's focal lengths from
+plane homographies (principal point at the image centre, no distortion), then PnP per frame.
+"""
+
+from __future__ import annotations
+
+import time
+
+import gtsam
+import numpy as np
+
+from vical.calib.errors import CalibrationError
+from vical.calib.gtsam_camera import MODEL_INDEX, kind_of, pixel_noise, skew_prior, to_gtsam
+from vical.calib.gtsam_camera import from_gtsam as camera_from_gtsam
+from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera
+from vical.calib.observations import FrameObservation, collect_observations, image_size
+from vical.calib.result import CalibrationResult, ResidualStats
+from vical.calib.solver import joint_covariance, optimize
+from vical.calib.uncertainty import weak_parameters
+from vical.data import CameraFrames, Target
+from vical.geometry import CameraModel, invert_transform
+
+LANDMARK_SIGMA = 1e-6  # [m] target points are known; a prior (not a constraint) keeps Marginals well posed
+MIN_VIEWS = 3  # intrinsics with a free principal point need three views of a plane (Zhang)
+
+K_KEY = gtsam.symbol("k", 0)
+
+
+def pose_key(k: int) -> int:
+    return gtsam.symbol("x", k)
+
+
+def landmark_key(i: int) -> int:
+    return gtsam.symbol("l", i)
+
+
+def distortion_names(model: str) -> list[str]:
+    """Names of the four distortion coefficients of ``model``."""
+    return ["k1", "k2", "p1", "p2"] if model == "radtan" else ["k1", "k2", "k3", "k4"]
+
+
+def intrinsic_names(model: str) -> list[str]:
+    return ["fx", "fy", "cx", "cy", *distortion_names(model)]
+
+
+def add_landmarks(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, target: Target) -> None:
+    """Target points as variables pinned by priors of ``LANDMARK_SIGMA``."""
+    noise = gtsam.noiseModel.Isotropic.Sigma(3, LANDMARK_SIGMA)
+    for i, p in enumerate(target.points):
+        graph.add(gtsam.PriorFactorPoint3(landmark_key(i), p, noise))
+        values.insert(landmark_key(i), p)
+
+
+def _build_graph(
+    camera: CameraModel,
+    observations: list[FrameObservation],
+    poses: dict[int, tuple[np.ndarray, float]],
+    target: Target,
+    sigma_px: float,
+    huber_k: float | None,
+) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
+    kind = kind_of(camera.distortion)
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    add_landmarks(graph, values, target)
+    calibration = to_gtsam(camera)
+    values.insert(K_KEY, calibration)
+    graph.add(skew_prior(K_KEY, calibration))
+    noise = pixel_noise(sigma_px, huber_k)
+    for k, (T_cam_target, _) in poses.items():
+        values.insert(pose_key(k), gtsam.Pose3(invert_transform(T_cam_target)))
+        obs = observations[k]
+        for uv, i in zip(obs.uv, obs.ids, strict=True):
+            graph.add(kind.sfm_factor(uv, noise, pose_key(k), landmark_key(int(i)), K_KEY))
+    return graph, values
+
+
+def reprojection_residuals(
+    camera: CameraModel, observations: list[FrameObservation], T_cam_target: dict[int, np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Measured minus predicted pixels (N, 2) [px] and the frame index (N,) of each corner."""
+    res, frame = [], []
+    for k, T in T_cam_target.items():
+        obs = observations[k]
+        uv, _ = camera.project(obs.points @ T[:3, :3].T + T[:3, 3])
+        res.append(obs.uv - uv)
+        frame.append(np.full(len(uv), obs.index))
+    return np.concatenate(res), np.concatenate(frame)
+
+
+def estimated_pixel_sigma(residuals: np.ndarray, num_params: int) -> float:
+    """A-posteriori corner noise [px]: ``sqrt(sum r^2 / (2 N - num_params))`` (per image axis)."""
+    dof = residuals.size - num_params
+    if dof <= 0:
+        raise CalibrationError(f"too few corners ({len(residuals)}) for {num_params} parameters")
+    return float(np.sqrt(np.sum(residuals**2) / dof))
+
+
+def calibrate_intrinsics(
+    frames: CameraFrames,
+    target: Target,
+    model: str = "radtan",
+    image_size_px: tuple[int, int] | None = None,
+    initial_camera_guess: CameraModel | None = None,
+    pixel_sigma: float | None = None,
+    huber_k: float | None = None,
+    max_iterations: int = 50,
+) -> CalibrationResult:
+    """Calibrate the camera's intrinsics and distortion from target observations.
+
+    Args:
+        frames: camera frames with corner detections.
+        target: the calibration target.
+        model: ``"radtan"`` (``Cal3DS2``) or ``"equidistant"`` (``Cal3Fisheye``).
+        image_size_px: ``(width, height)`` [px]; taken from ``frames.images`` or the initial guess if None.
+        initial_camera_guess: starting intrinsics (Zhang's closed form if None).
+        pixel_sigma: [px] corner noise; None estimates it from the residuals and scales the covariance.
+        huber_k: Huber kernel width in sigmas (None: plain least squares).
+        max_iterations: Levenberg-Marquardt iterations.
+    """
+    start = time.perf_counter()
+    kind_of(model)
+    observations = collect_observations(frames, target)
+    if image_size_px is None and initial_camera_guess is not None:
+        image_size_px = (initial_camera_guess.width, initial_camera_guess.height)
+    size = image_size(frames, image_size_px)
+    camera0 = initial_camera_guess or initial_camera(observations, model, size)
+    if camera0.distortion != model:  # keep the guessed focal length and principal point, start undistorted
+        camera0 = CameraModel(model, camera0.width, camera0.height, camera0.fx, camera0.fy, camera0.cx, camera0.cy)
+    poses = frame_poses(camera0, observations, min(MIN_INIT_CORNERS, target.num_points))
+    if len(poses) < MIN_VIEWS:
+        raise CalibrationError(
+            f"intrinsic calibration needs at least {MIN_VIEWS} frames with a usable target view, got {len(poses)} "
+            f"(of {len(frames)} frames); collect more views of the whole target"
+        )
+    sigma_graph = 1.0 if pixel_sigma is None else float(pixel_sigma)
+    graph, values = _build_graph(camera0, observations, poses, target, sigma_graph, huber_k)
+    solution = optimize(graph, values, max_iterations, "intrinsic calibration")
+    calibration = solution.values.atCal3DS2(K_KEY) if model == "radtan" else solution.values.atCal3Fisheye(K_KEY)
+    camera = camera_from_gtsam(calibration, camera0)
+    T_cam_target = {k: invert_transform(solution.values.atPose3(pose_key(k)).matrix()) for k in poses}
+    residuals, frame_index = reprojection_residuals(camera, observations, T_cam_target)
+    covariance = joint_covariance(graph, solution.values, [K_KEY])[np.ix_(MODEL_INDEX, MODEL_INDEX)]
+    if pixel_sigma is None:
+        sigma_px = estimated_pixel_sigma(residuals, 6 * len(poses) + len(MODEL_INDEX))
+        covariance = covariance * (sigma_px / sigma_graph) ** 2
+    else:
+        sigma_px = float(pixel_sigma)
+    names = intrinsic_names(model)
+    estimate = np.concatenate([camera.intrinsics, camera.dist])
+    return CalibrationResult(
+        task="intrinsic",
+        camera=camera,
+        T_cam_imu=None,
+        time_offset=None,
+        gyro_bias=None,
+        accel_bias=None,
+        gravity_target=None,
+        parameter_names=names,
+        estimate=estimate,
+        covariance=covariance,
+        weak_parameters=weak_parameters(names, estimate, covariance, camera),
+        reprojection=ResidualStats.of(residuals),
+        reprojection_residuals=residuals,
+        reprojection_frames=frame_index,
+        imu_residuals=None,
+        pixel_sigma=sigma_px,
+        iterations=solution.iterations,
+        solve_time=time.perf_counter() - start,
+        status=solution.status,
+        num_frames=len(poses),
+        warnings=_dropped_frames_warning(len(frames), len(poses)),
+    )
+
+
+def _dropped_frames_warning(num_frames: int, used: int) -> list[str]:
+    if used == num_frames:
+        return []
+    return [f"{num_frames - used} of {num_frames} frames had no usable target view and were not used"]

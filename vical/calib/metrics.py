@@ -1,0 +1,75 @@
+"""Calibration errors against ground truth: the paper's relative errors and absolute errors users read.
+
+Relative errors follow the authors' evaluation code (see ``docs/calibration.md``):
+
+- intrinsic [%]: ``100 ||[fx, fy, cx, cy] - gt|| / ||gt||`` (distortion excluded);
+- extrinsic [%]: ``100 sqrt(||R - R_gt||_F^2 + ||t - t_gt||^2) / sqrt(||R_gt||_F^2 + ||t_gt||^2)`` of
+  ``T_cam_imu`` (the relative error of the 12-vector ``[vec R, t]``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from vical.calib.result import CalibrationResult
+from vical.data import SensorTruth
+from vical.geometry import CameraModel, transform_error
+
+
+def intrinsic_relative_error(camera: CameraModel, truth: CameraModel) -> float:
+    """The paper's intrinsic error [%] of ``[fx, fy, cx, cy]``."""
+    return float(100.0 * np.linalg.norm(camera.intrinsics - truth.intrinsics) / np.linalg.norm(truth.intrinsics))
+
+
+def extrinsic_relative_error(T_cam_imu: np.ndarray, T_true: np.ndarray) -> float:
+    """The paper's extrinsic error [%]: relative error of the 12-vector ``[vec R, t]`` of ``T_cam_imu`` (4, 4)."""
+    d_R = np.linalg.norm(T_cam_imu[:3, :3] - T_true[:3, :3])
+    d_t = np.linalg.norm(T_cam_imu[:3, 3] - T_true[:3, 3])
+    scale = np.sqrt(np.linalg.norm(T_true[:3, :3]) ** 2 + np.linalg.norm(T_true[:3, 3]) ** 2)
+    return float(100.0 * np.hypot(d_R, d_t) / scale)
+
+
+@dataclass(frozen=True)
+class CalibrationErrors:
+    """Errors of one calibration against the truth (None where the task did not estimate it).
+
+    Attributes:
+        intrinsic_pct: the paper's intrinsic error [%].
+        intrinsic_abs_px: (4,) |fx, fy, cx, cy| errors [px].
+        extrinsic_pct: the paper's extrinsic error [%].
+        rotation_deg: rotation error of ``T_cam_imu`` [deg].
+        translation_mm: translation error of ``T_cam_imu`` [mm].
+        time_offset_ms: |time offset error| [ms].
+    """
+
+    intrinsic_pct: float
+    intrinsic_abs_px: np.ndarray
+    extrinsic_pct: float | None = None
+    rotation_deg: float | None = None
+    translation_mm: float | None = None
+    time_offset_ms: float | None = None
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["intrinsic_abs_px"] = [float(v) for v in self.intrinsic_abs_px]
+        return d
+
+
+def calibration_errors(result: CalibrationResult, truth: SensorTruth) -> CalibrationErrors:
+    """Relative and absolute errors of ``result`` against ``truth``."""
+    intrinsic_pct = intrinsic_relative_error(result.camera, truth.camera)
+    intrinsic_abs = np.abs(result.camera.intrinsics - truth.camera.intrinsics)
+    if result.T_cam_imu is None:
+        return CalibrationErrors(intrinsic_pct, intrinsic_abs)
+    rot, trans = transform_error(result.T_cam_imu, truth.T_cam_imu)
+    dt = None if result.time_offset is None else abs(result.time_offset - truth.time_offset) * 1e3
+    return CalibrationErrors(
+        intrinsic_pct,
+        intrinsic_abs,
+        extrinsic_relative_error(result.T_cam_imu, truth.T_cam_imu),
+        float(np.rad2deg(rot)),
+        float(trans * 1e3),
+        dt,
+    )

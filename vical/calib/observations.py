@@ -1,0 +1,73 @@
+"""Per-frame target observations: the corners a frame saw and the board points they belong to."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from vical.calib.errors import CalibrationError
+from vical.data import CameraFrames, Target
+
+MIN_CORNERS = 4  # a frame needs at least 4 corners to constrain its 6-DoF pose
+
+
+@dataclass(frozen=True)
+class FrameObservation:
+    """The target corners seen in one camera frame.
+
+    Attributes:
+        index: index of the frame in the recording's ``CameraFrames``.
+        t_ns: int64 [ns] frame timestamp (camera clock).
+        uv: (K, 2) [px] corner pixels.
+        ids: (K,) int64 target point ids.
+        points: (K, 3) [m] the corners' board-frame positions.
+    """
+
+    index: int
+    t_ns: int
+    uv: np.ndarray
+    ids: np.ndarray
+    points: np.ndarray
+
+
+def collect_observations(
+    frames: CameraFrames, target: Target, min_corners: int = MIN_CORNERS
+) -> list[FrameObservation]:
+    """Frames with at least ``min_corners`` valid detections, in time order.
+
+    Raises:
+        CalibrationError: when no frame has enough corners, or ids are outside the target.
+    """
+    if len(frames) == 0:
+        raise CalibrationError("the recording has no camera frames; record the target with the camera first")
+    points = target.points
+    out = []
+    for k in range(len(frames)):
+        ids = frames.ids[k]
+        if ids.size and (ids.min() < 0 or ids.max() >= target.num_points):
+            raise CalibrationError(
+                f"frame {k} has corner ids outside 0..{target.num_points - 1}; "
+                f"the target ({target.rows} x {target.cols} points) does not match the detections"
+            )
+        if len(ids) >= min_corners:
+            out.append(FrameObservation(k, int(frames.t[k]), frames.corners[k], ids, points[ids]))
+    if not out:
+        counts = frames.num_detections
+        raise CalibrationError(
+            f"no camera frame has at least {min_corners} target corners (most in one frame: {int(counts.max())} "
+            f"of {len(frames)} frames); check the target definition and that the board is in view"
+        )
+    return out
+
+
+def image_size(frames: CameraFrames, image_size: tuple[int, int] | None) -> tuple[int, int]:
+    """``(width, height)`` [px] from the argument or, failing that, from the frames' images."""
+    if image_size is not None:
+        w, h = (int(v) for v in image_size)
+        if w <= 0 or h <= 0:
+            raise CalibrationError(f"image_size must be positive (width, height) [px], got {image_size}")
+        return w, h
+    if frames.images is not None:
+        return int(frames.images.shape[2]), int(frames.images.shape[1])
+    raise CalibrationError("the image size is unknown: pass image_size=(width, height) or frames with images")

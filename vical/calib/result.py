@@ -1,0 +1,158 @@
+"""What a calibration returns: estimates, their 1-sigma, quality statistics and solver facts."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from vical.geometry import CameraModel
+
+
+@dataclass(frozen=True)
+class ResidualStats:
+    """Summary of residual magnitudes (px for reprojection, rad/s for gyro, m/s^2 for accel).
+
+    Attributes:
+        mean, median, std, rms, max: of the residual norms.
+        count: number of residuals.
+    """
+
+    mean: float
+    median: float
+    std: float
+    rms: float
+    max: float
+    count: int
+
+    @classmethod
+    def of(cls, residuals: np.ndarray) -> ResidualStats:
+        """Statistics of the norms of ``residuals`` (N, D)."""
+        r = np.asarray(residuals, dtype=float)
+        norms = np.linalg.norm(r.reshape(len(r), -1), axis=1) if len(r) else np.zeros(0)
+        if not len(norms):
+            return cls(np.nan, np.nan, np.nan, np.nan, np.nan, 0)
+        return cls(
+            float(norms.mean()),
+            float(np.median(norms)),
+            float(norms.std()),
+            float(np.sqrt(np.mean(norms**2))),
+            float(norms.max()),
+            len(norms),
+        )
+
+
+@dataclass(frozen=True)
+class WeakParameter:
+    """A parameter whose 1-sigma exceeds what a good data set reaches.
+
+    Attributes:
+        name: parameter name (see ``CalibrationResult.parameter_names``).
+        sigma: its 1-sigma in the parameter's unit.
+        threshold: the 1-sigma [same unit] above which it counts as weakly observed.
+        hint: what motion would help, in plain words.
+    """
+
+    name: str
+    sigma: float
+    threshold: float
+    hint: str
+
+    @property
+    def ratio(self) -> float:
+        return self.sigma / self.threshold
+
+
+@dataclass(frozen=True)
+class ImuResiduals:
+    """Gyro and accelerometer residuals per IMU factor (state interval), for reports and plots.
+
+    Attributes:
+        t: (S,) [s] interval mid times, relative to the recording start.
+        gyro_measured, gyro_predicted: (S, 3) [rad/s] mean angular rate over the interval from the
+            gyro (bias-corrected) and from the estimated states.
+        accel_measured, accel_predicted: (S, 3) [m/s^2] mean specific-force change expressed as the
+            velocity change per second from the accelerometer and from the estimated states.
+    """
+
+    t: np.ndarray
+    gyro_measured: np.ndarray
+    gyro_predicted: np.ndarray
+    accel_measured: np.ndarray
+    accel_predicted: np.ndarray
+
+    @property
+    def gyro_stats(self) -> ResidualStats:
+        return ResidualStats.of(self.gyro_measured - self.gyro_predicted)
+
+    @property
+    def accel_stats(self) -> ResidualStats:
+        return ResidualStats.of(self.accel_measured - self.accel_predicted)
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """The outcome of ``calibrate_intrinsics`` / ``calibrate_extrinsics`` / ``calibrate_joint``.
+
+    Attributes:
+        task: ``"intrinsic"``, ``"extrinsic"``, ``"joint"`` or ``"two_stage"``.
+        camera: the camera model (estimated, or the given one for the extrinsic task).
+        T_cam_imu: (4, 4) camera-IMU extrinsic (maps IMU points into the camera frame) or None.
+        time_offset: [s] Kalibr's ``timeshift_cam_imu`` (``t_imu = t_cam + time_offset``) or None.
+        gyro_bias: (3,) [rad/s] and accel_bias (3,) [m/s^2] at the first IMU state, or None.
+        gravity_target: (3,) [m/s^2] gravity in the target frame, or None.
+        parameter_names: names of the entries of ``estimate`` / ``covariance``: ``fx fy cx cy``
+            [px], ``d0..d3`` (distortion), ``rot_x rot_y rot_z`` [rad] (rotation error of
+            ``R_cam_imu`` as a rotation vector in the camera frame, left perturbation),
+            ``t_x t_y t_z`` [m] (translation of ``T_cam_imu``), ``time_offset`` [s],
+            ``bg_x..bg_z`` [rad/s], ``ba_x..ba_z`` [m/s^2].
+        estimate: (P,) values of those parameters (0 for the rotation perturbation).
+        covariance: (P, P) their marginal covariance from the factor graph.
+        weak_parameters: weakly observed parameters, the weakest first, with motion hints.
+        reprojection: reprojection error statistics [px].
+        reprojection_residuals: (N, 2) [px] measured minus predicted corner positions.
+        reprojection_frames: (N,) int index of the frame (in the input ``CameraFrames``) of each residual.
+        imu_residuals: gyro / accel residuals per IMU factor or None (intrinsic task).
+        pixel_sigma: [px] the corner noise used to weight the projection factors.
+        iterations: Levenberg-Marquardt iterations.
+        solve_time: [s] wall time of the whole calibration (initialisation, solve, covariance).
+        status: ``"converged"`` or ``"max_iterations"``.
+        num_frames: frames that entered the graph.
+        warnings: plain-language notes about the data (dropped frames, estimated noise).
+    """
+
+    task: str
+    camera: CameraModel
+    T_cam_imu: np.ndarray | None
+    time_offset: float | None
+    gyro_bias: np.ndarray | None
+    accel_bias: np.ndarray | None
+    gravity_target: np.ndarray | None
+    parameter_names: list[str]
+    estimate: np.ndarray
+    covariance: np.ndarray
+    weak_parameters: list[WeakParameter]
+    reprojection: ResidualStats
+    reprojection_residuals: np.ndarray
+    reprojection_frames: np.ndarray
+    imu_residuals: ImuResiduals | None
+    pixel_sigma: float
+    iterations: int
+    solve_time: float
+    status: str
+    num_frames: int
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def sigmas(self) -> dict[str, float]:
+        """1-sigma of every estimated parameter, by name (units as in ``parameter_names``)."""
+        return dict(zip(self.parameter_names, np.sqrt(np.diag(self.covariance)).tolist(), strict=True))
+
+    def sigma(self, name: str) -> float:
+        """1-sigma of one parameter."""
+        return self.sigmas[name]
+
+    def block(self, names: list[str]) -> tuple[np.ndarray, np.ndarray]:
+        """Estimate (k,) and covariance (k, k) of the named parameters."""
+        idx = [self.parameter_names.index(n) for n in names]
+        return self.estimate[idx], self.covariance[np.ix_(idx, idx)]

@@ -1,0 +1,83 @@
+"""Weakly observed parameters: 1-sigma beyond what a good data set reaches, with a motion hint.
+
+The thresholds are 1-sigma values that a well-excited 20 s recording of the paper's camera
+(640 x 480, 1 rad FOV, 7 x 6 board at 0.5-1.2 m) beats comfortably; a parameter above its
+threshold is flagged, the weakest first (largest sigma / threshold).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vical.calib.result import WeakParameter
+from vical.geometry import CameraModel
+
+_TILT_HINT = "move closer to the target and tilt it more (30-60 deg views) so focal length separates from distance"
+_BORDER_HINT = "show the target near the image corners and borders, where the lens distortion is largest"
+_AXES = {"x": "x (image right)", "y": "y (image down)", "z": "z (optical axis)"}
+
+
+def _rotate_others_hint(axis: str, what: str) -> str:
+    others = " and ".join(_AXES[a] for a in "xyz" if a != axis)
+    return f"rotate more about the camera's {others} axes: {what} along/about {_AXES[axis]} shows only then"
+
+
+def thresholds(camera: CameraModel) -> dict[str, float]:
+    """1-sigma above which each parameter counts as weakly observed (in the parameter's unit)."""
+    t = {
+        "fx": 0.002 * camera.fx,  # [px] 0.2 % of the focal length
+        "fy": 0.002 * camera.fy,  # [px]
+        "cx": 0.003 * camera.width,  # [px] ~2 px at 640 wide
+        "cy": 0.003 * camera.height,  # [px]
+        "rot_x": np.deg2rad(0.1),  # [rad]
+        "rot_y": np.deg2rad(0.1),  # [rad]
+        "rot_z": np.deg2rad(0.1),  # [rad]
+        "t_x": 0.002,  # [m]
+        "t_y": 0.002,  # [m]
+        "t_z": 0.002,  # [m]
+        "time_offset": 0.0005,  # [s]
+    }
+    radtan = {"k1": 0.005, "k2": 0.01, "p1": 0.0005, "p2": 0.0005}  # [-]
+    equidistant = {"k1": 0.005, "k2": 0.01, "k3": 0.02, "k4": 0.02}  # [-]
+    t.update(radtan if camera.distortion == "radtan" else equidistant)
+    return t
+
+
+def hint(name: str) -> str:
+    """Plain-language advice on the motion that would observe ``name`` better."""
+    if name in ("fx", "fy"):
+        return _TILT_HINT
+    if name == "cx":
+        return "tilt the target left/right (about the image's vertical axis) and show it near the left and right edges"
+    if name == "cy":
+        return "tilt the target up/down (about the image's horizontal axis) and show it near the top and bottom edges"
+    if name in ("k1", "k2", "k3", "k4", "p1", "p2"):
+        return _BORDER_HINT
+    if name.startswith("rot_"):
+        return _rotate_others_hint(name[-1], "a rotation error")
+    if name.startswith("t_"):
+        return _rotate_others_hint(name[-1], "the lever arm")
+    if name == "time_offset":
+        return "move with faster and changing rotation rates: the time offset shows only in fast motion"
+    return "record longer and hold the sensor in several orientations relative to gravity"
+
+
+def weak_parameters(
+    names: list[str], estimate: np.ndarray, covariance: np.ndarray, camera: CameraModel
+) -> list[WeakParameter]:
+    """Parameters whose 1-sigma exceeds its threshold, weakest first.
+
+    Args:
+        names: parameter names (P,), see ``CalibrationResult.parameter_names``.
+        estimate: (P,) estimates (unused by the rule, kept so callers pass a consistent triple).
+        covariance: (P, P) marginal covariance.
+        camera: the calibrated camera (scales the intrinsic thresholds).
+    """
+    limits = thresholds(camera)
+    sigmas = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    weak = [
+        WeakParameter(n, float(s), limits[n], hint(n))
+        for n, s in zip(names, sigmas, strict=True)
+        if n in limits and s > limits[n]
+    ]
+    return sorted(weak, key=lambda w: -w.ratio)
