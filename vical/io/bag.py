@@ -1,0 +1,225 @@
+"""ROS1 bags through the pure-Python ``rosbags`` package, with Kalibr's topic conventions.
+
+Writes ``sensor_msgs/Image`` (``mono8``) on ``/cam0/image_raw`` and ``sensor_msgs/Imu`` on
+``/imu0`` (gyro in ``angular_velocity`` [rad/s], specific force in ``linear_acceleration``
+[m/s^2], ``orientation_covariance[0] = -1``: no orientation), stamped in ``header.stamp`` and the
+bag time with the exact ns timestamps, which ``kalibr_calibrate_imu_camera`` reads. Reading
+takes the same topics (configurable), decodes ``mono8``/``rgb8``/``bgr8``/``bgra8``/``rgba8``
+images and ``sensor_msgs/CompressedImage`` to grey, and stamps with ``header.stamp``.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from rosbags.rosbag1 import Reader, ReaderError, Writer
+from rosbags.typesys import Stores, get_typestore
+from tqdm import tqdm
+
+from vical.data import NS_PER_S, CameraFrames, DataError, ImuSamples, Recording, Target
+from vical.io.checks import check_sampling, scale_imu, sort_and_dedupe
+from vical.io.errors import BagFormatError, FormatError
+from vical.io.images import Detector, check_size, run_detector, to_gray
+
+IMAGE_TYPE, COMPRESSED_TYPE, IMU_TYPE = (
+    "sensor_msgs/msg/Image",
+    "sensor_msgs/msg/CompressedImage",
+    "sensor_msgs/msg/Imu",
+)
+COLOR_CODES = {"rgb8": cv2.COLOR_RGB2GRAY, "bgr8": cv2.COLOR_BGR2GRAY, "rgba8": cv2.COLOR_RGBA2GRAY}
+COLOR_CODES["bgra8"] = cv2.COLOR_BGRA2GRAY
+_TYPESTORE = get_typestore(Stores.ROS1_NOETIC)
+
+
+# ------------------------------------------------------------------------------------ write
+def write_bag(
+    recording: Recording,
+    path: str | os.PathLike,
+    image_topic: str = "/cam0/image_raw",
+    imu_topic: str = "/imu0",
+    overwrite: bool = False,
+) -> Path:
+    """Write ``recording`` (it must carry images) as a ROS1 bag Kalibr can read, atomically."""
+    if recording.frames.images is None:
+        raise FormatError("a calibration bag holds images, but the recording has none; record it with images")
+    final = Path(path)
+    if final.exists() and (not overwrite or final.is_dir()):
+        raise FileExistsError(f"{final} already exists; pass overwrite=True to replace it")
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp_dir = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
+    try:
+        _write_messages(recording, tmp_dir / final.name, image_topic, imu_topic)
+        os.replace(tmp_dir / final.name, final)
+    finally:
+        shutil.rmtree(tmp_dir, ignore_errors=True)
+    return final
+
+
+def _write_messages(rec: Recording, path: Path, image_topic: str, imu_topic: str) -> None:
+    events = [(int(t), 1, k) for k, t in enumerate(rec.imu.t)] + [(int(t), 0, k) for k, t in enumerate(rec.frames.t)]
+    events.sort()
+    with Writer(path) as writer:
+        cam = writer.add_connection(image_topic, IMAGE_TYPE, typestore=_TYPESTORE)
+        imu = writer.add_connection(imu_topic, IMU_TYPE, typestore=_TYPESTORE)
+        for t, is_imu, k in tqdm(events, desc=f"writing {path.name}", unit="msg", leave=False):
+            if is_imu:
+                msg = _imu_msg(t, k, rec.imu.gyro[k], rec.imu.accel[k])
+                writer.write(imu, t, _TYPESTORE.serialize_ros1(msg, IMU_TYPE))
+            else:
+                msg = _image_msg(t, k, rec.frames.images[k])
+                writer.write(cam, t, _TYPESTORE.serialize_ros1(msg, IMAGE_TYPE))
+
+
+def _header(t_ns: int, seq: int, frame_id: str) -> Any:
+    sec, nsec = divmod(t_ns, NS_PER_S)
+    stamp = _TYPESTORE.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
+    return _TYPESTORE.types["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=frame_id)
+
+
+def _image_msg(t_ns: int, seq: int, image: np.ndarray) -> Any:
+    h, w = image.shape
+    return _TYPESTORE.types[IMAGE_TYPE](
+        header=_header(t_ns, seq, "cam0"),
+        height=h,
+        width=w,
+        encoding="mono8",
+        is_bigendian=0,
+        step=w,
+        data=np.ascontiguousarray(image).reshape(-1),
+    )
+
+
+def _imu_msg(t_ns: int, seq: int, gyro: np.ndarray, accel: np.ndarray) -> Any:
+    types = _TYPESTORE.types
+    vec = types["geometry_msgs/msg/Vector3"]
+    cov = np.zeros(9)
+    orientation_cov = cov.copy()
+    orientation_cov[0] = -1.0  # ROS convention: the orientation field is not provided
+    return types[IMU_TYPE](
+        header=_header(t_ns, seq, "imu0"),
+        orientation=types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=orientation_cov,
+        angular_velocity=vec(x=float(gyro[0]), y=float(gyro[1]), z=float(gyro[2])),
+        angular_velocity_covariance=cov,
+        linear_acceleration=vec(x=float(accel[0]), y=float(accel[1]), z=float(accel[2])),
+        linear_acceleration_covariance=cov,
+    )
+
+
+# ------------------------------------------------------------------------------------ read
+def read_bag(
+    path: str | os.PathLike,
+    target: Target,
+    detector: Detector | None = None,
+    image_topic: str = "/cam0/image_raw",
+    imu_topic: str | None = "/imu0",
+    keep_images: bool = True,
+    gyro_unit: str = "rad/s",
+    accel_unit: str = "m/s^2",
+) -> Recording:
+    """Recording from a ROS1 bag: images on ``image_topic`` (corners by ``detector``), IMU on ``imu_topic``.
+
+    ``imu_topic=None`` reads images only (intrinsic calibration). Raises ``BagFormatError``
+    naming the bag and topic when the bag is corrupt or truncated, a topic is missing or has the
+    wrong type, images change size, or timestamps/units are implausible.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise BagFormatError(f"{path} does not exist or is not a file")
+    try:
+        with Reader(path) as reader:
+            connections = _connections(reader, path, image_topic, imu_topic)
+            frames, imu = _read_streams(reader, connections, path, target, detector, keep_images)
+    except ReaderError as exc:
+        raise BagFormatError(f"{path} cannot be read as a ROS1 bag (corrupt or truncated?): {exc}") from exc
+    try:
+        imu_samples = _imu_samples(imu, f"{path} topic {imu_topic}", gyro_unit, accel_unit)
+        camera_frames = _camera_frames(frames, f"{path} topic {image_topic}", keep_images)
+    except (FormatError, DataError) as exc:
+        raise BagFormatError(str(exc)) from exc
+    return Recording(imu_samples, camera_frames, target, metadata={"source": "rosbag1", "path": str(path.resolve())})
+
+
+def _connections(reader: Reader, path: Path, image_topic: str, imu_topic: str | None) -> dict[str, Any]:
+    topics = {c.topic: c for c in reader.connections}
+    wanted = {image_topic: (IMAGE_TYPE, COMPRESSED_TYPE)}
+    if imu_topic is not None:
+        wanted[imu_topic] = (IMU_TYPE,)
+    found = {}
+    for topic, types in wanted.items():
+        if topic not in topics:
+            listing = ", ".join(f"{c.topic} ({c.msgtype})" for c in reader.connections) or "none"
+            raise BagFormatError(f"{path}: topic {topic} is missing; the bag has: {listing}. Choose the topic")
+        if topics[topic].msgtype not in types:
+            raise BagFormatError(f"{path}: topic {topic} holds {topics[topic].msgtype}, expected {' or '.join(types)}")
+        found[topic] = topics[topic]
+    return found
+
+
+def _read_streams(reader, connections, path, target, detector, keep_images):
+    """Decode every message of the chosen connections (tqdm progress): frame tuples and IMU rows."""
+    frames, imu = [], []
+    total = sum(c.msgcount for c in connections.values())
+    messages = reader.messages(connections=list(connections.values()))
+    for index, (conn, _, raw) in enumerate(tqdm(messages, total=total, desc=path.name, unit="msg", leave=False)):
+        msg = _TYPESTORE.deserialize_ros1(raw, conn.msgtype)
+        t = int(msg.header.stamp.sec) * NS_PER_S + int(msg.header.stamp.nanosec)
+        where = f"{path} topic {conn.topic} message {index}"
+        if conn.msgtype == IMU_TYPE:
+            w, a = msg.angular_velocity, msg.linear_acceleration
+            imu.append((t, index, (w.x, w.y, w.z, a.x, a.y, a.z)))
+            continue
+        image = _decode_image(msg, conn.msgtype, where)
+        corners, ids = run_detector(detector, image, target, where) if detector else (np.zeros((0, 2)), np.zeros(0))
+        frames.append((t, index, image if keep_images else None, corners, ids, where))
+    return frames, imu
+
+
+def _decode_image(msg: Any, msgtype: str, where: str) -> np.ndarray:
+    if msgtype == COMPRESSED_TYPE:
+        image = cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if image is None:
+            raise BagFormatError(f"{where}: cannot decode the compressed image ({msg.format})")
+        return to_gray(image, where)
+    channels = {"mono8": 1, "8UC1": 1, **dict.fromkeys(COLOR_CODES, 3)}
+    channels.update(rgba8=4, bgra8=4)
+    if msg.encoding not in channels:
+        raise BagFormatError(f"{where}: image encoding {msg.encoding!r} is not supported; use mono8 (or rgb8/bgr8)")
+    n = channels[msg.encoding]
+    data = np.frombuffer(msg.data, np.uint8)
+    if data.size < msg.step * msg.height or msg.step < msg.width * n:
+        raise BagFormatError(f"{where}: image data has {data.size} bytes, too few for {msg.width} x {msg.height}")
+    rows = data[: msg.step * msg.height].reshape(msg.height, msg.step)[:, : msg.width * n]
+    image = rows.reshape(msg.height, msg.width, n)
+    return image[:, :, 0].copy() if n == 1 else cv2.cvtColor(image, COLOR_CODES[msg.encoding])
+
+
+def _imu_samples(rows: list, where: str, gyro_unit: str, accel_unit: str) -> ImuSamples:
+    if not rows:
+        return ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+    t = np.array([r[0] for r in rows], dtype=np.int64)
+    values = np.array([r[2] for r in rows], dtype=np.float64)
+    order = sort_and_dedupe(t, values, where, np.array([r[1] for r in rows]))
+    check_sampling(t[order], where)
+    gyro, accel = scale_imu(values[order, :3], values[order, 3:], gyro_unit, accel_unit, where)
+    return ImuSamples(t[order], gyro, accel)
+
+
+def _camera_frames(frames: list, where: str, keep_images: bool) -> CameraFrames:
+    if not frames:
+        raise BagFormatError(f"{where}: no image messages")
+    t = np.array([f[0] for f in frames], dtype=np.int64)
+    size = None
+    for f in frames if keep_images else []:
+        size = check_size(f[2], size, f[5])
+    digest = np.array([[hash(f[2].tobytes()) if f[2] is not None else f[1]] for f in frames])
+    order = sort_and_dedupe(t, digest, where, np.array([f[1] for f in frames]))
+    check_sampling(t[order], where)
+    images = np.stack([frames[k][2] for k in order]) if keep_images else None
+    return CameraFrames(t[order], [frames[k][3] for k in order], [frames[k][4] for k in order], images)
