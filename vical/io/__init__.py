@@ -3,6 +3,9 @@
 See ``docs/formats.md``. This package depends only on ``vical.geometry`` and ``vical.data``.
 """
 
+from vical.io.bag import read_bag, write_bag
+from vical.io.checks import FormatWarning
+from vical.io.csvfiles import read_corners_csv, read_imu_csv, write_corners_csv, write_imu_csv
 from vical.io.errors import (
     BagFormatError,
     CsvFormatError,
@@ -10,6 +13,8 @@ from vical.io.errors import (
     KalibrFormatError,
     RecordingFormatError,
 )
+from vical.io.euroc import read_euroc, write_euroc
+from vical.io.images import Detector, read_image_folder
 from vical.io.kalibr import (
     read_camchain,
     read_imu_yaml,
@@ -19,20 +24,34 @@ from vical.io.kalibr import (
     write_target_yaml,
 )
 from vical.io.recording import is_recording_dir, load_recording, save_recording
+from vical.io.sources import detect_source, open_recording
 
 __all__ = [
     "BagFormatError",
     "CsvFormatError",
+    "Detector",
     "FormatError",
+    "FormatWarning",
     "KalibrFormatError",
     "RecordingFormatError",
+    "detect_source",
     "is_recording_dir",
     "load_recording",
+    "open_recording",
+    "read_bag",
     "read_camchain",
+    "read_corners_csv",
+    "read_euroc",
+    "read_image_folder",
+    "read_imu_csv",
     "read_imu_yaml",
     "read_target_yaml",
     "save_recording",
+    "write_bag",
     "write_camchain_imucam",
+    "write_corners_csv",
+    "write_euroc",
+    "write_imu_csv",
     "write_imu_yaml",
     "write_target_yaml",
 ]

@@ -1,0 +1,101 @@
+"""One entry point that recognises what a path holds and reads it as a ``Recording``.
+
+Recognised, in this order:
+
+1. a vical recording directory (``recording.yaml``),
+2. an EuRoC/ASL folder (``cam0/data.csv`` in it or in its ``mav0/``),
+3. a ROS1 bag (a file starting with ``#ROSBAG V2.0``),
+4. a corner CSV (``*.csv``), with the IMU from ``imu_csv`` (EuRoC format) when given,
+5. a folder of images (intrinsic-only: no IMU; timestamps from file order at ``rate_hz``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from vical.data import ImuSamples, Recording, Target
+from vical.io.bag import read_bag
+from vical.io.csvfiles import read_corners_csv, read_imu_csv
+from vical.io.errors import FormatError
+from vical.io.euroc import find_euroc_root, read_euroc
+from vical.io.images import Detector, list_images, read_image_folder
+from vical.io.recording import is_recording_dir, load_recording
+
+BAG_MAGIC = b"#ROSBAG V2.0"
+
+
+def detect_source(path: str | os.PathLike) -> str:
+    """``"recording"``, ``"euroc"``, ``"bag"``, ``"corners_csv"`` or ``"image_folder"``; raise if none fits."""
+    path = Path(path)
+    if not path.exists():
+        raise FormatError(f"{path} does not exist")
+    if path.is_dir():
+        if is_recording_dir(path):
+            return "recording"
+        if find_euroc_root(path) is not None:
+            return "euroc"
+        if list_images(path):
+            return "image_folder"
+    else:
+        with open(path, "rb") as f:
+            if f.read(len(BAG_MAGIC)) == BAG_MAGIC:
+                return "bag"
+        if path.suffix.lower() == ".csv":
+            return "corners_csv"
+    raise FormatError(
+        f"{path} is none of: a vical recording directory (recording.yaml), an EuRoC folder (cam0/data.csv), "
+        "a ROS1 bag, a corner CSV (.csv) or a folder of images"
+    )
+
+
+def open_recording(
+    path: str | os.PathLike,
+    target: Target | None = None,
+    detector: Detector | None = None,
+    imu_csv: str | os.PathLike | None = None,
+    image_topic: str = "/cam0/image_raw",
+    imu_topic: str | None = "/imu0",
+    rate_hz: float = 10.0,
+    keep_images: bool = False,
+    gyro_unit: str = "rad/s",
+    accel_unit: str = "m/s^2",
+) -> Recording:
+    """Read whatever ``path`` holds (see ``detect_source``) as a ``Recording``.
+
+    Args:
+        target: the calibration target; required for every source except a recording directory
+            (which stores its own; when given, it must agree).
+        detector: ``detector(image) -> (corners (K, 2), ids (K,))`` for sources with images.
+            EuRoC folders written by vical fall back to their ``cam0/corners.csv``.
+        imu_csv: EuRoC-format IMU CSV to pair with a corner CSV.
+        image_topic, imu_topic: bag topics (``imu_topic=None``: images only).
+        rate_hz: frame rate [Hz] that timestamps an image folder.
+        keep_images: keep decoded images in memory (EuRoC, bag, image folder).
+        gyro_unit, accel_unit: units of IMU values in CSVs and bags (``"deg/s"``, ``"g"`` convert).
+    """
+    kind = detect_source(path)
+    if kind == "recording":
+        recording = load_recording(path)
+        if target is not None and target != recording.target:
+            raise FormatError(f"{path} was recorded with target {recording.target}, not the given {target}")
+        return recording
+    if target is None:
+        raise FormatError(f"{path} is a {kind.replace('_', ' ')}: give the calibration target (Kalibr target YAML)")
+    units = {"gyro_unit": gyro_unit, "accel_unit": accel_unit}
+    if kind == "euroc":
+        return read_euroc(path, target, detector, keep_images, **units)
+    if kind == "bag":
+        return read_bag(path, target, detector, image_topic, imu_topic, keep_images, **units)
+    if kind == "corners_csv":
+        imu = read_imu_csv(imu_csv, **units) if imu_csv is not None else _no_imu()
+        frames = read_corners_csv(path, target)
+        return Recording(imu, frames, target, metadata={"source": "corners_csv", "path": str(Path(path).resolve())})
+    frames = read_image_folder(path, target, detector, rate_hz, keep_images=keep_images)
+    return Recording(_no_imu(), frames, target, metadata={"source": "image_folder", "path": str(Path(path).resolve())})
+
+
+def _no_imu() -> ImuSamples:
+    return ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
