@@ -1,0 +1,274 @@
+"""``PandaSim``: the simulated Panda that executes end-effector pose steps in MuJoCo physics.
+
+Timing. Simulated time is an integer count of physics steps; ``time_ns = step * timestep_ns``
+(exact int64). ``mj_step`` first evaluates the current state (kinematics, sensors, forces:
+``mj_forward``) and then integrates, so right after ``mj_step`` the derived quantities in
+``data`` -- ``site_xpos``/``site_xmat``, ``xpos``, ``cam_xpos``, ``sensordata`` (accelerometer,
+gyro) -- belong to the PRE-step state at ``time_ns - timestep_ns`` while ``qpos``/``qvel`` are
+already at ``time_ns``. The ``on_step(sim, t_ns)`` callback runs after every physics step with
+``t_ns`` the time of those derived quantities. Outside a motion (after ``reset`` and at the end of
+``move_to``) ``mj_forward`` has run, so every quantity in ``data`` belongs to ``time_ns``.
+
+Control. Joint torques = feed-forward (inverse dynamics of the plan) + PD on the plan, both in
+the affine actuators of panda.xml; the simulation never writes ``qpos`` while moving.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import mujoco
+import numpy as np
+
+from vical.data import NS_PER_S
+from vical.geometry import make_transform, rotation_angle
+from vical.sim.config import NUM_JOINTS, SimConfig
+from vical.sim.kinematics import PANDA_LIMITS, IKResult, PandaIK
+from vical.sim.motion import JointPlan, MotionResult, feedforward_torques, motion_steps, quintic_plan
+from vical.sim.scene import build_model, site_pose
+
+StepCallback = Callable[["PandaSim", int], None]
+
+
+def _check_pose(T: np.ndarray, name: str) -> np.ndarray:
+    T = np.asarray(T, dtype=float)
+    if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+        raise ValueError(f"{name} must be a finite (4, 4) homogeneous transform, got shape {T.shape}")
+    R = T[:3, :3]
+    if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) <= 0:
+        raise ValueError(f"{name}: the rotation block is not a rotation matrix (needs R^T R = I, det R = 1)")
+    return T
+
+
+def _rotation_path_length(R: np.ndarray) -> float:
+    """Sum of rotation angles [rad] between consecutive rotations ``R`` (K, 3, 3)."""
+    dR = np.einsum("kji,kjl->kil", R[:-1], R[1:])
+    vee = np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0], dR[:, 1, 0] - dR[:, 0, 1]], axis=1)
+    cos = (np.trace(dR, axis1=1, axis2=2) - 1.0) / 2.0
+    return float(np.sum(np.arctan2(0.5 * np.linalg.norm(vee, axis=1), cos)))
+
+
+class PandaSim:
+    """The simulated Panda with its camera + IMU rig in front of the checkerboard.
+
+    Attributes:
+        cfg: the validated sim config.
+        model, data: MuJoCo model and data of the scene.
+        T_world_board: (4, 4) board pose (Kalibr board frame).
+        limits: the Panda's joint limits.
+        rng: the simulator's seeded Generator (IK restarts).
+    """
+
+    def __init__(self, cfg: SimConfig | None = None) -> None:
+        self.cfg = cfg if cfg is not None else SimConfig()
+        self.model, self.T_world_board = build_model(self.cfg)
+        self.data = mujoco.MjData(self.model)
+        self.limits = PANDA_LIMITS
+        self._set_gains()
+        self.ik = PandaIK(self.model, self.cfg.ik, self.limits, self.cfg.motion.joint_limit_margin)
+        self._scratch = mujoco.MjData(self.model)
+        self._ee = self.model.site("ee").id
+        self._home = self.model.key("home").id
+        self.rng = np.random.default_rng(self.cfg.seed)
+        self._step = 0
+        self.reset()
+
+    def _set_gains(self) -> None:
+        kp = np.asarray(self.cfg.motion.kp)
+        kd = np.asarray(self.cfg.motion.kd)
+        self.model.actuator_biasprm[:NUM_JOINTS, 1] = -kp
+        self.model.actuator_biasprm[:NUM_JOINTS, 2] = -kd
+        self.model.actuator_forcerange[:NUM_JOINTS] = np.stack([-self.limits.tau_max, self.limits.tau_max], axis=1)
+
+    # ------------------------------------------------------------------ state
+    def reset(self, seed: int | None = None) -> None:
+        """Rest at the ``home`` keyframe at time 0 (reseeds ``rng`` when ``seed`` is given)."""
+        if seed is not None:
+            self.rng = np.random.default_rng(seed)
+        mujoco.mj_resetDataKeyframe(self.model, self.data, self._home)
+        self._step = 0
+        self.data.ctrl[:] = self._hold_ctrl(self.q)
+        mujoco.mj_forward(self.model, self.data)
+
+    @property
+    def step_count(self) -> int:
+        """Physics steps since ``reset``."""
+        return self._step
+
+    @property
+    def timestep_ns(self) -> int:
+        return self.cfg.physics.timestep_ns
+
+    @property
+    def time_ns(self) -> int:
+        """Simulated time [ns] of the current state (``qpos``/``qvel``)."""
+        return self._step * self.cfg.physics.timestep_ns
+
+    def _steps_for(self, seconds: float) -> int:
+        """Whole physics steps nearest to ``seconds`` [s]."""
+        return round(seconds * NS_PER_S / self.timestep_ns)
+
+    @property
+    def q(self) -> np.ndarray:
+        """(7,) [rad] current joint positions (a copy)."""
+        return self.data.qpos[:NUM_JOINTS].copy()
+
+    def ee_pose(self) -> np.ndarray:
+        """``T_world_ee`` (4, 4) from ``data`` (the current state outside motions; see module doc)."""
+        return site_pose(self.model, self.data, "ee")
+
+    # ------------------------------------------------------------------ planning
+    def solve_ik(self, T_world_ee: np.ndarray, q_start: np.ndarray | None = None) -> IKResult:
+        """Joint positions for the end-effector pose ``T_world_ee`` (4, 4), starting near ``q_start``."""
+        T = _check_pose(T_world_ee, "T_world_ee")
+        return self.ik.solve(T, self.q if q_start is None else np.asarray(q_start, float), self.rng)
+
+    def _hold_ctrl(self, q: np.ndarray) -> np.ndarray:
+        """Actuator commands that hold ``q`` (7,) at rest (gravity feed-forward + PD set-point)."""
+        plan = quintic_plan(q, q, 0, 0, self.model.opt.timestep)
+        return self._ctrl_table(plan)[0]
+
+    def _ctrl_table(self, plan: JointPlan) -> np.ndarray:
+        """(K + 1, 7) actuator commands ``tau_ff + kp q_ref + kd qd_ref`` (actuator = ctrl - kp q - kd qd)."""
+        tau = feedforward_torques(self.model, self._scratch, plan, self.cfg.motion.feedforward_stride)
+        return tau + np.asarray(self.cfg.motion.kp) * plan.q + np.asarray(self.cfg.motion.kd) * plan.qd
+
+    def first_collision(self, q0: np.ndarray, q1: np.ndarray) -> tuple[float, str]:
+        """Fraction along the joint line ``q0 -> q1`` of the first sampled configuration in contact.
+
+        Returns ``(1.0, "")`` when all ``sim.motion.collision_samples`` samples are free, else
+        the first colliding fraction and the names of the touching bodies.
+        """
+        m, d = self.model, self._scratch
+        for s in np.linspace(0.0, 1.0, self.cfg.motion.collision_samples):
+            d.qpos[:NUM_JOINTS] = q0 + s * (q1 - q0)
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_collision(m, d)
+            if d.ncon:
+                c = d.contact[0]
+                names = f"{m.body(m.geom_bodyid[c.geom1]).name} and {m.body(m.geom_bodyid[c.geom2]).name}"
+                return float(s), names
+        return 1.0, ""
+
+    def _safe_goal(self, q0: np.ndarray, q_goal: np.ndarray) -> tuple[np.ndarray, str]:
+        """Goal shortened to the last collision-free sample before the first contact, and why."""
+        s_hit, bodies = self.first_collision(q0, q_goal)
+        if s_hit >= 1.0:
+            return q_goal, ""
+        step = 1.0 / (self.cfg.motion.collision_samples - 1)
+        s_safe = max(0.0, s_hit - step)
+        message = f"path collides ({bodies}) at {100 * s_hit:.0f}% of the joint motion; stopped at {100 * s_safe:.0f}%"
+        return q0 + s_safe * (q_goal - q0), message
+
+    # ------------------------------------------------------------------ execution
+    def move_to(
+        self, T_world_ee_target: np.ndarray, on_step: StepCallback | None = None, settle_time: float | None = None
+    ) -> MotionResult:
+        """Move the end effector to ``T_world_ee_target`` (4, 4) in physics; never raises for infeasible targets.
+
+        IK (closest reachable pose when unreachable), collision check along the joint path
+        (stopping short of a contact), quintic plan within the scaled joint limits, execution
+        with feed-forward + PD torques, then ``settle_time`` [s] (default ``sim.motion.settle_time``)
+        at rest. ``on_step(sim, t_ns)`` runs after every physics step (see the module doc).
+        """
+        T_req = _check_pose(T_world_ee_target, "T_world_ee_target")
+        settle = self.cfg.motion.settle_time if settle_time is None else float(settle_time)
+        if not 0.0 <= settle <= 60.0:
+            raise ValueError(f"settle_time must be in [0, 60] s, got {settle}")
+        q0 = self.q
+        ik = self.ik.solve(T_req, q0, self.rng)
+        messages = []
+        if not ik.success:
+            messages.append(
+                f"target unreachable: executed the closest reachable pose, "
+                f"{1e3 * ik.position_error:.1f} mm and {np.degrees(ik.rotation_error):.2f} deg away"
+            )
+        q_goal, collision_message = self._safe_goal(q0, ik.q)
+        if collision_message:
+            messages.append(collision_message)
+        plan = self._plan(q0, q_goal, settle)
+        t_start = self.time_ns
+        trace = self._execute(plan, on_step)
+        return self._result(T_req, q_goal, plan, trace, messages, t_start)
+
+    def _plan(self, q0: np.ndarray, q_goal: np.ndarray, settle: float) -> JointPlan:
+        mc, dt = self.cfg.motion, self.model.opt.timestep
+        steps = motion_steps(q_goal - q0, self.limits, mc.velocity_scale, mc.acceleration_scale, mc.min_duration, dt)
+        hold = self._steps_for(settle)
+        return quintic_plan(q0, q_goal, steps, hold, dt)
+
+    def _execute(self, plan: JointPlan, on_step: StepCallback | None) -> dict[str, np.ndarray]:
+        """Run the plan in physics; logs (K + 1, .) arrays of the states at steps 0..K."""
+        m, d, ee = self.model, self.data, self._ee
+        ctrl = self._ctrl_table(plan)
+        n = plan.num_steps
+        q_log = np.empty((n + 1, NUM_JOINTS))
+        v_log = np.empty((n + 1, NUM_JOINTS))
+        p_log = np.empty((n + 1, 3))
+        R_log = np.empty((n + 1, 9))
+        q_log[0], v_log[0] = d.qpos, d.qvel
+        for k in range(n):
+            d.ctrl[:] = ctrl[k]
+            mujoco.mj_step(m, d)
+            self._step += 1
+            # Derived quantities now describe step k (pre-step state); qpos/qvel step k + 1.
+            p_log[k] = d.site_xpos[ee]
+            R_log[k] = d.site_xmat[ee]
+            q_log[k + 1] = d.qpos
+            v_log[k + 1] = d.qvel
+            if on_step is not None:
+                on_step(self, (self._step - 1) * self.timestep_ns)
+        d.ctrl[:] = ctrl[n]
+        mujoco.mj_forward(m, d)
+        p_log[n], R_log[n] = d.site_xpos[ee], d.site_xmat[ee]
+        return {"q": q_log, "qd": v_log, "p": p_log, "R": R_log.reshape(-1, 3, 3)}
+
+    def _result(
+        self,
+        T_req: np.ndarray,
+        q_goal: np.ndarray,
+        plan: JointPlan,
+        trace: dict[str, np.ndarray],
+        messages: list[str],
+        t_start: int,
+    ) -> MotionResult:
+        p_goal, R_goal = self.ik.forward(q_goal)
+        T_goal = make_transform(R_goal, p_goal)
+        lo_margin = np.min(trace["q"] - self.limits.q_min)
+        hi_margin = np.min(self.limits.q_max - trace["q"])
+        return MotionResult(
+            reached=not messages,
+            clamped=bool(messages),
+            message="; ".join(messages),
+            T_requested=T_req,
+            T_goal=T_goal,
+            T_final=self.ee_pose(),
+            q_goal=q_goal,
+            duration=plan.move_steps * plan.timestep,
+            settle_time=(plan.num_steps - plan.move_steps) * plan.timestep,
+            path_length=float(np.sum(np.linalg.norm(np.diff(trace["p"], axis=0), axis=1))),
+            rotation_length=_rotation_path_length(trace["R"]),
+            max_tracking_error=float(np.max(np.abs(trace["q"] - plan.q))),
+            position_margin=float(min(lo_margin, hi_margin)),
+            velocity_margin=float(np.min(self.limits.v_max - np.abs(trace["qd"]))),
+            num_steps=plan.num_steps,
+            t_start_ns=t_start,
+            t_end_ns=self.time_ns,
+        )
+
+    def hold(self, duration: float, on_step: StepCallback | None = None) -> MotionResult:
+        """Stay at rest at the current joint positions for ``duration`` [s] (physics keeps running)."""
+        if not 0.0 <= duration <= 60.0:
+            raise ValueError(f"hold duration must be in [0, 60] s, got {duration}")
+        q0 = self.q
+        dt = self.model.opt.timestep
+        plan = quintic_plan(q0, q0, 0, self._steps_for(duration), dt)
+        t_start = self.time_ns
+        T_now = self.ee_pose()
+        trace = self._execute(plan, on_step)
+        return self._result(T_now, q0, plan, trace, [], t_start)
+
+    def goal_pose_error(self, result: MotionResult) -> tuple[float, float]:
+        """Rotation [rad] and position [m] error of the final pose against the executed goal."""
+        dR = result.T_final[:3, :3].T @ result.T_goal[:3, :3]
+        return rotation_angle(dR), float(np.linalg.norm(result.T_final[:3, 3] - result.T_goal[:3, 3]))
