@@ -8,6 +8,7 @@ from test_io_samples import assert_frames_equal, make_recording
 
 import vical.io.recording as recording_module
 from vical.io import RecordingFormatError, load_recording, save_recording
+from vical.io.atomic import atomic_file
 
 
 def test_round_trip_is_bit_exact(tmp_path):
@@ -118,3 +119,15 @@ def test_not_a_recording(tmp_path):
         load_recording(tmp_path)
     with pytest.raises(RecordingFormatError, match="not a directory"):
         load_recording(tmp_path / "nothing")
+
+
+def test_atomic_file_keeps_the_old_file_on_failure(tmp_path):
+    path = tmp_path / "camchain.yaml"
+    path.write_text("old")
+    with pytest.raises(RuntimeError, match="interrupted"), atomic_file(path) as tmp:
+        tmp.write_text("half of the new")
+        raise RuntimeError("interrupted")
+    assert path.read_text() == "old" and [p.name for p in tmp_path.iterdir()] == ["camchain.yaml"]
+    with atomic_file(path) as tmp:
+        tmp.write_text("new")
+    assert path.read_text() == "new" and [p.name for p in tmp_path.iterdir()] == ["camchain.yaml"]
