@@ -131,7 +131,8 @@ def camera_pose_cv(model: mujoco.MjModel, data: mujoco.MjData, camera: str = "ca
 def set_imu_pose(model: mujoco.MjModel, T_body_imu: np.ndarray) -> None:
     """Place site ``imu`` at ``T_body_imu`` (4, 4) in the ``cam_body`` frame (per episode).
 
-    Writes ``model.site_pos``/``site_quat`` (MuJoCo quaternions are [w, x, y, z]); the data's
+    Writes ``model.site_pos``/``site_quat`` (MuJoCo quaternions are [w, x, y, z]) and clears the
+    site's same-frame shortcut; the data's
     site poses and IMU readings follow at the next ``mj_kinematics``/``mj_forward``/``mj_step``.
     """
     T = np.asarray(T_body_imu, dtype=float)
@@ -145,6 +146,8 @@ def set_imu_pose(model: mujoco.MjModel, T_body_imu: np.ndarray) -> None:
         raise SceneError("site 'imu' must be a child of body 'cam_body'")
     model.site_pos[i] = T[:3, 3]
     model.site_quat[i] = matrix_to_quat(R)
+    # The compiler marks a site at its body's origin as "same frame" and then skips site_pos/quat.
+    model.site_sameframe[i] = mujoco.mjtSameFrame.mjSAMEFRAME_NONE
 
 
 def imu_pose_in_body(model: mujoco.MjModel) -> np.ndarray:
