@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from rosbags.rosbag1 import Reader
+from rosbags.rosbag1 import Reader, Writer
 from test_io_samples import make_recording
 
-from vical.io.bag import read_bag, write_bag
-from vical.io.errors import BagFormatError
+from vical.io.bag import _TYPESTORE, IMAGE_TYPE, IMU_TYPE, _image_msg, _imu_msg, read_bag, write_bag
+from vical.io.checks import FormatWarning
+from vical.io.errors import BagFormatError, FormatError
 
 
 @pytest.fixture(scope="module")
@@ -85,3 +86,38 @@ def test_write_bag_refuses_to_overwrite_and_needs_images(bag, tmp_path):
     with pytest.raises(ValueError, match="has none"):
         write_bag(make_recording(images=False), tmp_path / "none.bag")
     assert list(tmp_path.iterdir()) == []
+
+
+def _custom_bag(path, images, imu):
+    """A bag from (t_ns, image) and (t_ns, gyro, accel) lists; header stamps in the given (possibly unsorted)
+    order while the bag's receive times increase, as a driver that stamps late would write."""
+    with Writer(path) as writer:
+        cam = writer.add_connection("/cam0/image_raw", IMAGE_TYPE, typestore=_TYPESTORE)
+        imu_conn = writer.add_connection("/imu0", IMU_TYPE, typestore=_TYPESTORE)
+        for k, (t, image) in enumerate(images):
+            writer.write(cam, k * 50_000_000, _TYPESTORE.serialize_ros1(_image_msg(t, k, image), IMAGE_TYPE))
+        for k, (t, gyro, accel) in enumerate(imu):
+            writer.write(imu_conn, t, _TYPESTORE.serialize_ros1(_imu_msg(t, k, gyro, accel), IMU_TYPE))
+    return path
+
+
+def _imu_stream(n=40, gyro=0.2):
+    return [(k * 5_000_000, np.array([gyro, 0, 0]), np.array([0, 0, 9.81])) for k in range(n)]
+
+
+def test_bag_flaws_are_fixed_or_named(tmp_path):
+    target = make_recording().target
+    img = np.zeros((8, 10), np.uint8)
+    images = [(k * 50_000_000, img + k) for k in range(4)]
+    swapped = [images[0], images[2], images[1], images[3]]
+    with pytest.warns(FormatWarning, match="not sorted"):
+        rec = read_bag(_custom_bag(tmp_path / "a.bag", swapped, _imu_stream()), target)
+    assert np.array_equal(rec.frames.images[:, 0, 0], [0, 1, 2, 3])
+    repeated = [*images, (images[3][0], img + 9)]
+    with pytest.raises(BagFormatError, match="share timestamp 150000000 ns with different data"):
+        read_bag(_custom_bag(tmp_path / "b.bag", repeated, _imu_stream()), target)
+    sizes = [*images, (200_000_000, np.zeros((9, 10), np.uint8))]
+    with pytest.raises(FormatError, match=r"/cam0/image_raw message \d+: image is 10 x 9 px"):
+        read_bag(_custom_bag(tmp_path / "c.bag", sizes, _imu_stream()), target, keep_images=False)
+    with pytest.raises(BagFormatError, match=r"d\.bag topic /imu0: gyro reads up to 120\.0 rad/s.*deg/s"):
+        read_bag(_custom_bag(tmp_path / "d.bag", images, _imu_stream(gyro=120.0)), target)

@@ -164,7 +164,7 @@ def _connections(reader: Reader, path: Path, image_topic: str, imu_topic: str | 
 
 def _read_streams(reader, connections, path, target, detector, keep_images):
     """Decode every message of the chosen connections (tqdm progress): frame tuples and IMU rows."""
-    frames, imu = [], []
+    frames, imu, size = [], [], None
     total = sum(c.msgcount for c in connections.values())
     messages = reader.messages(connections=list(connections.values()))
     for index, (conn, _, raw) in enumerate(tqdm(messages, total=total, desc=path.name, unit="msg", leave=False)):
@@ -176,8 +176,10 @@ def _read_streams(reader, connections, path, target, detector, keep_images):
             imu.append((t, index, (w.x, w.y, w.z, a.x, a.y, a.z)))
             continue
         image = _decode_image(msg, conn.msgtype, where)
+        size = check_size(image, size, where)
         corners, ids = run_detector(detector, image, target, where) if detector else (np.zeros((0, 2)), np.zeros(0))
-        frames.append((t, index, image if keep_images else None, corners, ids, where))
+        digest = hash(image.tobytes())  # tells repeated messages from conflicting ones with one stamp
+        frames.append((t, index, image if keep_images else None, corners, ids, digest))
     return frames, imu
 
 
@@ -215,10 +217,7 @@ def _camera_frames(frames: list, where: str, keep_images: bool) -> CameraFrames:
     if not frames:
         raise BagFormatError(f"{where}: no image messages")
     t = np.array([f[0] for f in frames], dtype=np.int64)
-    size = None
-    for f in frames if keep_images else []:
-        size = check_size(f[2], size, f[5])
-    digest = np.array([[hash(f[2].tobytes()) if f[2] is not None else f[1]] for f in frames])
+    digest = np.array([[f[5]] for f in frames])
     order = sort_and_dedupe(t, digest, where, np.array([f[1] for f in frames]))
     check_sampling(t[order], where)
     images = np.stack([frames[k][2] for k in order]) if keep_images else None
