@@ -1,0 +1,103 @@
+"""Preallocated circular replay buffer of transitions ``(s, a, r, s', terminated)``.
+
+Only *termination* (the MDP ended: no bootstrap from ``s'``) is stored. A time-limit *truncation* is not a
+terminal state: the transition is stored with ``terminated = 0`` and its true ``s'`` (gymnasium returns the
+final observation from ``step`` before the caller resets), so the critic bootstraps through it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from vical.rl.checkpoint import atomic_write
+
+_ARRAYS = ("obs", "actions", "rewards", "next_obs", "terminated")
+
+
+class Batch(NamedTuple):
+    """A minibatch of ``B`` transitions as float32 tensors.
+
+    obs, next_obs: ``(B, obs_dim)``; actions: ``(B, act_dim)`` in the policy's ``[-1, 1]`` units;
+    rewards: ``(B,)``; terminated: ``(B,)`` with 1.0 where ``s'`` is terminal.
+    """
+
+    obs: Tensor
+    actions: Tensor
+    rewards: Tensor
+    next_obs: Tensor
+    terminated: Tensor
+
+
+class ReplayBuffer:
+    """Holds the last ``capacity`` transitions in float32 arrays allocated once; oldest overwritten first."""
+
+    def __init__(self, capacity: int, obs_dim: int, act_dim: int) -> None:
+        if capacity < 1:
+            raise ValueError(f"replay buffer capacity must be >= 1, got {capacity}")
+        self.capacity = capacity
+        self.obs = np.zeros((capacity, obs_dim), np.float32)
+        self.actions = np.zeros((capacity, act_dim), np.float32)
+        self.rewards = np.zeros(capacity, np.float32)
+        self.next_obs = np.zeros((capacity, obs_dim), np.float32)
+        self.terminated = np.zeros(capacity, np.float32)
+        self.position = 0  # next slot to write
+        self.size = 0
+
+    def __len__(self) -> int:
+        return self.size
+
+    def add(self, obs: np.ndarray, action: np.ndarray, reward: float, next_obs: np.ndarray, terminated: bool) -> None:
+        """Store one transition: obs/next_obs ``(obs_dim,)``, action ``(act_dim,)``."""
+        i = self.position
+        self.obs[i] = obs
+        self.actions[i] = action
+        self.rewards[i] = reward
+        self.next_obs[i] = next_obs
+        self.terminated[i] = float(terminated)
+        self.position = (i + 1) % self.capacity
+        self.size = min(self.size + 1, self.capacity)
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> Batch:
+        """``batch_size`` transitions drawn uniformly with replacement from the stored ones."""
+        if self.size == 0:
+            raise ValueError("cannot sample from an empty replay buffer: add transitions first")
+        idx = rng.integers(0, self.size, size=batch_size)
+        return Batch(*(torch.from_numpy(getattr(self, name)[idx]) for name in _ARRAYS))
+
+    def state_dict(self) -> dict:
+        """The stored transitions (filled slots only) as tensors plus the write position."""
+        state = {name: torch.from_numpy(getattr(self, name)[: self.size].copy()) for name in _ARRAYS}
+        state.update(position=self.position, size=self.size, capacity=self.capacity)
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore from :meth:`state_dict`; the capacity and dimensions must match this buffer's."""
+        if state["capacity"] != self.capacity:
+            raise ValueError(f"replay buffer capacity {self.capacity} differs from the saved {state['capacity']}")
+        size = int(state["size"])
+        for name in _ARRAYS:
+            saved = np.asarray(state[name])
+            target = getattr(self, name)
+            if saved.shape[1:] != target.shape[1:]:
+                raise ValueError(f"replay buffer '{name}' has shape {target.shape[1:]}, saved {saved.shape[1:]}")
+            target[:size] = saved
+        self.size = size
+        self.position = int(state["position"])
+
+    def save(self, path: str | Path) -> None:
+        """Write the buffer to an ``.npz`` file atomically (temp file + ``os.replace``)."""
+        path = Path(path)
+        state = self.state_dict()
+        arrays = {k: (v.numpy() if isinstance(v, Tensor) else np.asarray(v)) for k, v in state.items()}
+        atomic_write(path, lambda f: np.savez(f, **arrays))
+
+    def load(self, path: str | Path) -> None:
+        """Restore from a file written by :meth:`save`."""
+        with np.load(path) as data:
+            state = {k: (data[k] if data[k].ndim else data[k].item()) for k in data.files}
+        self.load_state_dict(state)

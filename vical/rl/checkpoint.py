@@ -1,0 +1,85 @@
+"""Atomic file writes and checkpoint config compatibility."""
+
+from __future__ import annotations
+
+import os
+import uuid
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import IO, Any
+
+import torch
+
+# Settings a resumed run may change without altering the numbers it produces up to the old end.
+RESUMABLE_KEYS = frozenset({"resume", "run_dir", "train.total_steps", "train.progress"})
+
+
+class IncompatibleCheckpointError(ValueError):
+    """A checkpoint written under a config that differs from the current one in a setting that matters."""
+
+
+def atomic_write(path: str | Path, write: Callable[[IO[bytes]], Any]) -> None:
+    """Call ``write(file)`` on a temp file next to ``path``, then ``os.replace`` it onto ``path``.
+
+    A crash at any point leaves either the old file or the complete new one, never a partial file.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
+    try:
+        with open(tmp, "xb") as f:  # created with the user's umask, unlike tempfile's private 0600
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_checkpoint(state: dict, path: str | Path) -> None:
+    """``torch.save`` ``state`` to ``path`` atomically."""
+    atomic_write(path, lambda f: torch.save(state, f))
+
+
+def load_checkpoint(path: str | Path) -> dict:
+    """Load a checkpoint written by :func:`save_checkpoint` (tensors, numbers, strings and containers only)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no checkpoint at {path}: resume=<run dir> must name a run directory of vical-train")
+    return torch.load(path, map_location="cpu", weights_only=True)
+
+
+def flatten(cfg: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"a": {"b": 1}} -> {"a.b": 1}``; lists stay values."""
+    flat: dict[str, Any] = {}
+    for key, value in cfg.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            flat.update(flatten(value, f"{name}."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def config_differences(saved: Mapping[str, Any], current: Mapping[str, Any]) -> list[str]:
+    """Lines ``key: saved -> current`` for every setting outside ``RESUMABLE_KEYS`` that differs."""
+    old, new = flatten(saved), flatten(current)
+    keys = sorted((set(old) | set(new)) - RESUMABLE_KEYS)
+    missing = "<absent>"
+    return [
+        f"{k}: {old.get(k, missing)!r} (checkpoint) vs {new.get(k, missing)!r} (now)"
+        for k in keys
+        if old.get(k, missing) != new.get(k, missing)
+    ]
+
+
+def require_compatible(saved: Mapping[str, Any], current: Mapping[str, Any], path: str | Path) -> None:
+    """Refuse to resume from ``path`` when its config differs from ``current``, listing each differing key."""
+    diffs = config_differences(saved, current)
+    if diffs:
+        listing = "\n  ".join(diffs)
+        raise IncompatibleCheckpointError(
+            f"checkpoint {path} was written with a different config:\n  {listing}\n"
+            "Resume with the run's own config (vical-train resume=<run dir> loads it; only "
+            f"{sorted(RESUMABLE_KEYS - {'resume', 'run_dir'})} may change) or start a new run."
+        )

@@ -1,0 +1,85 @@
+"""TensorBoard logging of training: namespaced scalars, env info terms, hyperparameters, trajectory plots.
+
+Tags: ``losses/`` (SAC losses and diagnostics), ``charts/`` (episodic and evaluation returns), ``time/``
+(throughput), and every numeric entry of the env's ``info`` dict whose key starts with one of the
+configured prefixes (``calib/``, ``coverage/`` by default) under its own key, so an env reports new
+terms without any change here.
+
+Trajectory plots: an env may define ``trajectory_figure(observations, actions) -> matplotlib.figure.Figure``
+on its unwrapped instance; otherwise the generic figure plots each observation and action component
+against the step index.
+"""
+
+from __future__ import annotations
+
+import numbers
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: figures are only rendered into TensorBoard images
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.figure import Figure
+from torch.utils.tensorboard import SummaryWriter
+
+
+class TrainLogger:
+    """Writes one run's TensorBoard events under ``log_dir``.
+
+    ``purge_step``: on resume, events at or after this step (written by the interrupted run after its
+    last checkpoint) are discarded so the curves continue without duplicates.
+    """
+
+    def __init__(self, log_dir: str | Path, info_prefixes: Iterable[str], purge_step: int | None = None) -> None:
+        self.writer = SummaryWriter(str(log_dir), purge_step=purge_step)
+        self.info_prefixes = tuple(info_prefixes)
+
+    def hyperparameters(self, flat_config: Mapping[str, Any]) -> None:
+        """Log the resolved config once as a markdown table (text tab)."""
+        rows = "\n".join(f"|{key}|{value}|" for key, value in sorted(flat_config.items()))
+        self.writer.add_text("hyperparameters", f"|param|value|\n|-|-|\n{rows}", 0)
+
+    def scalars(self, values: Mapping[str, float], step: int) -> None:
+        for tag, value in values.items():
+            self.writer.add_scalar(tag, float(value), step)
+
+    def env_info(self, info: Mapping[str, Any], step: int) -> None:
+        """Log the numeric scalar entries of an env ``info`` dict whose keys start with a known prefix."""
+        for key, value in info.items():
+            if key.startswith(self.info_prefixes) and _is_scalar(value):
+                self.writer.add_scalar(key, float(value), step)
+
+    def trajectory(self, env: Any, observations: np.ndarray, actions: np.ndarray, step: int) -> None:
+        """Log an episode's figure under ``charts/trajectory``: obs ``(T + 1, obs_dim)``, actions ``(T, act_dim)``."""
+        hook = getattr(getattr(env, "unwrapped", env), "trajectory_figure", None)
+        figure = hook(observations, actions) if callable(hook) else trajectory_figure(observations, actions)
+        self.writer.add_figure("charts/trajectory", figure, step, close=True)
+
+    def close(self) -> None:
+        self.writer.close()
+
+
+def _is_scalar(value: Any) -> bool:
+    if isinstance(value, np.ndarray):
+        return value.size == 1 and np.issubdtype(value.dtype, np.number)
+    return isinstance(value, numbers.Real) and not isinstance(value, bool)
+
+
+def trajectory_figure(observations: np.ndarray, actions: np.ndarray) -> Figure:
+    """Observation components ``(T + 1, obs_dim)`` and actions ``(T, act_dim)`` (policy units) vs step."""
+    fig, (ax_obs, ax_act) = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    for i, series in enumerate(np.asarray(observations).T):
+        ax_obs.plot(series, label=f"obs[{i}]")
+    for i, series in enumerate(np.asarray(actions).T):
+        ax_act.plot(series, label=f"action[{i}]")
+    ax_obs.set_ylabel("observation")
+    ax_act.set_ylabel("action [-1, 1]")
+    ax_act.set_xlabel("step in episode")
+    for ax in (ax_obs, ax_act):
+        if ax.lines and len(ax.lines) <= 12:  # a legend for dozens of components is unreadable
+            ax.legend(loc="upper right", fontsize="x-small", ncol=2)
+    fig.tight_layout()
+    return fig
