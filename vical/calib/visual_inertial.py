@@ -1,0 +1,421 @@
+"""Camera-IMU calibration in one factor graph: extrinsic, time offset, biases, and optionally intrinsics.
+
+Layout (navigation frame = target frame, so no gauge prior is needed):
+
+- per used frame ``i``: IMU state ``X_i`` (``Pose3`` ``T_target_imu`` at IMU time
+  ``t_cam_i + tau0``), velocity ``V_i`` [m/s] (target frame), bias ``B_i``; the IMU pose at the
+  exposure instant ``P_i``, tied to ``X_i`` by the time-offset factor;
+- shared: ``E`` = ``T_imu_cam`` (``Pose3``), gravity direction ``G`` (``Unit3``, target frame),
+  time-offset correction ``D`` [s] (``tau = tau0 + D``), and in the joint task the calibration ``K``;
+- target points pinned by priors;
+- factors: ``ProjectionFactorPPP(C)`` per corner on ``(P_i, E, point[, K])``,
+  ``CombinedImuFactorWithGravityDirection`` between consecutive states (rotation-compensated
+  midpoint preintegration), one time-offset factor per frame, a weak prior on the first bias.
+
+Initialisation: PnP poses with the (known or intrinsically calibrated) camera; time offset,
+``R_cam_imu`` and gyro bias in closed form (``time_alignment``); translation from the guess;
+velocities by finite differences; gravity from the mean specific force.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+
+from vical.calib.errors import CalibrationError
+from vical.calib.gtsam_camera import MODEL_INDEX, kind_of, pixel_noise, skew_prior, to_gtsam
+from vical.calib.gtsam_camera import from_gtsam as camera_from_gtsam
+from vical.calib.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
+from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses
+from vical.calib.intrinsics import add_landmarks, estimated_pixel_sigma, intrinsic_names, landmark_key
+from vical.calib.nominal import nominal_T_cam_imu
+from vical.calib.observations import FrameObservation
+from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats
+from vical.calib.solver import joint_covariance, optimize
+from vical.calib.time_alignment import align, rotation_increments
+from vical.calib.time_offset_factor import time_offset_factor
+from vical.calib.uncertainty import weak_parameters
+from vical.data import ImuNoise, ImuSamples, Target, seconds_since
+from vical.geometry import CameraModel, invert_transform, make_transform, skew
+
+GRAVITY_MAGNITUDE = 9.81  # [m/s^2]
+GYRO_BIAS_PRIOR_SIGMA = 0.1  # [rad/s] weak prior on the first gyro bias (keeps short recordings well posed)
+ACCEL_BIAS_PRIOR_SIGMA = 1.0  # [m/s^2] weak prior on the first accelerometer bias
+MIN_PIXEL_SIGMA = 0.01  # [px] floor of the estimated corner noise (noise-free data would weight pixels infinitely)
+RECENTRE_OFFSET = 1e-3  # [s] re-linearise the states at the new offset when the in-graph correction exceeds this
+MAX_ROUNDS = 3
+
+E_KEY, G_KEY, D_KEY, K_KEY = (gtsam.symbol(c, 0) for c in "egdk")
+EXTRINSIC_NAMES = ["rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "time_offset"]
+BIAS_NAMES = ["ba_x", "ba_y", "ba_z", "bg_x", "bg_y", "bg_z"]  # GTSAM's ConstantBias order: accel, then gyro
+
+
+def _key(c: str, i: int) -> int:
+    return gtsam.symbol(c, i)
+
+
+@dataclass(frozen=True)
+class ViOptions:
+    """Settings of the camera-IMU solve.
+
+    Attributes:
+        estimate_time_offset: estimate the time offset (else it stays at the initial value).
+        max_time_offset: [s] half-width of the closed-form time-offset scan around the guess.
+        pixel_sigma: [px] corner noise; None estimates it from the PnP residuals.
+        huber_k: Huber kernel width in sigmas for the projection factors (None: least squares).
+        max_iterations: Levenberg-Marquardt iterations per round.
+        gravity_magnitude: [m/s^2] local gravity.
+    """
+
+    estimate_time_offset: bool = True
+    max_time_offset: float = 0.1
+    pixel_sigma: float | None = None
+    huber_k: float | None = None
+    max_iterations: int = 50
+    gravity_magnitude: float = GRAVITY_MAGNITUDE
+
+
+@dataclass
+class _Problem:
+    """Everything the graph is built from (times in seconds since the recording start)."""
+
+    camera: CameraModel
+    target: Target
+    observations: list[FrameObservation]
+    frame_ids: list[int]  # indices into observations of the frames that get a state
+    frame_times: np.ndarray  # (F,) [s] camera clock
+    T_target_cam: np.ndarray  # (F, 4, 4) initial camera poses
+    t_imu: np.ndarray
+    gyro: np.ndarray
+    accel: np.ndarray
+    noise: ImuNoise
+    options: ViOptions
+    t0_ns: int
+    sigma_px: float = 1.0
+    warnings: list[str] = field(default_factory=list)
+
+
+@dataclass
+class _Estimate:
+    """The current extrinsic estimate (input to a round, output of it)."""
+
+    T_cam_imu: np.ndarray
+    tau0: float
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+
+
+# ---------------------------------------------------------------------------------------- preparation
+def _check_overlap(imu: ImuSamples, frame_t_ns: np.ndarray, t0_ns: int) -> None:
+    if len(imu) < 2:
+        raise CalibrationError("the recording has fewer than 2 IMU samples; camera-IMU calibration needs the IMU")
+    lo, hi = frame_t_ns.min(), frame_t_ns.max()
+    if hi < imu.t[0] or lo > imu.t[-1]:
+        span = seconds_since(np.array([lo, hi, imu.t[0], imu.t[-1]]), t0_ns)
+        raise CalibrationError(
+            f"camera frames span {span[0]:.3f}..{span[1]:.3f} s and IMU samples {span[2]:.3f}..{span[3]:.3f} s "
+            "(relative to the recording start): they do not overlap; check that both streams use the same clock"
+        )
+
+
+def _prepare(
+    frames_obs: list[FrameObservation],
+    imu: ImuSamples,
+    camera: CameraModel,
+    target: Target,
+    noise: ImuNoise,
+    options: ViOptions,
+) -> _Problem:
+    frame_t_ns = np.array([o.t_ns for o in frames_obs], dtype=np.int64)
+    t0_ns = int(min(imu.t[0], frame_t_ns.min())) if len(imu) else int(frame_t_ns.min())
+    _check_overlap(imu, frame_t_ns, t0_ns)
+    poses = frame_poses(camera, frames_obs, min(MIN_INIT_CORNERS, target.num_points))
+    if len(poses) < 3:
+        raise CalibrationError(
+            f"only {len(poses)} frames have a usable target pose; camera-IMU calibration needs a sequence of views"
+        )
+    ids = sorted(poses)
+    residuals = np.concatenate([_pnp_residuals(camera, frames_obs[k], poses[k][0]) for k in ids])
+    sigma = options.pixel_sigma
+    if sigma is None:
+        sigma = max(estimated_pixel_sigma(residuals, 6 * len(ids)), MIN_PIXEL_SIGMA)
+    return _Problem(
+        camera=camera,
+        target=target,
+        observations=frames_obs,
+        frame_ids=ids,
+        frame_times=seconds_since(frame_t_ns[ids], t0_ns),
+        T_target_cam=np.array([invert_transform(poses[k][0]) for k in ids]),
+        t_imu=seconds_since(imu.t, t0_ns),
+        gyro=imu.gyro,
+        accel=imu.accel,
+        noise=noise,
+        options=options,
+        t0_ns=t0_ns,
+        sigma_px=float(sigma),
+    )
+
+
+def _pnp_residuals(camera: CameraModel, obs: FrameObservation, T_cam_target: np.ndarray) -> np.ndarray:
+    uv, _ = camera.project(obs.points @ T_cam_target[:3, :3].T + T_cam_target[:3, 3])
+    return obs.uv - uv
+
+
+def _initial_estimate(problem: _Problem, T_guess: np.ndarray, tau_guess: float) -> _Estimate:
+    """Closed-form time offset, rotation and gyro bias; translation from the guess."""
+    inc = rotation_increments(problem.frame_times, problem.T_target_cam[:, :3, :3])
+    opts = problem.options
+    half_width = opts.max_time_offset if opts.estimate_time_offset else 0.0
+    alignment = align(problem.t_imu, problem.gyro, inc, half_width, tau_guess)
+    return _Estimate(
+        make_transform(alignment.R_cam_imu, T_guess[:3, 3]), alignment.time_offset, alignment.gyro_bias, np.zeros(3)
+    )
+
+
+# ---------------------------------------------------------------------------------------- graph
+@dataclass
+class _Graph:
+    graph: gtsam.NonlinearFactorGraph
+    values: gtsam.Values
+    states: list[int]  # indices into problem.frame_ids of the frames that got a state
+    imu_factors: list  # (i, factor, dt) per IMU factor
+    state_times: np.ndarray  # (S,) [s] IMU clock
+
+
+def _states_inside_imu(problem: _Problem, tau0: float) -> list[int]:
+    s = problem.frame_times + tau0
+    inside = np.flatnonzero((s >= problem.t_imu[0]) & (s <= problem.t_imu[-1]))
+    if len(inside) < 3:
+        raise CalibrationError(
+            f"only {len(inside)} frames with a target pose fall inside the IMU time span after the time offset "
+            f"({tau0 * 1e3:.1f} ms); the camera and IMU recordings barely overlap"
+        )
+    return inside.tolist()
+
+
+def _insert_states(values: gtsam.Values, problem: _Problem, states: list[int], est: _Estimate) -> np.ndarray:
+    """Initial IMU poses, velocities (finite differences), biases; returns the state times (S,) [s]."""
+    T_imu = np.array([problem.T_target_cam[k] @ est.T_cam_imu for k in states])
+    times = problem.frame_times[states] + est.tau0
+    vel = np.gradient(T_imu[:, :3, 3], times, axis=0) if len(states) > 1 else np.zeros((1, 3))
+    bias = gtsam.imuBias.ConstantBias(est.accel_bias, est.gyro_bias)
+    for n, T in enumerate(T_imu):
+        values.insert(_key("x", n), gtsam.Pose3(T))
+        values.insert(_key("p", n), gtsam.Pose3(T))
+        values.insert(_key("v", n), vel[n])
+        values.insert(_key("b", n), bias)
+    f = interpolate(problem.t_imu, problem.accel, times)
+    g_dir = -np.mean(np.einsum("nij,nj->ni", T_imu[:, :3, :3], f), axis=0)
+    values.insert(G_KEY, gtsam.Unit3(g_dir / np.linalg.norm(g_dir)))
+    return times
+
+
+def _add_imu_factors(graph: gtsam.NonlinearFactorGraph, problem: _Problem, times: np.ndarray, est: _Estimate) -> list:
+    params = preintegration_params(problem.noise)
+    bias = gtsam.imuBias.ConstantBias(est.accel_bias, est.gyro_bias)
+    factors = []
+    for n in range(len(times) - 1):
+        segments = midpoint_segments(problem.t_imu, problem.gyro, problem.accel, times[n], times[n + 1])
+        pim = preintegrate(params, bias, segments)
+        f = gtsam.CombinedImuFactorWithGravityDirection(
+            _key("x", n), _key("v", n), _key("x", n + 1), _key("v", n + 1), _key("b", n), _key("b", n + 1),
+            G_KEY, pim, problem.options.gravity_magnitude,
+        )  # fmt: skip
+        graph.add(f)
+        factors.append((n, f, times[n + 1] - times[n]))
+    sigmas = np.r_[np.full(3, ACCEL_BIAS_PRIOR_SIGMA), np.full(3, GYRO_BIAS_PRIOR_SIGMA)]
+    graph.add(gtsam.PriorFactorConstantBias(_key("b", 0), bias, gtsam.noiseModel.Diagonal.Sigmas(sigmas)))
+    return factors
+
+
+def _add_projection_factors(graph, problem: _Problem, states: list[int], joint: bool) -> None:
+    kind = kind_of(problem.camera.distortion)
+    noise = pixel_noise(problem.sigma_px, problem.options.huber_k)
+    calibration = to_gtsam(problem.camera)
+    for n, k in enumerate(states):
+        obs = problem.observations[problem.frame_ids[k]]
+        for uv, i in zip(obs.uv, obs.ids, strict=True):
+            if joint:
+                graph.add(kind.pppc_factor(uv, noise, _key("p", n), E_KEY, landmark_key(int(i)), K_KEY))
+            else:
+                graph.add(kind.ppp_factor(uv, noise, _key("p", n), E_KEY, landmark_key(int(i)), calibration))
+
+
+def _add_time_offset_factors(graph, problem: _Problem, times: np.ndarray, est: _Estimate) -> None:
+    omega = interpolate(problem.t_imu, problem.gyro, times) - est.gyro_bias
+    exact = gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)  # [rad, m] exposure pose = state pose when tau is fixed
+    for n in range(len(times)):
+        if problem.options.estimate_time_offset:
+            graph.add(time_offset_factor(_key("p", n), _key("x", n), _key("v", n), D_KEY, omega[n]))
+        else:
+            graph.add(gtsam.BetweenFactorPose3(_key("x", n), _key("p", n), gtsam.Pose3(), exact))
+
+
+def _build(problem: _Problem, est: _Estimate, joint: bool) -> _Graph:
+    states = _states_inside_imu(problem, est.tau0)
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    add_landmarks(graph, values, problem.target)
+    values.insert(E_KEY, gtsam.Pose3(invert_transform(est.T_cam_imu)))
+    values.insert(D_KEY, np.zeros(1))
+    if not problem.options.estimate_time_offset:
+        graph.add(gtsam.PriorFactorVector(D_KEY, np.zeros(1), gtsam.noiseModel.Isotropic.Sigma(1, 1e-9)))
+    if joint:
+        calibration = to_gtsam(problem.camera)
+        values.insert(K_KEY, calibration)
+        graph.add(skew_prior(K_KEY, calibration))
+    times = _insert_states(values, problem, states, est)
+    imu_factors = _add_imu_factors(graph, problem, times, est)
+    _add_projection_factors(graph, problem, states, joint)
+    _add_time_offset_factors(graph, problem, times, est)
+    return _Graph(graph, values, states, imu_factors, times)
+
+
+# ---------------------------------------------------------------------------------------- solve
+def _camera_of(values: gtsam.Values, problem: _Problem, joint: bool) -> CameraModel:
+    if not joint:
+        return problem.camera
+    radtan = problem.camera.distortion == "radtan"
+    calibration = values.atCal3DS2(K_KEY) if radtan else values.atCal3Fisheye(K_KEY)
+    return camera_from_gtsam(calibration, problem.camera)
+
+
+def _estimate_of(values: gtsam.Values, est: _Estimate) -> _Estimate:
+    bias = values.atConstantBias(_key("b", 0))
+    T_cam_imu = invert_transform(values.atPose3(E_KEY).matrix())
+    tau = est.tau0 + float(values.atVector(D_KEY)[0])
+    return _Estimate(T_cam_imu, tau, np.asarray(bias.gyroscope()), np.asarray(bias.accelerometer()))
+
+
+def _solve_rounds(problem: _Problem, est: _Estimate, joint: bool):
+    """Build and solve, re-centring the states on the new offset while the in-graph correction is large."""
+    iterations = 0
+    for _ in range(MAX_ROUNDS):
+        g = _build(problem, est, joint)
+        solution = optimize(g.graph, g.values, problem.options.max_iterations, "camera-IMU calibration")
+        iterations += solution.iterations
+        correction = float(solution.values.atVector(D_KEY)[0])
+        new = _estimate_of(solution.values, est)
+        problem.camera = _camera_of(solution.values, problem, joint)
+        if not problem.options.estimate_time_offset or abs(correction) < RECENTRE_OFFSET:
+            return g, solution, new, iterations
+        est = new
+    problem.warnings.append(f"the time offset moved by {correction * 1e3:.2f} ms in the last round")
+    return g, solution, new, iterations
+
+
+# ---------------------------------------------------------------------------------------- outputs
+def _extrinsic_jacobian(T_cam_imu: np.ndarray) -> np.ndarray:
+    """(6, 6) map from the tangent of ``E = T_imu_cam`` to [rotation error of R_cam_imu, t_cam_imu]."""
+    J = np.zeros((6, 6))
+    J[:3, :3] = -np.eye(3)
+    J[3:, :3] = skew(T_cam_imu[:3, 3])
+    J[3:, 3:] = -np.eye(3)
+    return J
+
+
+def _parameter_covariance(g: _Graph, values: gtsam.Values, est: _Estimate, joint: bool) -> np.ndarray:
+    keys = ([K_KEY] if joint else []) + [E_KEY, D_KEY, _key("b", 0)]
+    cov = joint_covariance(g.graph, values, keys)
+    blocks = ([np.eye(9)[MODEL_INDEX]] if joint else []) + [_extrinsic_jacobian(est.T_cam_imu), np.eye(1), np.eye(6)]
+    rows = sum(b.shape[0] for b in blocks)
+    J = np.zeros((rows, cov.shape[0]))
+    r = c = 0
+    for b in blocks:
+        J[r : r + b.shape[0], c : c + b.shape[1]] = b
+        r, c = r + b.shape[0], c + b.shape[1]
+    return J @ cov @ J.T
+
+
+def _reprojection(problem: _Problem, g: _Graph, values: gtsam.Values, camera: CameraModel):
+    T_imu_cam = values.atPose3(E_KEY).matrix()
+    res, frame = [], []
+    for n, k in enumerate(g.states):
+        obs = problem.observations[problem.frame_ids[k]]
+        T_cam_target = invert_transform(values.atPose3(_key("p", n)).matrix() @ T_imu_cam)
+        uv, _ = camera.project(obs.points @ T_cam_target[:3, :3].T + T_cam_target[:3, 3])
+        res.append(obs.uv - uv)
+        frame.append(np.full(len(uv), obs.index))
+    return np.concatenate(res), np.concatenate(frame)
+
+
+def _imu_residuals(g: _Graph, values: gtsam.Values, gravity_magnitude: float) -> ImuResiduals:
+    """Mean rates per IMU factor: measured (preintegrated, bias-corrected to first order) vs from the states."""
+    gravity = np.asarray(values.atUnit3(G_KEY).point3()) * gravity_magnitude
+    rows = []
+    for n, f, dt in g.imu_factors:
+        pim = f.preintegratedMeasurements()
+        bias_hat, bias = pim.biasHat(), values.atConstantBias(_key("b", n))
+        X0, X1 = values.atPose3(_key("x", n)), values.atPose3(_key("x", n + 1))
+        v0, v1 = values.atVector(_key("v", n)), values.atVector(_key("v", n + 1))
+        R0 = X0.rotation().matrix()
+        d_bg = np.asarray(bias.gyroscope()) - np.asarray(bias_hat.gyroscope())
+        d_ba = np.asarray(bias.accelerometer()) - np.asarray(bias_hat.accelerometer())
+        gyro_meas = gtsam.Rot3.Logmap(pim.deltaRij()) / dt - d_bg
+        gyro_pred = gtsam.Rot3.Logmap(X0.rotation().between(X1.rotation())) / dt
+        accel_meas = np.asarray(pim.deltaVij()) / dt - d_ba
+        accel_pred = R0.T @ (v1 - v0 - gravity * dt) / dt
+        rows.append(np.concatenate([[g.state_times[n] + 0.5 * dt], gyro_meas, gyro_pred, accel_meas, accel_pred]))
+    a = np.array(rows).reshape(-1, 13)
+    return ImuResiduals(a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13])
+
+
+def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, iterations: int, start: float):
+    joint = task == "joint"
+    values = solution.values
+    camera = problem.camera
+    covariance = _parameter_covariance(g, values, est, joint)
+    names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
+    estimate = np.concatenate(
+        ([camera.intrinsics, camera.dist] if joint else [])
+        + [np.zeros(3), est.T_cam_imu[:3, 3], [est.tau0], est.accel_bias, est.gyro_bias]
+    )
+    residuals, frame_index = _reprojection(problem, g, values, camera)
+    gravity = np.asarray(values.atUnit3(G_KEY).point3()) * problem.options.gravity_magnitude
+    return CalibrationResult(
+        task=task,
+        camera=camera,
+        T_cam_imu=est.T_cam_imu,
+        time_offset=est.tau0,
+        gyro_bias=est.gyro_bias,
+        accel_bias=est.accel_bias,
+        gravity_target=gravity,
+        parameter_names=names,
+        estimate=estimate,
+        covariance=covariance,
+        weak_parameters=weak_parameters(names, estimate, covariance, camera),
+        reprojection=ResidualStats.of(residuals),
+        reprojection_residuals=residuals,
+        reprojection_frames=frame_index,
+        imu_residuals=_imu_residuals(g, values, problem.options.gravity_magnitude),
+        pixel_sigma=problem.sigma_px,
+        iterations=iterations,
+        solve_time=time.perf_counter() - start,
+        status=solution.status,
+        num_frames=len(g.states),
+        warnings=problem.warnings,
+    )
+
+
+def run_visual_inertial(
+    task: str,
+    observations: list[FrameObservation],
+    imu: ImuSamples,
+    target: Target,
+    camera: CameraModel,
+    imu_noise: ImuNoise,
+    initial_T_cam_imu: np.ndarray | None,
+    initial_time_offset: float,
+    options: ViOptions,
+    start: float,
+) -> CalibrationResult:
+    """Shared pipeline of the extrinsic (``task="extrinsic"``) and joint (``task="joint"``) solves."""
+    T_guess = nominal_T_cam_imu() if initial_T_cam_imu is None else np.asarray(initial_T_cam_imu, float)
+    if T_guess.shape != (4, 4):
+        raise CalibrationError(f"initial_T_cam_imu must be a 4 x 4 transform, got shape {T_guess.shape}")
+    problem = _prepare(observations, imu, camera, target, imu_noise, options)
+    est = _initial_estimate(problem, T_guess, float(initial_time_offset))
+    g, solution, est, iterations = _solve_rounds(problem, est, task == "joint")
+    return _result(task, problem, g, solution, est, iterations, start)
