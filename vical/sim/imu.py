@@ -16,6 +16,7 @@ initial bias.
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 
 from vical.data import ImuNoise, ImuSamples
@@ -24,6 +25,62 @@ from vical.sim.sampling import IMU_SAMPLING
 
 class ImuSimulationError(RuntimeError):
     """IMU readings that do not arrive at every physics step."""
+
+
+class ImuSiteReader:
+    """Ideal IMU readings of a site from MuJoCo's ``gyro`` and ``accelerometer`` sensors.
+
+    MuJoCo evaluates the accelerometer with the acceleration of its forward pass, while the
+    ``implicit``/``implicitfast`` integrators advance the velocity with a different one (velocity
+    dependent forces such as the actuators' PD damping are treated implicitly). The recorded
+    specific force must be that of the motion that actually happens, so the reading is corrected
+    by the site Jacobian times the difference, ``R^T J_p ((v_{k+1} - v_k) / h - qacc_k)``; the
+    correction is zero with the explicit Euler integrator. Measured on the Panda scene with
+    ``implicitfast``: without it the accelerometer was off by up to 0.1 m/s^2 during motions.
+
+    Args:
+        model: the compiled scene; sensors ``accel_sensor`` and ``gyro_sensor`` sit on ``site``.
+    """
+
+    def __init__(
+        self, model: mujoco.MjModel, site: str = "imu", accel_sensor: str = "accel", gyro_sensor: str = "gyro"
+    ):
+        self.model = model
+        self._site = model.site(site).id
+        for name in (accel_sensor, gyro_sensor):
+            sensor = model.sensor(name)
+            if model.sensor_objid[sensor.id] != self._site:
+                raise ValueError(f"sensor {name!r} must sit on site {site!r}")
+        accel = model.sensor_adr[model.sensor(accel_sensor).id]
+        gyro = model.sensor_adr[model.sensor(gyro_sensor).id]
+        self._accel, self._gyro = slice(accel, accel + 3), slice(gyro, gyro + 3)
+        self._jacp = np.zeros((3, model.nv))
+        self._qvel: np.ndarray | None = None
+        self._t_ns: int | None = None
+
+    def reset(self, data: mujoco.MjData, t_ns: int) -> None:
+        """Remember the velocity of the state at ``t_ns`` (before the next physics step)."""
+        self._qvel = data.qvel.copy()
+        self._t_ns = int(t_ns)
+
+    def read(self, data: mujoco.MjData, t_ns: int, step_ns: int) -> tuple[np.ndarray, np.ndarray]:
+        """Gyro (3,) [rad/s] and specific force (3,) [m/s^2] in the site frame at ``t_ns``.
+
+        Call right after the ``mj_step`` that started at ``t_ns`` (``data``'s sensors and
+        kinematics are those of ``t_ns``, its ``qvel`` that of ``t_ns + step_ns``).
+        """
+        if self._t_ns != int(t_ns):
+            raise ImuSimulationError(
+                f"IMU reader expected the physics step starting at {self._t_ns} ns, got {t_ns} ns; "
+                "every physics step must be reported (reset the reader after moving without it)"
+            )
+        qacc_executed = (data.qvel - self._qvel) / (step_ns * 1e-9)
+        mujoco.mj_jacSite(self.model, data, self._jacp, None, self._site)
+        R = data.site_xmat[self._site].reshape(3, 3)
+        accel = data.sensordata[self._accel] + R.T @ (self._jacp @ (qacc_executed - data.qacc))
+        self._qvel[:] = data.qvel
+        self._t_ns = int(t_ns) + int(step_ns)
+        return data.sensordata[self._gyro].copy(), accel
 
 
 def window_weights(steps_per_sample: int, sampling: str) -> tuple[np.ndarray, np.ndarray]:
@@ -106,7 +163,7 @@ class ImuSimulator:
 
     Args:
         step_ns: physics step [ns].
-        steps_per_sample: physics steps per IMU period (``vical.sim.sampling.steps_per_sample``).
+        steps_per_sample: physics steps per IMU period (``vical.sim.PhysicsConfig.steps_per_period``).
         sampling: ``average`` or ``instant`` (see the module docstring).
         noise: Kalibr noise model (None: noise-free, bias-free samples).
         rng: generator for the noise (needed when ``noise`` is given).

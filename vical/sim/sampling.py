@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from vical.config import ConfigError, from_mapping, require, require_range
-from vical.data import NS_PER_S, ImuNoise, SensorTruth
+from vical.data import ImuNoise, SensorTruth
 from vical.geometry import CameraModel, CameraModelError, euler_to_matrix, invert_transform, make_transform
 
 # Optical frame from camera body frame: body forward -> optical z, body left -> -x, body up -> -y.
@@ -273,22 +273,6 @@ def mean_sensor(cfg: SensorSampling) -> SensorTruth:
     return SensorTruth(camera, T_CAM_BODY @ T_body_imu, cfg.time_offset.mean, cfg.imu.kalibr_noise())
 
 
-def imu_pose_in_body(truth: SensorTruth) -> np.ndarray:
+def sensor_imu_pose(truth: SensorTruth) -> np.ndarray:
     """``T_body_imu`` (4, 4) of a sensor: the IMU pose in the camera body frame."""
     return invert_transform(T_CAM_BODY) @ truth.T_cam_imu
-
-
-def steps_per_sample(physics_step_ns: int, rate_hz: float, key: str) -> int:
-    """Physics steps per sample of a sensor at ``rate_hz``; ``ConfigError`` naming ``key`` unless it is an integer.
-
-    The physics rate must be an integer multiple of every sensor rate, so that each sample
-    instant falls on a physics step.
-    """
-    require_range(key, rate_hz, 0.0, None, low_open=True)
-    ratio = NS_PER_S / (physics_step_ns * rate_hz)
-    if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
-        raise ConfigError(
-            f"{key} = {rate_hz} Hz: the physics rate ({NS_PER_S / physics_step_ns:g} Hz) must be an integer "
-            f"multiple of it; choose a rate that divides the physics rate or change the physics timestep"
-        )
-    return round(ratio)
