@@ -1,5 +1,11 @@
 """Simulation: the MuJoCo Panda with a camera + IMU rig in front of a checkerboard, and motion execution."""
 
+import os
+
+# Offscreen rendering needs an OpenGL backend chosen before mujoco is imported; EGL works headless.
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+
 from vical.sim.config import BoardConfig, IKConfig, MotionConfig, PhysicsConfig, SimConfig
 from vical.sim.kinematics import PANDA_LIMITS, IKResult, JointLimits
 from vical.sim.motion import MotionResult

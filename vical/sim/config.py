@@ -183,8 +183,8 @@ class IKConfig:
         rotation_tolerance: converged below this rotation error [rad].
     """
 
-    max_iterations: int = 60
-    restarts: int = 6
+    max_iterations: int = 100
+    restarts: int = 10
     damping: float = 1e-3
     max_step: float = 0.4
     position_tolerance: float = 1e-5

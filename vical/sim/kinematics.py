@@ -102,13 +102,25 @@ class PandaIK:
             and np.linalg.norm(err[3:]) < self.cfg.rotation_tolerance
         )
 
+    def _step(self, J: np.ndarray, err: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Damped least-squares step (7,); joints at a limit that the step pushes outward are frozen.
+
+        Without freezing, clamping would undo part of the step and the descent could stall.
+        """
+        dq = J.T @ np.linalg.solve(J @ J.T + self._eye6, err)
+        blocked = ((q <= self.q_lo) & (dq < 0)) | ((q >= self.q_hi) & (dq > 0))
+        if blocked.any():
+            Jf = J * ~blocked
+            dq = Jf.T @ np.linalg.solve(Jf @ Jf.T + self._eye6, err)
+        return dq
+
     def _attempt(self, q0: np.ndarray, T_target: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """One DLS descent from ``q0``: (q, final error (6,), iterations)."""
         q = np.clip(q0, self.q_lo, self.q_hi)
         err = self._error(q, T_target)
         for it in range(1, self.cfg.max_iterations + 1):
             J = self._jacobian()  # kinematics of q are in self._data from _error
-            dq = J.T @ np.linalg.solve(J @ J.T + self._eye6, err)
+            dq = self._step(J, err, q)
             largest = np.max(np.abs(dq))
             if largest > self.cfg.max_step:
                 dq *= self.cfg.max_step / largest

@@ -76,47 +76,72 @@ def motion_steps(
 
 
 def quintic_plan(q0: np.ndarray, q1: np.ndarray, move_steps: int, hold_steps: int, timestep: float) -> JointPlan:
-    """Quintic move from ``q0`` to ``q1`` (7,) [rad] over ``move_steps``, then ``hold_steps`` at rest."""
+    """Quintic move from ``q0`` to ``q1`` (7,) [rad] over ``move_steps``, then ``hold_steps`` at rest.
+
+    Positions are the quintic sampled at every step. Velocities and accelerations are the finite
+    differences that MuJoCo's semi-implicit Euler step realises exactly
+    (``v_k = (q_k - q_{k-1}) / dt``, ``a_k = (v_{k+1} - v_k) / dt``), so a plant that follows the
+    accelerations reproduces the sampled positions; each is the analytic derivative at some
+    instant within the step, so the analytic limit checks bound them too.
+    """
     k = np.arange(move_steps + hold_steps + 1)
-    duration = move_steps * timestep
-    s, ds, dds = quintic(k / max(move_steps, 1))
-    dq = np.asarray(q1, float) - np.asarray(q0, float)
-    q = q0 + s[:, None] * dq
-    qd = (ds / duration)[:, None] * dq if move_steps else np.zeros_like(q)
-    qdd = (dds / duration**2)[:, None] * dq if move_steps else np.zeros_like(q)
+    s, _, _ = quintic(k / max(move_steps, 1)) if move_steps else (np.ones(len(k)), None, None)
+    q = np.asarray(q0, float) + s[:, None] * (np.asarray(q1, float) - np.asarray(q0, float))
+    qd = np.zeros_like(q)
+    qd[1:] = np.diff(q, axis=0) / timestep
+    qdd = np.zeros_like(q)
+    qdd[:-1] = np.diff(qd, axis=0) / timestep
     return JointPlan(q=q, qd=qd, qdd=qdd, timestep=timestep, move_steps=move_steps)
 
 
+def _inverse_dynamics(model: mujoco.MjModel, scratch: mujoco.MjData, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray):
+    """(N, 7) [N m] joint torques for states (N, 7) each, from MuJoCo's discrete-time inverse dynamics.
+
+    Contacts are disabled while solving (plans are collision-checked) and the inverse is that of
+    the discrete-time integrator (``mjENBL_INVDISCRETE``, with the implicit actuator damping), so
+    the torque reproduces the step-to-step motion rather than the continuous-time ODE.
+    """
+    tau = np.empty((len(q), NUM_JOINTS))
+    flags, enable = model.opt.disableflags, model.opt.enableflags
+    model.opt.disableflags = flags | mujoco.mjtDisableBit.mjDSBL_CONTACT
+    model.opt.enableflags = enable | mujoco.mjtEnableBit.mjENBL_INVDISCRETE
+    try:
+        for i in range(len(q)):
+            scratch.qpos[:NUM_JOINTS] = q[i]
+            scratch.qvel[:NUM_JOINTS] = qd[i]
+            scratch.qacc[:NUM_JOINTS] = qdd[i]
+            mujoco.mj_inverseSkip(model, scratch, mujoco.mjtStage.mjSTAGE_NONE, 1)
+            tau[i] = scratch.qfrc_inverse[:NUM_JOINTS]
+    finally:
+        model.opt.disableflags, model.opt.enableflags = flags, enable
+    return tau
+
+
+def rest_torque(model: mujoco.MjModel, scratch: mujoco.MjData, q: np.ndarray) -> np.ndarray:
+    """(7,) [N m] torque that holds joint positions ``q`` (7,) at rest (gravity and rig load)."""
+    zero = np.zeros((1, NUM_JOINTS))
+    return _inverse_dynamics(model, scratch, np.asarray(q, float)[None], zero, zero)[0]
+
+
 def feedforward_torques(model: mujoco.MjModel, scratch: mujoco.MjData, plan: JointPlan, stride: int) -> np.ndarray:
-    """(K + 1, 7) [N m] joint torques that realise the plan (MuJoCo inverse dynamics, ``mj_inverse``).
+    """(K + 1, 7) [N m] joint torques that realise the plan (MuJoCo inverse dynamics).
 
     Includes gravity, Coriolis and inertia with rotor armature and the sensor rig's mass.
-    Inverse dynamics costs as much as a physics step, so it runs every ``stride`` steps (and at
-    the motion's end) and a cubic spline fills the steps between: the torque of a quintic plan is
-    smooth, the spline's error is far below what the PD feedback corrects. Contacts are disabled
-    while solving (the plan is collision-checked). The rest at the end reuses the final torque.
+    Inverse dynamics costs as much as a physics step, so during the move it runs every ``stride``
+    steps (and at the move's last step) and a cubic spline fills the steps between: the torque of
+    a quintic plan is smooth, the spline's error is far below what the PD feedback corrects.
+    Rows after the move hold the goal at rest.
     """
     last = plan.move_steps
-    stride = max(1, min(stride, last // 8))  # at least 8 intervals so short moves keep their shape
-    knots = np.unique(np.append(np.arange(0, last + 1, stride), last))
-    tau_knots = np.empty((len(knots), NUM_JOINTS))
-    flags = model.opt.disableflags
-    model.opt.disableflags = flags | mujoco.mjtDisableBit.mjDSBL_CONTACT
-    try:
-        for i, k in enumerate(knots):
-            scratch.qpos[:NUM_JOINTS] = plan.q[k]
-            scratch.qvel[:NUM_JOINTS] = plan.qd[k]
-            scratch.qacc[:NUM_JOINTS] = plan.qdd[k]
-            mujoco.mj_inverseSkip(model, scratch, mujoco.mjtStage.mjSTAGE_NONE, 1)
-            tau_knots[i] = scratch.qfrc_inverse[:NUM_JOINTS]
-    finally:
-        model.opt.disableflags = flags
     tau = np.empty((plan.num_steps + 1, NUM_JOINTS))
-    if last == 0:
-        tau[0] = tau_knots[0]
-    else:
+    if last > 0:
+        stride = max(1, min(stride, last // 8))  # at least 8 intervals so short moves keep their shape
+        knots = np.unique(np.append(np.arange(0, last + 1, stride), last))
+        tau_knots = _inverse_dynamics(model, scratch, plan.q[knots], plan.qd[knots], plan.qdd[knots])
         tau[: last + 1] = CubicSpline(knots, tau_knots, axis=0)(np.arange(last + 1))
-    tau[last + 1 :] = tau[last]
+    tau[last + 1 :] = rest_torque(model, scratch, plan.q[-1])
+    if last == 0:
+        tau[0] = tau[-1]
     return tau
 
 

@@ -24,7 +24,7 @@ from vical.data import NS_PER_S
 from vical.geometry import make_transform, rotation_angle
 from vical.sim.config import NUM_JOINTS, SimConfig
 from vical.sim.kinematics import PANDA_LIMITS, IKResult, PandaIK
-from vical.sim.motion import JointPlan, MotionResult, feedforward_torques, motion_steps, quintic_plan
+from vical.sim.motion import JointPlan, MotionResult, feedforward_torques, motion_steps, quintic_plan, rest_torque
 from vical.sim.scene import build_model, site_pose
 
 StepCallback = Callable[["PandaSim", int], None]
@@ -38,6 +38,11 @@ def _check_pose(T: np.ndarray, name: str) -> np.ndarray:
     if not np.allclose(R.T @ R, np.eye(3), atol=1e-6) or np.linalg.det(R) <= 0:
         raise ValueError(f"{name}: the rotation block is not a rotation matrix (needs R^T R = I, det R = 1)")
     return T
+
+
+def _geom_label(model: mujoco.MjModel, geom: int) -> str:
+    """The geom's name, else the name of its body (unnamed collision capsules of the arm)."""
+    return model.geom(geom).name or model.body(model.geom_bodyid[geom]).name
 
 
 def _rotation_path_length(R: np.ndarray) -> float:
@@ -124,9 +129,8 @@ class PandaSim:
         return self.ik.solve(T, self.q if q_start is None else np.asarray(q_start, float), self.rng)
 
     def _hold_ctrl(self, q: np.ndarray) -> np.ndarray:
-        """Actuator commands that hold ``q`` (7,) at rest (gravity feed-forward + PD set-point)."""
-        plan = quintic_plan(q, q, 0, 0, self.model.opt.timestep)
-        return self._ctrl_table(plan)[0]
+        """Actuator commands (7,) that hold ``q`` (7,) at rest (gravity feed-forward + PD set-point)."""
+        return rest_torque(self.model, self._scratch, q) + np.asarray(self.cfg.motion.kp) * q
 
     def _ctrl_table(self, plan: JointPlan) -> np.ndarray:
         """(K + 1, 7) actuator commands ``tau_ff + kp q_ref + kd qd_ref`` (actuator = ctrl - kp q - kd qd)."""
@@ -146,8 +150,7 @@ class PandaSim:
             mujoco.mj_collision(m, d)
             if d.ncon:
                 c = d.contact[0]
-                names = f"{m.body(m.geom_bodyid[c.geom1]).name} and {m.body(m.geom_bodyid[c.geom2]).name}"
-                return float(s), names
+                return float(s), f"{_geom_label(m, c.geom1)} and {_geom_label(m, c.geom2)}"
         return 1.0, ""
 
     def _safe_goal(self, q0: np.ndarray, q_goal: np.ndarray) -> tuple[np.ndarray, str]:
@@ -218,7 +221,7 @@ class PandaSim:
             v_log[k + 1] = d.qvel
             if on_step is not None:
                 on_step(self, (self._step - 1) * self.timestep_ns)
-        d.ctrl[:] = ctrl[n]
+        d.ctrl[:] = self._hold_ctrl(plan.q[-1])
         mujoco.mj_forward(m, d)
         p_log[n], R_log[n] = d.site_xpos[ee], d.site_xmat[ee]
         return {"q": q_log, "qd": v_log, "p": p_log, "R": R_log.reshape(-1, 3, 3)}
