@@ -1,10 +1,17 @@
 """IMU simulation: window averaging, Kalibr noise statistics, streaming, physics readings vs kinematics."""
 
+from dataclasses import replace
+
+import mujoco
 import numpy as np
 import pytest
 
 from vical.data import ImuNoise
+from vical.geometry import euler_to_matrix, make_transform, so3_log
+from vical.sim import PandaSim, camera_pose_cv, site_pose
 from vical.sim.imu import ImuNoiseProcess, ImuSimulationError, ImuSimulator, discrete_sigmas, window_weights
+from vical.sim.recorder import SensorRecorder
+from vical.sim.sampling import ImuSampling, SensorSampling, mean_sensor, sample_sensor
 
 STEP_NS = 1_000_000  # 1 ms physics step
 
@@ -133,3 +140,116 @@ def test_missing_physics_step_is_an_error():
 def test_noise_needs_a_generator():
     with pytest.raises(ValueError, match="seeded numpy Generator"):
         ImuSimulator(STEP_NS, 5, "average", ImuNoise())
+
+
+# ------------------------------------------------------------------ physics readings vs kinematics
+@pytest.fixture(scope="module")
+def moving_rig():
+    """A recorded motion with a tilted IMU: the recorder's noise-free samples and the executed joint states."""
+    sim = PandaSim()
+    sampling = SensorSampling(imu=ImuSampling(sampling="instant"))
+    truth = replace(
+        sample_sensor(sampling, np.random.default_rng(4)),
+        imu_noise=ImuNoise(0.0, 0.0, 0.0, 0.0, 200.0),
+    )
+    recorder = SensorRecorder(sim, sim.cfg.board.target, sampling)
+    recorder.start(truth, np.random.default_rng(0))
+    states = {sim.time_ns: (sim.data.qpos.copy(), sim.data.qvel.copy())}
+
+    def on_step(s, t_ns):
+        recorder.on_step(s, t_ns)
+        states[t_ns + s.timestep_ns] = (s.data.qpos.copy(), s.data.qvel.copy())  # post-step state
+
+    T_goal = sim.ee_pose() @ make_transform(euler_to_matrix([0.25, -0.15, 0.2]), [0.08, -0.06, 0.05])
+    sim.move_to(T_goal, on_step=on_step)
+    return sim, recorder, states
+
+
+def _kinematic_imu(sim, states, t_ns, eps=1e-4):
+    """Specific force and angular rate of site imu at ``t_ns`` from forward kinematics of the executed states.
+
+    The executed joint acceleration is the velocity change over the step, (v(t+h) - v(t)) / h; the
+    site's acceleration and rotation rate come from central differences of forward kinematics
+    along q(t) + s v + s^2 a / 2 with |s| = eps [s].
+    """
+    model, h = sim.model, sim.timestep_ns
+    scratch = mujoco.MjData(model)
+    q, v = states[t_ns]
+    a = (states[t_ns + h][1] - v) / (h * 1e-9)
+    site = model.site("imu").id
+    poses = []
+    for s in (-eps, 0.0, eps):
+        scratch.qpos[:] = q + s * v + 0.5 * s * s * a
+        mujoco.mj_kinematics(model, scratch)
+        poses.append((scratch.site_xpos[site].copy(), scratch.site_xmat[site].reshape(3, 3).copy()))
+    (p_m, R_m), (p_0, R_0), (p_p, R_p) = poses
+    accel_world = (p_p - 2.0 * p_0 + p_m) / eps**2
+    specific_force = R_0.T @ (accel_world - model.opt.gravity)
+    omega = (so3_log(R_0.T @ R_p) - so3_log(R_0.T @ R_m)) / (2.0 * eps)
+    return omega, specific_force, (p_p - p_m) / (2.0 * eps), R_0
+
+
+def test_noise_free_imu_matches_kinematics(moving_rig):
+    sim, recorder, states = moving_rig
+    imu = recorder.recording().imu
+    assert len(imu) > 50
+    reference = [_kinematic_imu(sim, states, int(t)) for t in imu.t]
+    gyro_ref = np.array([r[0] for r in reference])
+    accel_ref = np.array([r[1] for r in reference])
+    assert np.abs(gyro_ref).max() > 0.2 and np.abs(accel_ref - accel_ref[0]).max() > 0.2  # it moves
+    np.testing.assert_allclose(imu.gyro, gyro_ref, atol=1e-4)
+    np.testing.assert_allclose(imu.accel, accel_ref, atol=1e-4)
+
+
+def test_ground_truth_trajectory_matches_kinematics(moving_rig):
+    sim, recorder, states = moving_rig
+    rec = recorder.recording()
+    traj = rec.trajectory
+    np.testing.assert_array_equal(traj.t, rec.imu.t)
+    for k in range(0, len(traj), 7):
+        omega, _, v_world, R = _kinematic_imu(sim, states, int(traj.t[k]))
+        np.testing.assert_allclose(traj.T_world_imu[k, :3, :3], R, atol=1e-12)
+        np.testing.assert_allclose(traj.v_world[k], v_world, atol=1e-6)
+        np.testing.assert_allclose(traj.omega_imu[k], omega, atol=1e-6)
+
+
+def test_imu_pose_is_the_camera_pose_times_the_extrinsic(moving_rig):
+    sim, recorder, _ = moving_rig
+    T_world_imu = site_pose(sim.model, sim.data, "imu")
+    T_world_cam = camera_pose_cv(sim.model, sim.data)
+    np.testing.assert_allclose(T_world_imu, T_world_cam @ recorder.truth.T_cam_imu, atol=1e-9)
+
+
+def test_averaged_samples_are_the_window_mean_of_the_kinematics():
+    sim = PandaSim()
+    sampling = SensorSampling()  # average
+    truth = replace(mean_sensor(sampling), imu_noise=ImuNoise(0.0, 0.0, 0.0, 0.0, 200.0))
+    recorder = SensorRecorder(sim, sim.cfg.board.target, sampling)
+    recorder.start(truth, np.random.default_rng(0))
+    states = {sim.time_ns: (sim.data.qpos.copy(), sim.data.qvel.copy())}
+
+    def on_step(s, t_ns):
+        recorder.on_step(s, t_ns)
+        states[t_ns + s.timestep_ns] = (s.data.qpos.copy(), s.data.qvel.copy())
+
+    sim.move_to(sim.ee_pose() @ make_transform(euler_to_matrix([-0.2, 0.1, 0.15]), [0.0, 0.05, 0.05]), on_step)
+    imu = recorder.recording().imu
+    offsets, weights = window_weights(5, "average")
+    for k in range(0, len(imu), 9):
+        t = int(imu.t[k])
+        window = [_kinematic_imu(sim, states, t + int(o) * STEP_NS) for o in offsets]
+        np.testing.assert_allclose(imu.gyro[k], weights @ np.array([w[0] for w in window]), atol=1e-4)
+        np.testing.assert_allclose(imu.accel[k], weights @ np.array([w[1] for w in window]), atol=1e-4)
+
+
+def test_accelerometer_reads_gravity_at_rest():
+    sim = PandaSim()
+    sampling = SensorSampling()
+    truth = replace(sample_sensor(sampling, np.random.default_rng(9)), imu_noise=ImuNoise(0.0, 0.0, 0.0, 0.0, 200.0))
+    recorder = SensorRecorder(sim, sim.cfg.board.target, sampling)
+    recorder.start(truth, np.random.default_rng(0))
+    sim.hold(0.2, on_step=recorder.on_step)
+    imu = recorder.recording().imu
+    R_world_imu = site_pose(sim.model, sim.data, "imu")[:3, :3]
+    np.testing.assert_allclose(imu.accel, np.tile(R_world_imu.T @ [0.0, 0.0, 9.81], (len(imu), 1)), atol=1e-4)
+    np.testing.assert_allclose(imu.gyro, 0.0, atol=1e-6)

@@ -1,0 +1,174 @@
+"""Recorder: frame timing and the time-offset sign, recordings that save and load exactly, bad input."""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+import pytest
+
+from vical.calib.detection import detect_checkerboard
+from vical.config import ConfigError
+from vical.geometry import (
+    CameraModel,
+    euler_to_matrix,
+    interpolate_transform,
+    invert_transform,
+    make_transform,
+    transform_error,
+)
+from vical.io.recording import load_recording, save_recording
+from vical.sim import PandaSim
+from vical.sim.imu import ImuSimulationError
+from vical.sim.recorder import SensorRecorder
+from vical.sim.sampling import CameraSampling, ImuSampling, SensorSampling, mean_sensor, sample_sensor
+
+OFFSET = 0.0123  # [s]
+
+
+@pytest.fixture(scope="module")
+def sim():
+    return PandaSim()
+
+
+def _record(sim, truth, sampling=None, detector=None, keep_images=False, steps=None):
+    sampling = sampling or SensorSampling()
+    sim.reset()
+    recorder = SensorRecorder(sim, sim.cfg.board.target, sampling, detector, keep_images)
+    try:
+        recorder.start(truth, np.random.default_rng(5))
+        T = sim.ee_pose()
+        for rpy, xyz in steps or [([0.25, 0.0, 0.25], [0.0, 0.08, 0.0]), ([-0.2, 0.15, -0.25], [0.05, -0.1, 0.05])]:
+            T = T @ make_transform(euler_to_matrix(rpy), xyz)
+            recorder.add_motion(sim.move_to(T, on_step=recorder.on_step))
+        return recorder.recording({"seed": 5, "note": "test"})
+    finally:
+        recorder.close()
+
+
+@pytest.fixture(scope="module")
+def offset_recording(sim):
+    sampling = replace(SensorSampling(), pixel_noise_px=0.0)
+    truth = replace(sample_sensor(sampling, np.random.default_rng(2)), time_offset=OFFSET)
+    return _record(sim, truth, sampling)
+
+
+def test_frames_are_stamped_on_the_camera_grid_and_exposed_inside_the_motion(offset_recording):
+    rec = offset_recording
+    assert np.all(rec.frames.t % 100_000_000 == 0)
+    exposures = rec.frames.t + round(OFFSET * 1e9)
+    assert exposures[0] >= 0 and exposures[-1] <= rec.duration * 1e9
+    assert len(rec.frames) == int((rec.duration * 1e9 - round(OFFSET * 1e9)) // 100_000_000) + 1
+    assert rec.frames.num_detections.min() == rec.target.num_points
+    assert rec.duration > 0.5 and rec.path_length > 0.1
+    assert rec.metadata == {"seed": 5, "note": "test"}
+
+
+def _pnp_camera_poses(rec):
+    """``T_world_cam`` (M, 4, 4) from PnP on every frame's corners (exact, noise-free corners)."""
+    camera, T_world_board = rec.truth.camera, rec.T_world_target
+    poses = []
+    for corners, ids in zip(rec.frames.corners, rec.frames.ids, strict=True):
+        ok, rvec, tvec = cv2.solvePnP(
+            np.ascontiguousarray(rec.target.points[ids]),
+            np.ascontiguousarray(corners),
+            camera.K,
+            np.append(camera.dist, 0.0),
+            flags=cv2.SOLVEPNP_ITERATIVE,
+        )
+        assert ok
+        T_cam_board = make_transform(cv2.Rodrigues(rvec)[0], tvec.ravel())
+        poses.append(T_world_board @ invert_transform(T_cam_board))
+    return np.array(poses)
+
+
+def _true_camera_pose(rec, t_imu_ns):
+    """Ground-truth ``T_world_cam`` at IMU time ``t_imu_ns`` (interpolated between trajectory samples)."""
+    traj = rec.trajectory
+    k = int(np.searchsorted(traj.t, t_imu_ns)) - 1
+    s = (t_imu_ns - traj.t[k]) / (traj.t[k + 1] - traj.t[k])
+    T_world_imu = interpolate_transform(traj.T_world_imu[k], traj.T_world_imu[k + 1], s)
+    return T_world_imu @ invert_transform(rec.truth.T_cam_imu)
+
+
+def test_time_offset_shows_up_with_kalibr_sign_in_pnp_poses(offset_recording):
+    rec = offset_recording
+    pnp = _pnp_camera_poses(rec)
+    inside = (rec.frames.t - 40_000_000 > rec.trajectory.t[0]) & (rec.frames.t + 40_000_000 < rec.trajectory.t[-1])
+    shifts = np.arange(-30.0, 30.01, 0.1) * 1e6  # candidate offsets [ns]
+
+    def misfit(shift):
+        return sum(
+            sum(transform_error(pnp[i], _true_camera_pose(rec, int(rec.frames.t[i] + shift))))
+            for i in np.flatnonzero(inside)
+        )
+
+    costs = np.array([misfit(s) for s in shifts])
+    best = shifts[int(np.argmin(costs))] * 1e-9
+    # t_imu = t_cam + time_offset: the PnP pose of the frame stamped t_cam is the true pose at t_cam + 12.3 ms.
+    assert best == pytest.approx(OFFSET, abs=2e-4)
+    assert costs[np.argmin(np.abs(shifts + OFFSET * 1e9))] > 10 * costs.min()
+
+
+def test_negative_offset_drops_frames_exposed_before_the_start(sim):
+    truth = replace(mean_sensor(SensorSampling()), time_offset=-OFFSET)
+    rec = _record(sim, truth, steps=[([0.0, 0.0, 0.1], [0.0, 0.0, 0.0])])
+    assert rec.frames.t[0] == 100_000_000  # stamp 0 would be exposed at -12.3 ms
+
+
+def test_recording_saves_and_loads_exactly(sim, tmp_path):
+    sampling = SensorSampling(imu=ImuSampling(gyro_bias_std=0.01, accel_bias_std=0.05))
+    truth = sample_sensor(sampling, np.random.default_rng(8), asymmetric=True)
+    rec = _record(sim, truth, sampling, keep_images=True, steps=[([0.1, 0.0, 0.1], [0.03, 0.0, 0.0])])
+    assert rec.frames.images.shape == (len(rec.frames), 480, 640)
+    loaded = load_recording(save_recording(rec, tmp_path / "rec"))
+    for a, b in [(rec.imu, loaded.imu), (rec.trajectory, loaded.trajectory)]:
+        for name in a.__dataclass_fields__:
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    np.testing.assert_array_equal(rec.frames.t, loaded.frames.t)
+    np.testing.assert_array_equal(rec.frames.images, loaded.frames.images)
+    for c, d in zip(rec.frames.corners + rec.frames.ids, loaded.frames.corners + loaded.frames.ids, strict=True):
+        np.testing.assert_array_equal(c, d)
+    assert loaded.truth.to_dict() == rec.truth.to_dict()
+    np.testing.assert_array_equal(loaded.T_world_target, rec.T_world_target)
+    assert (loaded.path_length, loaded.duration, loaded.metadata) == (rec.path_length, rec.duration, rec.metadata)
+
+
+def test_same_seed_same_recording(sim):
+    truth = sample_sensor(SensorSampling(), np.random.default_rng(1))
+    steps = [([0.1, 0.0, 0.0], [0.0, 0.02, 0.0])]
+    a, b = _record(sim, truth, steps=steps), _record(sim, truth, steps=steps)
+    np.testing.assert_array_equal(a.imu.accel, b.imu.accel)
+    np.testing.assert_array_equal(np.vstack(a.frames.corners), np.vstack(b.frames.corners))
+
+
+def test_render_backend_records_detections(sim):
+    sampling = replace(SensorSampling(), backend="render")
+    truth = mean_sensor(sampling)
+    rec = _record(sim, truth, sampling, detect_checkerboard, steps=[([0.0, 0.1, 0.0], [0.0, 0.0, 0.03])])
+    assert len(rec.frames) >= 3 and rec.frames.num_detections.min() == rec.target.num_points
+    assert rec.frames.images is None
+
+
+def test_bad_setups_are_refused(sim):
+    target = sim.cfg.board.target
+    with pytest.raises(ValueError, match="needs a corner detector"):
+        SensorRecorder(sim, target, replace(SensorSampling(), backend="render"))
+    with pytest.raises(ConfigError, match=r"sensor\.imu\.rate_hz"):
+        SensorRecorder(sim, target, SensorSampling(imu=ImuSampling(rate_hz=300.0)))
+    with pytest.raises(ConfigError, match=r"sensor\.camera\.rate_hz"):
+        SensorRecorder(sim, target, SensorSampling(camera=CameraSampling(rate_hz=3.0)))
+    recorder = SensorRecorder(sim, target, SensorSampling())
+    small = replace(mean_sensor(SensorSampling()), camera=CameraModel.from_hfov(1.0, 320, 240))
+    with pytest.raises(ValueError, match=r"320 x 240 px .*sensor\.camera\.width/height"):
+        recorder.start(small, np.random.default_rng(0))
+    with pytest.raises(RuntimeError, match="start"):
+        recorder.recording()
+    sim.reset()
+    recorder.start(mean_sensor(SensorSampling()), np.random.default_rng(0))
+    sim.hold(0.01)  # physics steps the recorder does not see
+    with pytest.raises(ImuSimulationError, match="every physics step"):
+        sim.hold(0.01, on_step=recorder.on_step)

@@ -1,0 +1,214 @@
+"""Record a simulated sensor while the Panda moves: IMU, camera frames, ground truth -> ``Recording``.
+
+``SensorRecorder.on_step`` is the ``PandaSim.move_to`` step callback. At every physics step it
+hands the IMU site's accelerometer and gyro readings to the IMU model (``vical.sim.imu``), keeps
+the ground-truth IMU state at the IMU sample instants and, at each camera exposure, observes the
+target from the camera pose interpolated between the two physics steps around the exposure.
+
+Clocks. The IMU clock is the simulation clock (``t_ns`` of ``on_step``). Camera frames are
+stamped on a grid of the camera period in the camera clock; the frame stamped ``t_cam`` is
+exposed at IMU time ``t_cam + time_offset`` (Kalibr's sign, ``docs/conventions.md``). Only frames
+whose exposure falls inside the recorded span are kept.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from vical.data import CameraFrames, ImuSamples, Recording, SensorTruth, Target, Trajectory
+from vical.geometry import make_transform
+from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
+from vical.sim.imu import ImuSimulator, ImuSiteReader
+from vical.sim.sampling import SensorSampling, sensor_imu_pose
+from vical.sim.scene import camera_pose_cv, set_imu_pose
+
+
+@dataclass
+class _TruthLog:
+    """Ground-truth IMU states at the IMU sample instants."""
+
+    t: list[int]
+    T_world_imu: list[np.ndarray]
+    v_world: list[np.ndarray]
+    omega_imu: list[np.ndarray]
+
+
+class SensorRecorder:
+    """Collects one episode's sensor data from a ``PandaSim``.
+
+    Args:
+        sim: the simulator (``vical.sim.robot.PandaSim``): ``model``, ``data``, ``timestep_ns``,
+            ``T_world_board``.
+        target: the calibration target on the board.
+        sampling: sensor settings (rates, IMU sampling mode, pixel noise, backend).
+        detector: corner detector for the ``render`` backend (``detect_checkerboard``).
+        keep_images: also keep the rendered grey image of every frame (renders even with the
+            ``project`` backend, whose corners stay analytic).
+        rules: visibility rules of the ``project`` backend.
+        render_size: (W, H) [px] of the undistorted render (see ``RenderBackend``).
+    """
+
+    def __init__(
+        self,
+        sim,
+        target: Target,
+        sampling: SensorSampling,
+        detector: Detector | None = None,
+        keep_images: bool = False,
+        rules: VisibilityRules | None = None,
+        render_size: tuple[int, int] = (800, 600),
+    ) -> None:
+        if sampling.backend == "render" and detector is None:
+            raise ValueError(
+                "sensor.backend=render needs a corner detector (vical.calib.detection.detect_checkerboard)"
+            )
+        self.sim = sim
+        self.target = target
+        self.sampling = sampling
+        self.keep_images = keep_images
+        step_ns = int(sim.timestep_ns)
+        physics = sim.cfg.physics
+        self._imu_steps = physics.steps_per_period(sampling.imu.rate_hz, "sensor.imu.rate_hz")
+        self._cam_period_ns = step_ns * physics.steps_per_period(sampling.camera.rate_hz, "sensor.camera.rate_hz")
+        self._step_ns = step_ns
+        self.project = ProjectBackend(target, sim.T_world_board, sampling.pixel_noise_px, rules)
+        needs_render = sampling.backend == "render" or keep_images
+        self.render = RenderBackend(sim.model, target, detector, render_size) if needs_render else None
+        model = sim.model
+        self._imu_site = model.site("imu").id
+        self._reader = ImuSiteReader(model)
+        self.truth: SensorTruth | None = None
+
+    # ------------------------------------------------------------------ episode
+    def start(self, truth: SensorTruth, rng: np.random.Generator) -> None:
+        """Begin an episode with sensor ``truth``: places the IMU site, prepares the camera, clears the data.
+
+        Call before the first motion of the episode (after ``sim.reset``); ``rng`` draws the IMU
+        and pixel noise.
+        """
+        if truth.camera.width != self.sampling.camera.width or truth.camera.height != self.sampling.camera.height:
+            raise ValueError(
+                f"sensor camera is {truth.camera.width} x {truth.camera.height} px but the recorder is set up for "
+                f"{self.sampling.camera.width} x {self.sampling.camera.height} (sensor.camera.width/height)"
+            )
+        self.truth = truth
+        set_imu_pose(self.sim.model, sensor_imu_pose(truth))
+        mujoco.mj_forward(self.sim.model, self.sim.data)
+        self._reader.reset(self.sim.data, self.sim.time_ns)
+        imu_rng, self._cam_rng = rng.spawn(2)
+        self._imu = ImuSimulator(
+            self._step_ns,
+            self._imu_steps,
+            self.sampling.imu.sampling,
+            truth.imu_noise,
+            imu_rng,
+            truth.gyro_bias,
+            truth.accel_bias,
+        )
+        if self.render is not None:
+            self.render.set_camera(truth.camera)
+        self._offset_ns = round(truth.time_offset * 1e9)
+        self._next_stamp: int | None = None
+        self._before: tuple[int, np.ndarray] | None = None
+        self._frames: dict[str, list] = {"t": [], "corners": [], "ids": [], "images": []}
+        self._log = _TruthLog([], [], [], [])
+        self._path_length = 0.0
+        self._duration = 0.0
+
+    def on_step(self, sim, t_ns: int) -> None:
+        """``PandaSim`` step callback: ``data``'s derived quantities belong to time ``t_ns``."""
+        data = sim.data
+        self._imu.add_reading(t_ns, *self._reader.read(data, t_ns, self._step_ns))
+        if t_ns % (self._imu_steps * self._step_ns) == 0:
+            self._log_truth(t_ns)
+        if self._next_stamp is None:
+            self._next_stamp = self._first_stamp(t_ns)
+        exposure = self._next_stamp + self._offset_ns
+        if t_ns <= exposure < t_ns + self._step_ns:
+            self._before = (t_ns, camera_pose_cv(sim.model, data))
+        if t_ns >= exposure and self._before is not None:
+            T_world_cam = interpolate_pose(exposure, *self._before, t_ns, camera_pose_cv(sim.model, data))
+            self._observe(self._next_stamp, T_world_cam)
+            self._next_stamp += self._cam_period_ns
+            self._before = None
+
+    def add_motion(self, result) -> None:
+        """Account a finished ``MotionResult`` (path length [m] and time [s]) to the recording."""
+        self._path_length += float(result.path_length)
+        self._duration += float(result.duration + result.settle_time)
+
+    def recording(self, metadata: dict[str, Any] | None = None) -> Recording:
+        """Everything recorded since ``start``; the trajectory holds the truth at the IMU sample times."""
+        if self.truth is None:
+            raise RuntimeError("SensorRecorder.start(truth, rng) must be called before recording()")
+        imu = self._imu.samples()
+        return Recording(
+            imu=imu,
+            frames=self._camera_frames(),
+            target=self.target,
+            truth=self.truth,
+            trajectory=self._trajectory(imu),
+            T_world_target=np.array(self.sim.T_world_board, dtype=float),
+            path_length=self._path_length,
+            duration=self._duration,
+            metadata=dict(metadata or {}),
+        )
+
+    # ------------------------------------------------------------------ internals
+    def _first_stamp(self, t_ns: int) -> int:
+        """First camera stamp on the camera-period grid whose exposure is at or after ``t_ns``."""
+        period = self._cam_period_ns
+        return -(-(t_ns - self._offset_ns) // period) * period
+
+    def _observe(self, stamp: int, T_world_cam: np.ndarray) -> None:
+        camera = self.truth.camera
+        image = None
+        if self.sampling.backend == "render":
+            corners, ids, image = self.render.observe(self.sim.data, T_world_cam)
+        else:
+            corners, ids = self.project.observe(camera, T_world_cam, self._cam_rng)
+            if self.keep_images:
+                image = self.render.image(self.sim.data, T_world_cam)
+        frames = self._frames
+        frames["t"].append(stamp)
+        frames["corners"].append(corners)
+        frames["ids"].append(ids)
+        if self.keep_images:
+            frames["images"].append(image)
+
+    def _log_truth(self, t_ns: int) -> None:
+        model, data = self.sim.model, self.sim.data
+        i = self._imu_site
+        R = data.site_xmat[i].reshape(3, 3).copy()
+        velocity = np.zeros(6)  # [angular (3), linear (3)] in world axes at the site
+        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_SITE, i, velocity, 0)
+        log = self._log
+        log.t.append(t_ns)
+        log.T_world_imu.append(make_transform(R, data.site_xpos[i]))
+        log.v_world.append(velocity[3:].copy())
+        log.omega_imu.append(R.T @ velocity[:3])
+
+    def _trajectory(self, imu: ImuSamples) -> Trajectory:
+        log = self._log
+        keep = np.isin(np.asarray(log.t, dtype=np.int64), imu.t)
+        take = np.flatnonzero(keep)
+        return Trajectory(
+            t=np.asarray(log.t, dtype=np.int64)[take],
+            T_world_imu=np.asarray(log.T_world_imu).reshape(-1, 4, 4)[take],
+            v_world=np.asarray(log.v_world).reshape(-1, 3)[take],
+            omega_imu=np.asarray(log.omega_imu).reshape(-1, 3)[take],
+        )
+
+    def _camera_frames(self) -> CameraFrames:
+        f = self._frames
+        images = np.asarray(f["images"], dtype=np.uint8) if self.keep_images and f["images"] else None
+        return CameraFrames(np.asarray(f["t"], dtype=np.int64), f["corners"], f["ids"], images)
+
+    def close(self) -> None:
+        """Free the renderer's GL context."""
+        if self.render is not None:
+            self.render.close()
