@@ -120,7 +120,12 @@ def check_rotation_excitation(t_imu: np.ndarray, gyro: np.ndarray, inc: Rotation
 
 
 def align(
-    t_imu: np.ndarray, gyro: np.ndarray, inc: RotationIncrements, max_offset: float, offset_guess: float = 0.0
+    t_imu: np.ndarray,
+    gyro: np.ndarray,
+    inc: RotationIncrements,
+    max_offset: float,
+    offset_guess: float = 0.0,
+    estimate_offset: bool = True,
 ) -> Alignment:
     """Time offset, ``R_cam_imu`` and gyro bias from camera rotation increments and the gyro.
 
@@ -128,7 +133,8 @@ def align(
         t_imu: (N,) [s] IMU sample times; gyro: (N, 3) [rad/s].
         inc: camera rotation increments.
         max_offset: [s] the scan covers ``offset_guess +- max_offset``.
-        offset_guess: [s] centre of the scan.
+        offset_guess: [s] centre of the scan (the offset itself when ``estimate_offset`` is False).
+        estimate_offset: scan and refine the offset; else keep ``offset_guess``.
     """
     if len(inc.t_start) < 3:
         raise CalibrationError(
@@ -138,6 +144,21 @@ def align(
     check_rotation_excitation(t_imu, gyro, inc)
     angle = cumulative_angle(t_imu, gyro)
     dt = inc.t_end - inc.t_start
+    tau = _scan(t_imu, angle, inc, max_offset, offset_guess) if estimate_offset else float(offset_guess)
+    for _ in range(2 if estimate_offset else 0):
+        d_imu, keep = _valid_pair(t_imu, angle, inc, tau)
+        R, b = _kabsch_and_bias(inc.theta_cam[keep], d_imu[keep], dt[keep])
+        tau = _refine(t_imu, angle, inc, tau, R, b)
+    d_imu, keep = _valid_pair(t_imu, angle, inc, tau)
+    if keep.sum() < 3:
+        raise CalibrationError("fewer than 3 frame pairs overlap the IMU samples; the streams barely overlap in time")
+    R, b = _kabsch_and_bias(inc.theta_cam[keep], d_imu[keep], dt[keep])
+    rms = float(np.sqrt(np.mean(np.sum((inc.theta_cam[keep] - (d_imu[keep] - b * dt[keep, None]) @ R.T) ** 2, 1))))
+    return Alignment(tau, R, b, rms)
+
+
+def _scan(t_imu, angle, inc: RotationIncrements, max_offset: float, offset_guess: float) -> float:
+    """Coarse offset from the rotation-free cost: increment magnitudes of camera and gyro agree."""
     taus = offset_guess + np.arange(-max_offset, max_offset + 0.5 * COARSE_STEP, COARSE_STEP)
     d, valid = _gyro_increments(t_imu, angle, inc, taus)
     magnitude_cost = _masked_mean((np.linalg.norm(d, axis=2) - np.linalg.norm(inc.theta_cam, axis=1)) ** 2, valid)
@@ -146,15 +167,7 @@ def align(
             "the camera frames and the IMU samples do not overlap in time for any time offset within "
             f"+-{max_offset * 1e3:.0f} ms; check that both streams are stamped with the same clock"
         )
-    tau = _parabola_minimum(taus, magnitude_cost)
-    for _ in range(2):
-        d_imu, keep = _valid_pair(t_imu, angle, inc, tau)
-        R, b = _kabsch_and_bias(inc.theta_cam[keep], d_imu[keep], dt[keep])
-        tau = _refine(t_imu, angle, inc, tau, R, b)
-    d_imu, keep = _valid_pair(t_imu, angle, inc, tau)
-    R, b = _kabsch_and_bias(inc.theta_cam[keep], d_imu[keep], dt[keep])
-    rms = float(np.sqrt(np.mean(np.sum((inc.theta_cam[keep] - (d_imu[keep] - b * dt[keep, None]) @ R.T) ** 2, 1))))
-    return Alignment(tau, R, b, rms)
+    return _parabola_minimum(taus, magnitude_cost)
 
 
 def _valid_pair(t_imu, angle, inc: RotationIncrements, tau: float) -> tuple[np.ndarray, np.ndarray]:

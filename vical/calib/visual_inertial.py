@@ -168,8 +168,7 @@ def _initial_estimate(problem: _Problem, T_guess: np.ndarray, tau_guess: float) 
     """Closed-form time offset, rotation and gyro bias; translation from the guess."""
     inc = rotation_increments(problem.frame_times, problem.T_target_cam[:, :3, :3])
     opts = problem.options
-    half_width = opts.max_time_offset if opts.estimate_time_offset else 0.0
-    alignment = align(problem.t_imu, problem.gyro, inc, half_width, tau_guess)
+    alignment = align(problem.t_imu, problem.gyro, inc, opts.max_time_offset, tau_guess, opts.estimate_time_offset)
     return _Estimate(
         make_transform(alignment.R_cam_imu, T_guess[:3, 3]), alignment.time_offset, alignment.gyro_bias, np.zeros(3)
     )
