@@ -71,3 +71,32 @@ def test_pattern_image_colours_follow_square_convention():
     assert img[25, 25] == 0  # square (1, 1)
     # The board is not half-turn symmetric: the last square (rows, cols) = (6, 7) is white.
     assert img[-15, -15] == 255
+
+
+def test_aprilgrid_points_follow_kalibr_numbering():
+    # Kalibr's GridCalibrationTargetAprilgrid, 2 x 2 tags: ids 0-1-5-4 around tag 0, 10-11-15-14 around tag 3,
+    # x along the columns, y along the rows, pitch (1 + tagSpacing) tagSize.
+    t = Target.aprilgrid(tag_rows=2, tag_cols=2, tag_size=0.1, tag_spacing=0.3)
+    assert t.grid_shape == (4, 4) and t.num_points == 16 and t.num_tags == 4
+    assert np.array_equal(t.tag_corner_ids([0, 3]), [[0, 1, 5, 4], [10, 11, 15, 14]])
+    p = t.points
+    assert np.allclose(p[[0, 1, 2, 4, 15]], [[0, 0, 0], [0.1, 0, 0], [0.13, 0, 0], [0, 0.1, 0], [0.23, 0.23, 0]])
+    assert np.allclose(t.center, [0.115, 0.115, 0.0])
+    assert np.array_equal(t.outline, p[[0, 3, 15, 12]])
+    with pytest.raises(TargetError, match="tag ids"):
+        t.tag_corner_ids([4])
+    with pytest.raises(TargetError, match="tag_spacing > 0"):
+        Target("aprilgrid", 2, 2, 0.1, 0.1, 0.0)
+
+
+def test_aprilgrid_image_layout():
+    t = Target.aprilgrid(tag_rows=2, tag_cols=3, tag_size=0.088, tag_spacing=0.3)
+    image = t.aprilgrid_image(px_per_bit=4)  # 40 px tags, 12 px gaps, 24 px margin
+    assert image.shape == (2 * 24 + 2 * 52 - 12, 2 * 24 + 3 * 52 - 12)
+    h = image.shape[0]
+    # Tag 0 sits bottom-left with its 2-bit (8 px) black border; corner squares fill the gap crossings.
+    assert np.all(image[h - 24 - 40 : h - 24, 24 : 24 + 8] == 0)
+    assert np.all(image[h - 24 : h - 12, 12:24] == 0)
+    assert np.all(image[h - 12 :, :] == 255) and np.all(image[:, :12] == 255)
+    with pytest.raises(TargetError, match="whole number of pixels"):
+        Target.aprilgrid(2, 2, 0.1, 0.33).aprilgrid_image(px_per_bit=1)
