@@ -1,0 +1,97 @@
+"""Aprilgrid detection with point ids in Kalibr's numbering (``vical.data.Target``).
+
+Tags are found with OpenCV's aruco module and its ``DICT_APRILTAG_36h11`` dictionary, reading a
+2-bit black border as Kalibr's grids are printed. As in Kalibr's ``GridCalibrationTargetAprilgrid``:
+tags with an id outside the grid, tags seen twice (a stray tag in the scene) and tags with a
+corner closer than ``min_border_px`` to the image edge are dropped; the tag corners are refined
+with ``cv2.cornerSubPix`` (they are X-junctions with the grid's black corner squares) and a corner
+the refinement moves out of its search window is dropped. (Aruco's unrefined corners are contour
+vertices, about 2-3 px off at these junctions, so Kalibr's 1.2 px displacement limit for its own
+detector's corners does not transfer.) Partial views give the corners of the tags seen.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from vical.calib.errors import CalibrationError
+from vical.data.target import Target
+
+# OpenCV returns a marker's corners top-left, top-right, bottom-right, bottom-left as the tag is
+# printed (top = board +y); Kalibr orders them counter-clockwise from (min x, min y).
+_CV_TO_KALIBR = [3, 2, 1, 0]
+_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 1e-3)
+
+
+def make_aprilgrid_detector() -> cv2.aruco.ArucoDetector:
+    """An aruco detector for tag36h11 tags with a 2-bit black border (Kalibr's print)."""
+    params = cv2.aruco.DetectorParameters()
+    params.markerBorderBits = 2
+    params.cornerRefinementMethod = cv2.aruco.CORNER_REFINE_NONE
+    dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
+    return cv2.aruco.ArucoDetector(dictionary, params)
+
+
+def detect_aprilgrid(
+    image: np.ndarray, target: Target, min_border_px: float = 4.0, detector: cv2.aruco.ArucoDetector | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Find the aprilgrid's tag corners in a grey image.
+
+    Args:
+        image: (H, W) uint8 grey image.
+        target: an aprilgrid ``Target``.
+        min_border_px: tags with a corner closer than this to the image edge are dropped [px].
+        detector: a reusable ``make_aprilgrid_detector()`` (built per call when None).
+
+    Returns:
+        corners (K, 2) float64 [px] and ids (K,) int64 point ids, sorted by id; empty when no
+        tag was found.
+    """
+    if target.kind != "aprilgrid":
+        raise CalibrationError(f"detect_aprilgrid needs an aprilgrid target, got {target.kind!r}")
+    if image.ndim != 2 or image.dtype != np.uint8:
+        raise CalibrationError(f"detect_aprilgrid needs an (H, W) uint8 grey image, got {image.shape} {image.dtype}")
+    quads, tag_ids, _ = (detector or make_aprilgrid_detector()).detectMarkers(image)
+    if tag_ids is None:
+        return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
+    quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)[:, _CV_TO_KALIBR]
+    tag_ids = np.asarray(tag_ids, dtype=np.int64).reshape(-1)
+    keep = _valid_tags(quads, tag_ids, target, image.shape, min_border_px)
+    quads, tag_ids = quads[keep], tag_ids[keep]
+    if not len(tag_ids):
+        return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
+    corners, moved = _refine(image, quads, target)
+    ids = target.tag_corner_ids(tag_ids).reshape(-1)
+    good = ~moved
+    order = np.argsort(ids[good])
+    return corners[good][order], ids[good][order]
+
+
+def _valid_tags(
+    quads: np.ndarray, tag_ids: np.ndarray, target: Target, shape: tuple[int, ...], border: float
+) -> np.ndarray:
+    """(T,) mask of tags in the grid, seen once, with every corner ``border`` px inside the image."""
+    in_grid = (tag_ids >= 0) & (tag_ids < target.num_tags)
+    values, counts = np.unique(tag_ids, return_counts=True)
+    unique = ~np.isin(tag_ids, values[counts > 1])
+    h, w = shape
+    u, v = quads[..., 0], quads[..., 1]
+    inside = np.all((u >= border) & (u <= w - 1 - border) & (v >= border) & (v <= h - 1 - border), axis=1)
+    return in_grid & unique & inside
+
+
+def _refine(image: np.ndarray, quads: np.ndarray, target: Target) -> tuple[np.ndarray, np.ndarray]:
+    """Sub-pixel corners (4T, 2) and a mask (4T,) of corners the refinement moved out of its window.
+
+    The search window stays inside the smaller of the gap between tags and the tag's black
+    border (0.2 tag sizes), measured on each tag's shortest side in the image.
+    """
+    raw = quads.reshape(-1, 2)
+    side = np.min(np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2))
+    half = int(np.clip(np.floor(0.5 * side * min(target.tag_spacing, 0.2)), 1, 8))
+    refined = cv2.cornerSubPix(
+        image, np.ascontiguousarray(raw, dtype=np.float32).reshape(-1, 1, 2), (half, half), (-1, -1), _SUBPIX_CRITERIA
+    ).reshape(-1, 2)
+    moved = np.max(np.abs(refined - raw), axis=1) > half
+    return refined.astype(np.float64), moved
