@@ -17,6 +17,7 @@ the recording's ``truth``.
 from __future__ import annotations
 
 import os
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -87,6 +88,12 @@ def _camera_sensor_yaml(rec: Recording) -> dict[str, Any]:
     data["resolution"] = [int(width), int(height)]
     if rec.truth is not None:
         cam = rec.truth.camera
+        if np.any(cam.distortion_center_offset != 0):
+            warnings.warn(
+                "EuRoC's pinhole models have the distortion centre at the principal point; the camera's "
+                f"distortion_center_offset {cam.distortion_center_offset.tolist()} px is not written",
+                stacklevel=3,
+            )
         data["T_BS"] = _matrix(invert_transform(rec.truth.T_cam_imu))
         data["camera_model"] = "pinhole"
         data["intrinsics"] = [float(v) for v in cam.intrinsics]
