@@ -7,7 +7,7 @@ import pytest
 from rosbags.rosbag1 import Reader, Writer
 from test_io_samples import make_recording
 
-from vical.io.bag import _TYPESTORE, IMAGE_TYPE, IMU_TYPE, _image_msg, _imu_msg, read_bag, write_bag
+from vical.io.bag import IMAGE_TYPE, IMU_TYPE, _image_msg, _imu_msg, read_bag, ros1_typestore, write_bag
 from vical.io.checks import FormatWarning
 from vical.io.errors import BagFormatError, FormatError
 
@@ -92,12 +92,12 @@ def _custom_bag(path, images, imu):
     """A bag from (t_ns, image) and (t_ns, gyro, accel) lists; header stamps in the given (possibly unsorted)
     order while the bag's receive times increase, as a driver that stamps late would write."""
     with Writer(path) as writer:
-        cam = writer.add_connection("/cam0/image_raw", IMAGE_TYPE, typestore=_TYPESTORE)
-        imu_conn = writer.add_connection("/imu0", IMU_TYPE, typestore=_TYPESTORE)
+        cam = writer.add_connection("/cam0/image_raw", IMAGE_TYPE, typestore=ros1_typestore())
+        imu_conn = writer.add_connection("/imu0", IMU_TYPE, typestore=ros1_typestore())
         for k, (t, image) in enumerate(images):
-            writer.write(cam, k * 50_000_000, _TYPESTORE.serialize_ros1(_image_msg(t, k, image), IMAGE_TYPE))
+            writer.write(cam, k * 50_000_000, ros1_typestore().serialize_ros1(_image_msg(t, k, image), IMAGE_TYPE))
         for k, (t, gyro, accel) in enumerate(imu):
-            writer.write(imu_conn, t, _TYPESTORE.serialize_ros1(_imu_msg(t, k, gyro, accel), IMU_TYPE))
+            writer.write(imu_conn, t, ros1_typestore().serialize_ros1(_imu_msg(t, k, gyro, accel), IMU_TYPE))
     return path
 
 

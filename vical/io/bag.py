@@ -10,6 +10,7 @@ images and ``sensor_msgs/CompressedImage`` to grey, and stamps with ``header.sta
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import tempfile
@@ -20,6 +21,7 @@ import cv2
 import numpy as np
 from rosbags.rosbag1 import Reader, ReaderError, Writer
 from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
 from tqdm import tqdm
 
 from vical.data import NS_PER_S, CameraFrames, DataError, ImuSamples, Recording, Target
@@ -34,7 +36,12 @@ IMAGE_TYPE, COMPRESSED_TYPE, IMU_TYPE = (
 )
 COLOR_CODES = {"rgb8": cv2.COLOR_RGB2GRAY, "bgr8": cv2.COLOR_BGR2GRAY, "rgba8": cv2.COLOR_RGBA2GRAY}
 COLOR_CODES["bgra8"] = cv2.COLOR_BGRA2GRAY
-_TYPESTORE = get_typestore(Stores.ROS1_NOETIC)
+
+
+@functools.cache
+def ros1_typestore() -> Typestore:
+    """ROS1 Noetic message types (built on first use: it takes about 0.1 s)."""
+    return get_typestore(Stores.ROS1_NOETIC)
 
 
 # ------------------------------------------------------------------------------------ write
@@ -65,26 +72,26 @@ def _write_messages(rec: Recording, path: Path, image_topic: str, imu_topic: str
     events = [(int(t), 1, k) for k, t in enumerate(rec.imu.t)] + [(int(t), 0, k) for k, t in enumerate(rec.frames.t)]
     events.sort()
     with Writer(path) as writer:
-        cam = writer.add_connection(image_topic, IMAGE_TYPE, typestore=_TYPESTORE)
-        imu = writer.add_connection(imu_topic, IMU_TYPE, typestore=_TYPESTORE)
+        cam = writer.add_connection(image_topic, IMAGE_TYPE, typestore=ros1_typestore())
+        imu = writer.add_connection(imu_topic, IMU_TYPE, typestore=ros1_typestore())
         for t, is_imu, k in tqdm(events, desc=f"writing {path.name}", unit="msg", leave=False):
             if is_imu:
                 msg = _imu_msg(t, k, rec.imu.gyro[k], rec.imu.accel[k])
-                writer.write(imu, t, _TYPESTORE.serialize_ros1(msg, IMU_TYPE))
+                writer.write(imu, t, ros1_typestore().serialize_ros1(msg, IMU_TYPE))
             else:
                 msg = _image_msg(t, k, rec.frames.images[k])
-                writer.write(cam, t, _TYPESTORE.serialize_ros1(msg, IMAGE_TYPE))
+                writer.write(cam, t, ros1_typestore().serialize_ros1(msg, IMAGE_TYPE))
 
 
 def _header(t_ns: int, seq: int, frame_id: str) -> Any:
     sec, nsec = divmod(t_ns, NS_PER_S)
-    stamp = _TYPESTORE.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
-    return _TYPESTORE.types["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=frame_id)
+    stamp = ros1_typestore().types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
+    return ros1_typestore().types["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=frame_id)
 
 
 def _image_msg(t_ns: int, seq: int, image: np.ndarray) -> Any:
     h, w = image.shape
-    return _TYPESTORE.types[IMAGE_TYPE](
+    return ros1_typestore().types[IMAGE_TYPE](
         header=_header(t_ns, seq, "cam0"),
         height=h,
         width=w,
@@ -96,7 +103,7 @@ def _image_msg(t_ns: int, seq: int, image: np.ndarray) -> Any:
 
 
 def _imu_msg(t_ns: int, seq: int, gyro: np.ndarray, accel: np.ndarray) -> Any:
-    types = _TYPESTORE.types
+    types = ros1_typestore().types
     vec = types["geometry_msgs/msg/Vector3"]
     cov = np.zeros(9)
     orientation_cov = cov.copy()
@@ -162,13 +169,20 @@ def _connections(reader: Reader, path: Path, image_topic: str, imu_topic: str | 
     return found
 
 
-def _read_streams(reader, connections, path, target, detector, keep_images):
+def _read_streams(
+    reader: Reader,
+    connections: dict[str, Any],
+    path: Path,
+    target: Target,
+    detector: Detector | None,
+    keep_images: bool,
+) -> tuple[list, list]:
     """Decode every message of the chosen connections (tqdm progress): frame tuples and IMU rows."""
     frames, imu, size = [], [], None
     total = sum(c.msgcount for c in connections.values())
     messages = reader.messages(connections=list(connections.values()))
     for index, (conn, _, raw) in enumerate(tqdm(messages, total=total, desc=path.name, unit="msg", leave=False)):
-        msg = _TYPESTORE.deserialize_ros1(raw, conn.msgtype)
+        msg = ros1_typestore().deserialize_ros1(raw, conn.msgtype)
         t = int(msg.header.stamp.sec) * NS_PER_S + int(msg.header.stamp.nanosec)
         where = f"{path} topic {conn.topic} message {index}"
         if conn.msgtype == IMU_TYPE:

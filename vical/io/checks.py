@@ -97,7 +97,9 @@ def sort_and_dedupe(t: np.ndarray, rows: np.ndarray, where: str, lines: np.ndarr
     return order
 
 
-def scale_imu(gyro: np.ndarray, accel: np.ndarray, gyro_unit: str, accel_unit: str, where: str):
+def scale_imu(
+    gyro: np.ndarray, accel: np.ndarray, gyro_unit: str, accel_unit: str, where: str
+) -> tuple[np.ndarray, np.ndarray]:
     """Gyro [rad/s] and accel [m/s^2] from values in the given units; raise when they look like other units."""
     if gyro_unit not in GYRO_UNITS or accel_unit not in ACCEL_UNITS:
         raise FormatError(f"gyro_unit must be one of {list(GYRO_UNITS)}, accel_unit one of {list(ACCEL_UNITS)}")

@@ -31,7 +31,7 @@ from vical.io.csvfiles import parse_times, read_corners_csv, read_imu_csv, read_
 from vical.io.errors import CsvFormatError, FormatError, KalibrFormatError
 from vical.io.images import Detector, frames_from_images, read_gray, write_png
 from vical.io.kalibr import read_camchain, read_imu_yaml
-from vical.io.yamlfile import dump_yaml, load_mapping
+from vical.io.yamlfile import as_floats, dump_yaml, load_mapping
 
 EUROC_DISTORTION_NAMES = {"radtan": "radial-tangential", "equidistant": "equidistant"}
 
@@ -179,7 +179,11 @@ def _read_reference(root: Path) -> tuple[SensorTruth | None, tuple[int, int] | N
     if not cam_yaml.is_file():
         return None, None
     data = load_mapping(cam_yaml, KalibrFormatError)
-    resolution = tuple(int(v) for v in data["resolution"]) if "resolution" in data else None
+    resolution = None
+    if "resolution" in data:
+        resolution = tuple(
+            int(v) for v in as_floats(data["resolution"], 2, "resolution", str(cam_yaml), KalibrFormatError)
+        )
     has_noise = imu_yaml.is_file() and "gyroscope_noise_density" in load_mapping(imu_yaml, KalibrFormatError)
     if "intrinsics" not in data or not has_noise:
         return None, resolution
