@@ -30,6 +30,15 @@ def test_default_yaml_matches_dataclass_defaults():
     assert SimConfig.from_mapping(yaml.safe_load(CONF.read_text())) == SimConfig()
 
 
+def test_omegaconf_node_builds_the_same_config():
+    from omegaconf import OmegaConf
+
+    node = OmegaConf.load(CONF)
+    node.board.distance = 1.2
+    cfg = SimConfig.from_mapping(node)
+    assert cfg.board.distance == 1.2 and cfg.motion.kp == SimConfig().motion.kp
+
+
 def test_scene_rests_for_one_second_without_warnings(sim):
     sim.reset()
     q_home = sim.q
@@ -152,3 +161,15 @@ def test_sensor_rates_must_be_whole_multiples_of_the_physics_step():
         physics.steps_per_period(2000.0, "sensor.imu.rate_hz")
     with pytest.raises(ConfigError, match=r"sensor\.camera\.rate_hz"):
         PhysicsConfig(timestep=0.003).steps_per_period(200.0, "sensor.camera.rate_hz")
+
+
+def test_board_offset_and_tilt_are_applied_about_the_board_centre():
+    cfg = SimConfig.from_mapping({"board": {"distance": 1.2, "offset": [0.1, -0.05], "tilt_rpy": [0.3, -0.2, 0.1]}})
+    sim = PandaSim(cfg)
+    T_body_board = invert_transform(body_pose(sim.model, sim.data, "cam_body")) @ sim.T_world_board
+    centre = transform_points(T_body_board, cfg.board.target.center)
+    np.testing.assert_allclose(centre, [1.2, 0.1, -0.05], atol=1e-9)
+    facing = np.array([[0.0, 0.0, -1.0], [0.0, -1.0, 0.0], [-1.0, 0.0, 0.0]])
+    np.testing.assert_allclose(T_body_board[:3, :3], facing @ euler_to_matrix([0.3, -0.2, 0.1]), atol=1e-9)
+    board = sim.model.body("board").id
+    np.testing.assert_allclose(sim.data.xpos[board], sim.T_world_board[:3, 3], atol=1e-9)
