@@ -143,8 +143,10 @@ class PandaIK:
             q0 = q_start if attempt == 0 else rng.uniform(self.q_lo, self.q_hi)
             q, err, iterations = self._attempt(np.asarray(q0, dtype=float), T_target)
             total += iterations
-            # Rank attempts by position + rotation error: 1 mm counts as much as 1 mrad.
-            score = float(np.linalg.norm(err[:3]) + np.linalg.norm(err[3:]))
+            # Rank attempts by position + rotation error (1 mm counts as much as 1 mrad), plus 1 cm
+            # per radian of joint motion, so an unreachable target does not trade a marginally
+            # smaller error for a sweep into a far-away configuration.
+            score = float(np.linalg.norm(err[:3]) + np.linalg.norm(err[3:]) + 0.01 * np.linalg.norm(q - q_start))
             if best is None or score < best[0]:
                 best = (score, q, err)
             if self._converged(err):
