@@ -30,7 +30,13 @@ def test_group_option_composes(group, option):
 def test_root_config_composes(root):
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose(config_name=root)
-    OmegaConf.to_container(cfg, resolve=True)
+    raw = OmegaConf.to_container(cfg, resolve=False)
+    for key, value in raw.items():
+        # ${hydra:...} (run directories) resolves only inside a Hydra run; everything else must resolve here.
+        if isinstance(value, str) and "${hydra:" in value:
+            continue
+        node = cfg[key]
+        OmegaConf.to_container(node, resolve=True) if OmegaConf.is_config(node) else str(node)
 
 
 def test_task_files_name_themselves_and_a_metric():
