@@ -84,7 +84,7 @@ def test_noise_does_not_depend_on_chunking():
 def _feed(sim, steps, signal):
     for k in steps:
         t = k * STEP_NS
-        sim.add_reading(t, signal(t), 2.0 * signal(t))
+        sim.add_reading(t, np.concatenate([signal(t), 2.0 * signal(t)]))
 
 
 def test_streaming_average_of_a_known_signal():
@@ -130,11 +130,11 @@ def test_streaming_equals_one_batch_and_noise_is_seeded():
 
 def test_missing_physics_step_is_an_error():
     sim = ImuSimulator(STEP_NS, 5, "average")
-    sim.add_reading(0, np.zeros(3), np.zeros(3))
+    sim.add_reading(0, np.zeros(6))
     with pytest.raises(ImuSimulationError, match="every physics step: expected t = 1000000 ns, got 2000000 ns"):
-        sim.add_reading(2 * STEP_NS, np.zeros(3), np.zeros(3))
+        sim.add_reading(2 * STEP_NS, np.zeros(6))
     with pytest.raises(ImuSimulationError, match="not on the physics grid"):
-        sim.add_reading(STEP_NS + 7, np.zeros(3), np.zeros(3))
+        sim.add_reading(STEP_NS + 7, np.zeros(6))
 
 
 def test_noise_needs_a_generator():

@@ -111,8 +111,7 @@ class ProjectBackend:
         self.T_world_board = np.asarray(T_world_board, dtype=float)
         self.pixel_noise_px = float(pixel_noise_px)
         self.rules = rules or VisibilityRules()
-        self._points = target.points
-        self._outline = grid_outline(target, self.rules.margin_squares)
+        self._points_and_outline = np.vstack([target.points, grid_outline(target, self.rules.margin_squares)])
         self._ids = np.arange(target.num_points, dtype=np.int64)
 
     def ideal_corners(self, camera: CameraModel, T_world_cam: np.ndarray) -> np.ndarray | None:
@@ -120,13 +119,14 @@ class ProjectBackend:
         T_cam_board = invert_transform(T_world_cam) @ self.T_world_board
         if not self._faces_camera(T_cam_board):
             return None
-        outline, in_front = camera.project(transform_points(T_cam_board, self._outline))
-        if not np.all(in_front) or not np.all(camera.in_image(outline, self.rules.border_px)):
+        # One projection of the grid points followed by the enlarged outline.
+        uv, in_front = camera.project(transform_points(T_cam_board, self._points_and_outline))
+        n = self.target.num_points
+        if not np.all(in_front) or not np.all(camera.in_image(uv[n:], self.rules.border_px)):
             return None
-        uv, _ = camera.project(transform_points(T_cam_board, self._points))
-        if self._min_spacing(uv) < self.rules.min_corner_spacing_px:
+        if self._min_spacing(uv[:n]) < self.rules.min_corner_spacing_px:
             return None
-        return uv
+        return uv[:n]
 
     def observe(
         self, camera: CameraModel, T_world_cam: np.ndarray, rng: np.random.Generator

@@ -54,33 +54,46 @@ class ImuSiteReader:
         accel = model.sensor_adr[model.sensor(accel_sensor).id]
         gyro = model.sensor_adr[model.sensor(gyro_sensor).id]
         self._accel, self._gyro = slice(accel, accel + 3), slice(gyro, gyro + 3)
-        self._jacp = np.zeros((3, model.nv))
-        self._qvel: np.ndarray | None = None
+        self._jac = np.zeros((6, model.nv))  # [translational; rotational] site Jacobian of the last read
+        self._qvel = np.zeros(model.nv)  # velocity of the state the next read belongs to
+        self._qvel_read = np.zeros(model.nv)  # velocity of the state of the last read
+        self._dqacc = np.zeros(model.nv)
         self._t_ns: int | None = None
 
     def reset(self, data: mujoco.MjData, t_ns: int) -> None:
         """Remember the velocity of the state at ``t_ns`` (before the next physics step)."""
-        self._qvel = data.qvel.copy()
+        self._qvel[:] = data.qvel
         self._t_ns = int(t_ns)
 
-    def read(self, data: mujoco.MjData, t_ns: int, step_ns: int) -> tuple[np.ndarray, np.ndarray]:
-        """Gyro (3,) [rad/s] and specific force (3,) [m/s^2] in the site frame at ``t_ns``.
+    def read(self, data: mujoco.MjData, t_ns: int, step_ns: int) -> np.ndarray:
+        """``[gyro (3) rad/s, specific force (3) m/s^2]`` (6,) in the site frame at ``t_ns``.
 
         Call right after the ``mj_step`` that started at ``t_ns`` (``data``'s sensors and
         kinematics are those of ``t_ns``, its ``qvel`` that of ``t_ns + step_ns``).
         """
-        if self._t_ns != int(t_ns):
+        if self._t_ns != t_ns:
             raise ImuSimulationError(
                 f"IMU reader expected the physics step starting at {self._t_ns} ns, got {t_ns} ns; "
                 "every physics step must be reported (reset the reader after moving without it)"
             )
-        qacc_executed = (data.qvel - self._qvel) / (step_ns * 1e-9)
-        mujoco.mj_jacSite(self.model, data, self._jacp, None, self._site)
-        R = data.site_xmat[self._site].reshape(3, 3)
-        accel = data.sensordata[self._accel] + R.T @ (self._jacp @ (qacc_executed - data.qacc))
+        jac = self._jac
+        mujoco.mj_jacSite(self.model, data, jac[:3], jac[3:], self._site)
+        # Executed minus forward-pass joint acceleration.
+        np.subtract(data.qvel, self._qvel, out=self._dqacc)
+        self._dqacc *= 1e9 / step_ns
+        self._dqacc -= data.qacc
+        reading = np.empty(6)
+        reading[:3] = data.sensordata[self._gyro]
+        # R^T (J_p dqacc), written as (J_p dqacc) R.
+        reading[3:] = data.sensordata[self._accel] + (jac[:3] @ self._dqacc) @ data.site_xmat[self._site].reshape(3, 3)
+        self._qvel_read, self._qvel = self._qvel, self._qvel_read
         self._qvel[:] = data.qvel
-        self._t_ns = int(t_ns) + int(step_ns)
-        return data.sensordata[self._gyro].copy(), accel
+        self._t_ns = t_ns + step_ns
+        return reading
+
+    def site_velocity(self) -> tuple[np.ndarray, np.ndarray]:
+        """Linear (3,) [m/s] and angular (3,) [rad/s] velocity, world axes, of the site at the last read's time."""
+        return self._jac[:3] @ self._qvel_read, self._jac[3:] @ self._qvel_read
 
 
 def window_weights(steps_per_sample: int, sampling: str) -> tuple[np.ndarray, np.ndarray]:
@@ -150,10 +163,10 @@ class ImuNoiseProcess:
         n = len(gyro)
         draws = self._rng.standard_normal((n, 12))
         increments = draws[:, 6:] * self._walk
-        # Sample k carries the bias before increment k: bias_0 is the initial bias.
-        biases = self._bias + np.concatenate([np.zeros((1, 6)), np.cumsum(increments, axis=0)[:-1]])
-        if n:
-            self._bias = biases[-1] + increments[-1]
+        # Sample k carries the bias before increment k (bias_0 is the initial bias). Summing
+        # sequentially from the carried bias gives the same floats however the stream is chunked.
+        walk = np.cumsum(np.vstack([self._bias, increments]), axis=0)
+        biases, self._bias = walk[:-1], walk[-1]
         noisy = np.hstack([gyro, accel]) + biases + draws[:, :6] * self._white
         return noisy[:, :3], noisy[:, 3:], biases
 
@@ -170,7 +183,8 @@ class ImuSimulator:
         gyro_bias, accel_bias: (3,) initial biases [rad/s], [m/s^2].
 
     Samples fall on multiples of the IMU period in the physics clock; a sample is complete once
-    every reading of its window has arrived.
+    every reading of its window has arrived. Noise is drawn in sample order when samples are
+    requested, so it does not depend on how often they are.
     """
 
     def __init__(
@@ -185,7 +199,8 @@ class ImuSimulator:
     ) -> None:
         self.step_ns = int(step_ns)
         self.period_steps = int(steps_per_sample)
-        self._offsets, self._weights = window_weights(steps_per_sample, sampling)
+        offsets, self._weights = window_weights(steps_per_sample, sampling)
+        self._first_offset, self._last_offset = int(offsets[0]), int(offsets[-1])
         if noise is not None and rng is None:
             raise ValueError("ImuSimulator needs a seeded numpy Generator to draw IMU noise")
         self._noise = None
@@ -194,55 +209,60 @@ class ImuSimulator:
             gyro_bias = zero if gyro_bias is None else gyro_bias
             accel_bias = zero if accel_bias is None else accel_bias
             self._noise = ImuNoiseProcess(noise, rng, gyro_bias, accel_bias)
-        # Readings (6,) [gyro, accel] of consecutive physics steps from ``_base_step`` on; older
-        # ones are dropped once no pending sample needs them.
-        self._readings: list[np.ndarray] = []
+        # Readings (6,) [gyro, accel] of consecutive physics steps, row 0 = step ``_base_step``;
+        # rows before the next sample's window are dropped after each sample.
+        self._buffer = np.zeros((len(offsets) + self.period_steps, 6))
+        self._count = 0
         self._base_step: int | None = None
-        self._next_step: int | None = None  # index (in physics steps) of the next sample instant
-        self._t: list[np.ndarray] = []
-        self._gyro: list[np.ndarray] = []
-        self._accel: list[np.ndarray] = []
+        self._next_step = 0  # physics step of the next sample instant
+        self._ideal_t: list[int] = []
+        self._ideal: list[np.ndarray] = []
+        self._t = np.zeros(0, dtype=np.int64)
+        self._gyro = np.zeros((0, 3))
+        self._accel = np.zeros((0, 3))
 
-    def add_reading(self, t_ns: int, gyro: np.ndarray, accel: np.ndarray) -> None:
-        """Record the ideal readings (3,) [rad/s], (3,) [m/s^2] of the physics state at ``t_ns``."""
+    def add_reading(self, t_ns: int, reading: np.ndarray) -> None:
+        """Record the ideal ``[gyro (3) rad/s, accel (3) m/s^2]`` (6,) of the physics state at ``t_ns``."""
         step, rem = divmod(int(t_ns), self.step_ns)
         if rem:
             raise ImuSimulationError(f"IMU reading at t = {t_ns} ns is not on the physics grid ({self.step_ns} ns)")
         if self._base_step is None:
             self._base_step = step
-            first_center = step - int(self._offsets[0])
+            first_center = step - self._first_offset
             self._next_step = -(-first_center // self.period_steps) * self.period_steps
-        elif step != self._base_step + len(self._readings):
-            expected = (self._base_step + len(self._readings)) * self.step_ns
+        elif step != self._base_step + self._count:
+            expected = (self._base_step + self._count) * self.step_ns
             raise ImuSimulationError(
                 f"IMU readings must arrive at every physics step: expected t = {expected} ns, got {t_ns} ns"
             )
-        self._readings.append(np.concatenate([gyro, accel]).astype(float))
-        self._emit_complete()
+        if self._count == len(self._buffer):
+            self._buffer = np.vstack([self._buffer, np.zeros_like(self._buffer)])
+        self._buffer[self._count] = reading
+        self._count += 1
+        if step == self._next_step + self._last_offset:
+            self._emit()
 
-    def _emit_complete(self) -> None:
-        last_step = self._base_step + len(self._readings) - 1
-        centers = []
-        while self._next_step + int(self._offsets[-1]) <= last_step:
-            centers.append(self._next_step)
-            self._next_step += self.period_steps
-        if not centers:
-            return
-        readings = np.asarray(self._readings)
-        idx = np.asarray(centers)[:, None] + self._offsets[None, :] - self._base_step
-        ideal = np.einsum("l,klc->kc", self._weights, readings[idx])
-        drop = min(self._next_step + int(self._offsets[0]) - self._base_step, len(self._readings))
-        del self._readings[:drop]
+    def _emit(self) -> None:
+        start = self._next_step + self._first_offset - self._base_step
+        window = self._buffer[start : start + len(self._weights)]
+        self._ideal.append(self._weights @ window)
+        self._ideal_t.append(self._next_step * self.step_ns)
+        self._next_step += self.period_steps
+        drop = min(self._next_step + self._first_offset - self._base_step, self._count)
+        keep = self._count - drop
+        self._buffer[:keep] = self._buffer[drop : self._count]
+        self._count = keep
         self._base_step += drop
-        gyro, accel = ideal[:, :3], ideal[:, 3:]
-        if self._noise is not None:
-            gyro, accel, _ = self._noise.apply(gyro, accel)
-        self._t.append(np.asarray(centers, dtype=np.int64) * self.step_ns)
-        self._gyro.append(gyro)
-        self._accel.append(accel)
 
     def samples(self) -> ImuSamples:
         """All complete IMU samples so far."""
-        if not self._t:
-            return ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
-        return ImuSamples(np.concatenate(self._t), np.concatenate(self._gyro), np.concatenate(self._accel))
+        if self._ideal:
+            ideal = np.asarray(self._ideal)
+            gyro, accel = ideal[:, :3], ideal[:, 3:]
+            if self._noise is not None:
+                gyro, accel, _ = self._noise.apply(gyro, accel)
+            self._t = np.concatenate([self._t, np.asarray(self._ideal_t, dtype=np.int64)])
+            self._gyro = np.vstack([self._gyro, gyro])
+            self._accel = np.vstack([self._accel, accel])
+            self._ideal, self._ideal_t = [], []
+        return ImuSamples(self._t.copy(), self._gyro.copy(), self._accel.copy())

@@ -122,7 +122,7 @@ class SensorRecorder:
     def on_step(self, sim, t_ns: int) -> None:
         """``PandaSim`` step callback: ``data``'s derived quantities belong to time ``t_ns``."""
         data = sim.data
-        self._imu.add_reading(t_ns, *self._reader.read(data, t_ns, self._step_ns))
+        self._imu.add_reading(t_ns, self._reader.read(data, t_ns, self._step_ns))
         if t_ns % (self._imu_steps * self._step_ns) == 0:
             self._log_truth(t_ns)
         if self._next_stamp is None:
@@ -181,16 +181,14 @@ class SensorRecorder:
             frames["images"].append(image)
 
     def _log_truth(self, t_ns: int) -> None:
-        model, data = self.sim.model, self.sim.data
-        i = self._imu_site
+        data, i = self.sim.data, self._imu_site
         R = data.site_xmat[i].reshape(3, 3).copy()
-        velocity = np.zeros(6)  # [angular (3), linear (3)] in world axes at the site
-        mujoco.mj_objectVelocity(model, data, mujoco.mjtObj.mjOBJ_SITE, i, velocity, 0)
+        v_world, omega_world = self._reader.site_velocity()
         log = self._log
         log.t.append(t_ns)
         log.T_world_imu.append(make_transform(R, data.site_xpos[i]))
-        log.v_world.append(velocity[3:].copy())
-        log.omega_imu.append(R.T @ velocity[:3])
+        log.v_world.append(v_world)
+        log.omega_imu.append(omega_world @ R)
 
     def _trajectory(self, imu: ImuSamples) -> Trajectory:
         log = self._log
