@@ -10,6 +10,7 @@ from vical.calib.observations import FrameObservation
 from vical.geometry import CameraModel, make_transform
 
 MIN_INIT_CORNERS = 12  # frames with fewer corners gave metre-level PnP errors; skip them for initialisation
+MAX_INIT_VIEWS = 20  # homographies used for the closed-form focal length
 MAX_PNP_RMS_PX = 20.0  # [px] a PnP pose that reprojects worse than this is not used as a starting point
 
 
@@ -56,20 +57,22 @@ def initial_camera(observations: list[FrameObservation], model: str, size: tuple
     w, h = size
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
     usable = [o for o in observations if len(o.ids) >= MIN_INIT_CORNERS] or observations
+    usable = usable[:: max(1, len(usable) // MAX_INIT_VIEWS)]  # a spread-out subset is plenty for a start
     fx, fy = focal_from_homographies(usable, centre)
     return CameraModel(model, w, h, fx, fy, centre[0], centre[1], np.zeros(4))
 
 
 def pnp(camera: CameraModel, obs: FrameObservation) -> tuple[np.ndarray, float] | None:
-    """Pose ``T_cam_target`` (4, 4) of one frame and its reprojection RMS [px], or None when PnP fails.
+    """Pose ``T_cam_target`` (4, 4) of one frame and its approximate reprojection RMS [px], or None on failure.
 
     Pixels are undistorted with the camera model first, so both distortion models share one path.
     """
-    xy = camera.undistort(camera.pixels_to_normalized(obs.uv))
+    xy = camera.pixels_to_normalized(obs.uv)
+    if np.any(camera.dist != 0) or np.any(camera.distortion_center_offset != 0):
+        xy = camera.undistort(xy)
     obj = np.ascontiguousarray(obs.points, dtype=np.float64)
     img = np.ascontiguousarray(xy, dtype=np.float64)
-    flag = cv2.SOLVEPNP_IPPE if len(obs.ids) >= 4 else cv2.SOLVEPNP_ITERATIVE
-    ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=flag)
+    ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)  # planar target
     if not ok:
         return None
     R = cv2.Rodrigues(rvec)[0]
@@ -77,8 +80,9 @@ def pnp(camera: CameraModel, obs: FrameObservation) -> tuple[np.ndarray, float] 
     p_cam = obs.points @ R.T + tvec.ravel()
     if np.any(p_cam[:, 2] <= 0):
         return None
-    uv, _ = camera.project(p_cam)
-    rms = float(np.sqrt(np.mean(np.sum((uv - obs.uv) ** 2, axis=1))))
+    # RMS in undistorted normalised coordinates scaled by the focal length: pixels to first order.
+    err = (p_cam[:, :2] / p_cam[:, 2:] - xy) * [camera.fx, camera.fy]
+    rms = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
     return T, rms
 
 

@@ -138,7 +138,10 @@ def calibrate_intrinsics(
         )
     sigma_graph = 1.0 if pixel_sigma is None else float(pixel_sigma)
     graph, values = _build_graph(camera0, observations, poses, target, sigma_graph, huber_k)
-    solution = optimize(graph, values, max_iterations, "intrinsic calibration")
+    # Frame poses first, then the shared variables: COLAMD would eliminate the target points early and
+    # make every pose pair dense.
+    ordering = [pose_key(k) for k in poses] + [landmark_key(i) for i in range(target.num_points)] + [K_KEY]
+    solution = optimize(graph, values, max_iterations, "intrinsic calibration", ordering)
     calibration = solution.values.atCal3DS2(K_KEY) if model == "radtan" else solution.values.atCal3Fisheye(K_KEY)
     camera = camera_from_gtsam(calibration, camera0)
     T_cam_target = {k: invert_transform(solution.values.atPose3(pose_key(k)).matrix()) for k in poses}

@@ -28,9 +28,15 @@ class Solution:
 
 
 def optimize(
-    graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values, max_iterations: int = 50, what: str = "calibration"
+    graph: gtsam.NonlinearFactorGraph,
+    initial: gtsam.Values,
+    max_iterations: int = 50,
+    what: str = "calibration",
+    ordering: list[int] | None = None,
 ) -> Solution:
-    """Levenberg-Marquardt (COLAMD ordering, multifrontal Cholesky) from ``initial``.
+    """Levenberg-Marquardt (multifrontal Cholesky) from ``initial``.
+
+    The elimination ``ordering`` (keys, first eliminated first) defaults to COLAMD.
 
     Raises:
         CalibrationError: when the linear system is singular (an unobservable parameter) or the
@@ -38,9 +44,12 @@ def optimize(
     """
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(max_iterations)
-    params.setRelativeErrorTol(1e-10)
+    params.setRelativeErrorTol(1e-8)
     params.setAbsoluteErrorTol(1e-12)
-    params.setOrderingType("COLAMD")
+    if ordering is None:
+        params.setOrderingType("COLAMD")
+    else:
+        params.setOrdering(_ordering(ordering))
     try:
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
         values = optimizer.optimize()
@@ -69,6 +78,13 @@ def joint_covariance(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, ke
             f"the uncertainty cannot be computed: the information matrix is singular ({_first_line(exc)}); "
             "some parameter is not observable from this data"
         ) from exc
+
+
+def _ordering(keys: list[int]) -> gtsam.Ordering:
+    ordering = gtsam.Ordering()
+    for key in keys:
+        ordering.push_back(key)
+    return ordering
 
 
 def _first_line(exc: Exception) -> str:
