@@ -26,7 +26,7 @@ import numpy as np
 
 from vical.config import require_range
 from vical.data import Target
-from vical.geometry import CameraModel, interpolate_transform, invert_transform, transform_points
+from vical.geometry import CameraModel, interpolate_transform
 
 Detector = Callable[[np.ndarray, Target], tuple[np.ndarray, np.ndarray]]
 """``detector(image (H, W) uint8, target) -> (corners (K, 2) float64 [px], ids (K,) int64)``."""
@@ -113,14 +113,17 @@ class ProjectBackend:
         self.rules = rules or VisibilityRules()
         self._points_and_outline = np.vstack([target.points, grid_outline(target, self.rules.margin_squares)])
         self._ids = np.arange(target.num_points, dtype=np.int64)
+        self._cos_max_obliquity = float(np.cos(self.rules.max_obliquity))
 
     def ideal_corners(self, camera: CameraModel, T_world_cam: np.ndarray) -> np.ndarray | None:
         """Noise-free corner pixels (N, 2) in id order, or None when the rules say the board is not seen."""
-        T_cam_board = invert_transform(T_world_cam) @ self.T_world_board
-        if not self._faces_camera(T_cam_board):
+        R_world_cam, t_world_cam = T_world_cam[:3, :3], T_world_cam[:3, 3]
+        R_cam_board = R_world_cam.T @ self.T_world_board[:3, :3]
+        t_cam_board = (self.T_world_board[:3, 3] - t_world_cam) @ R_world_cam
+        if not self._faces_camera(R_cam_board, t_cam_board):
             return None
         # One projection of the grid points followed by the enlarged outline.
-        uv, in_front = camera.project(transform_points(T_cam_board, self._points_and_outline))
+        uv, in_front = camera.project(self._points_and_outline @ R_cam_board.T + t_cam_board)
         n = self.target.num_points
         if not np.all(in_front) or not np.all(camera.in_image(uv[n:], self.rules.border_px)):
             return None
@@ -137,21 +140,21 @@ class ProjectBackend:
             return _NO_CORNERS
         return uv + self.pixel_noise_px * rng.standard_normal(uv.shape), self._ids.copy()
 
-    def _faces_camera(self, T_cam_board: np.ndarray) -> bool:
-        center = transform_points(T_cam_board, self.target.center)
-        normal = T_cam_board[:3, 2]
-        distance = float(np.linalg.norm(center))
+    def _faces_camera(self, R_cam_board: np.ndarray, t_cam_board: np.ndarray) -> bool:
+        center = R_cam_board @ self.target.center + t_cam_board
+        distance = float(np.sqrt(center @ center))
         if center[2] <= 0 or distance == 0:
             return False
         # The printed side faces the camera when its normal points back along the line of sight.
-        cos_view = float(-normal @ center) / distance
-        return cos_view >= np.cos(self.rules.max_obliquity)
+        cos_view = -float(R_cam_board[:, 2] @ center) / distance
+        return cos_view >= self._cos_max_obliquity
 
     def _min_spacing(self, uv: np.ndarray) -> float:
         grid = uv.reshape(self.target.rows, self.target.cols, 2)
-        along_rows = np.linalg.norm(np.diff(grid, axis=0), axis=2)
-        along_cols = np.linalg.norm(np.diff(grid, axis=1), axis=2)
-        return float(min(along_rows.min(), along_cols.min()))
+        along_rows = np.diff(grid, axis=0)
+        along_cols = np.diff(grid, axis=1)
+        shortest_sq = min((along_rows * along_rows).sum(axis=2).min(), (along_cols * along_cols).sum(axis=2).min())
+        return float(np.sqrt(shortest_sq))
 
 
 # ---------------------------------------------------------------------------------- rendering
