@@ -28,6 +28,17 @@ SIZE = (640, 480)
 BIASES = {"gyro_bias": [0.01, -0.02, 0.005], "accel_bias": [0.05, -0.1, 0.08]}  # [rad/s], [m/s^2]
 
 
+def _interleaved_times(fn_a, fn_b, repeats: int):
+    """Median times of two functions run alternately, so both see the same machine load."""
+    ta, tb, out_a, out_b = [], [], None, None
+    for _ in range(repeats):
+        t, out_a = _median_time(fn_a, 1)
+        ta.append(t)
+        t, out_b = _median_time(fn_b, 1)
+        tb.append(t)
+    return float(np.median(ta)), out_a, float(np.median(tb)), out_b
+
+
 def _median_time(fn, repeats: int):
     times, out = [], None
     for _ in range(repeats):
@@ -54,8 +65,9 @@ def _row(name: str, seconds: float, rec: Recording, result, extra: str = "") -> 
 def bench(label: str, rec: Recording, repeats: int) -> list[str]:
     noise = rec.truth.imu_noise
     f, imu, tgt = rec.frames, rec.imu, rec.target
-    t_cv, K_cv = _median_time(lambda: _opencv(rec), repeats)
-    t_in, r_in = _median_time(lambda: calibrate_intrinsics(f, tgt, "radtan", SIZE), repeats)
+    t_cv, K_cv, t_in, r_in = _interleaved_times(
+        lambda: _opencv(rec), lambda: calibrate_intrinsics(f, tgt, "radtan", SIZE), repeats
+    )
     t_ex, r_ex = _median_time(lambda: calibrate_extrinsics(f, imu, tgt, rec.truth.camera, noise), repeats)
     t_jo, r_jo = _median_time(lambda: calibrate_joint(f, imu, tgt, "radtan", SIZE, noise), repeats)
     t_ts, r_ts = _median_time(lambda: calibrate_two_stage(f, imu, tgt, "radtan", SIZE, noise), repeats)
