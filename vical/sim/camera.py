@@ -229,7 +229,7 @@ class RenderBackend:
             the warp has the rays beyond the pinhole's field of view that barrel distortion pulls in.
     """
 
-    def __init__(self, model, target: Target, detector: Detector, render_size: tuple[int, int] = (800, 600)) -> None:
+    def __init__(self, model, target: Target, detector: Detector, render_size: tuple[int, int] = (704, 528)) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
         import mujoco  # after MUJOCO_GL: the GL backend is chosen at import
 

@@ -60,7 +60,7 @@ class SensorRecorder:
         detector: Detector | None = None,
         keep_images: bool = False,
         rules: VisibilityRules | None = None,
-        render_size: tuple[int, int] = (800, 600),
+        render_size: tuple[int, int] = (704, 528),
     ) -> None:
         if sampling.backend == "render" and detector is None:
             raise ValueError(
