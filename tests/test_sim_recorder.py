@@ -167,6 +167,8 @@ def test_bad_setups_are_refused(sim):
         recorder.start(small, np.random.default_rng(0))
     with pytest.raises(RuntimeError, match="start"):
         recorder.recording()
+    with pytest.raises(ImuSimulationError, match="before reset"):
+        sim.hold(0.01, on_step=recorder.on_step)
     sim.reset()
     recorder.start(mean_sensor(SensorSampling()), np.random.default_rng(0))
     sim.hold(0.01)  # physics steps the recorder does not see

@@ -142,3 +142,7 @@ def test_distortion_that_always_folds_over_is_refused():
     cfg = SensorSampling.from_config({"camera": {"k1": {"mean": -3.0, "std": 0.0}}})
     with pytest.raises(ConfigError, match=r"no valid camera.*k1\.std"):
         sample_sensor(cfg, np.random.default_rng(0))
+
+
+def test_paper_file_equals_the_dataclass_defaults(paper):
+    assert paper == SensorSampling()

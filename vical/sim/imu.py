@@ -71,6 +71,8 @@ class ImuSiteReader:
         Call right after the ``mj_step`` that started at ``t_ns`` (``data``'s sensors and
         kinematics are those of ``t_ns``, its ``qvel`` that of ``t_ns + step_ns``).
         """
+        if self._t_ns is None:
+            raise ImuSimulationError("IMU reader got a physics step before reset(data, t_ns) (SensorRecorder.start)")
         if self._t_ns != t_ns:
             raise ImuSimulationError(
                 f"IMU reader expected the physics step starting at {self._t_ns} ns, got {t_ns} ns; "

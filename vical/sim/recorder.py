@@ -122,7 +122,8 @@ class SensorRecorder:
     def on_step(self, sim, t_ns: int) -> None:
         """``PandaSim`` step callback: ``data``'s derived quantities belong to time ``t_ns``."""
         data = sim.data
-        self._imu.add_reading(t_ns, self._reader.read(data, t_ns, self._step_ns))
+        reading = self._reader.read(data, t_ns, self._step_ns)  # refuses steps before start()
+        self._imu.add_reading(t_ns, reading)
         if t_ns % (self._imu_steps * self._step_ns) == 0:
             self._log_truth(t_ns)
         if self._next_stamp is None:

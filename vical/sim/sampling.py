@@ -72,7 +72,7 @@ class CameraSampling:
     hfov: Normal = field(default_factory=lambda: Normal(1.0, 0.05))
     k1: Normal = field(default_factory=lambda: Normal(0.0, 0.02))
     k2: Normal = field(default_factory=lambda: Normal(0.0, 0.02))
-    tangential_std: float = 0.0
+    tangential_std: float = 0.001
     center_offset_std: float = 0.05
 
     def __post_init__(self) -> None:
