@@ -87,7 +87,12 @@ def record(cfg: DictConfig) -> Path:
     return out
 
 
-@hydra.main(config_path="../../conf", config_name="record", version_base="1.3")
+# An absolute path: the console script imports this module, and Hydra would read a relative
+# config_path as a Python package ("conf") that does not exist.
+CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+
+
+@hydra.main(config_path=CONF_DIR, config_name="record", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     out = record(cfg)
     print(f"recording written to {out}")
