@@ -49,7 +49,7 @@ class EnsembleMLP(nn.Module):
                 w, b = w.detach(), b.detach()
             x = torch.baddbmm(b, x, w)
             if i < last:
-                x = F.relu(x)
+                x = x.relu_()  # in place: baddbmm's backward does not need its output
         return x
 
 

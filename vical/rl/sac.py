@@ -109,10 +109,10 @@ class SAC(nn.Module):
         if config.auto_alpha:
             self.log_alpha = nn.Parameter(torch.tensor(math.log(config.init_alpha)))
         self.target_entropy = float(-act_dim if config.target_entropy is None else config.target_entropy)
-        groups = [{"params": m.parameters()} for m in (self.policy, self.q, self.v)]
-        if config.auto_alpha:
-            groups.append({"params": [self.log_alpha]})
-        self.optimizer = torch.optim.Adam(groups, lr=config.lr, fused=True)
+        # One optimiser over every trained parameter (the target V is a buffer-like copy, not trained):
+        # Adam's state is per parameter, so this is the paper's separate optimisers in one fused call.
+        trained = [p for p in self.parameters() if p.requires_grad]
+        self.optimizer = torch.optim.Adam(trained, lr=config.lr, fused=True)
 
     @property
     def alpha(self) -> Tensor:

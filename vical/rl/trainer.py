@@ -80,6 +80,18 @@ class RunSettings:
     train: TrainConfig
     env: dict
 
+    def effective_config(self) -> dict:
+        """Every setting with defaults filled in, as plain containers (the run's config.yaml)."""
+        return {
+            "seed": self.seed,
+            "torch_threads": self.torch_threads,
+            "run_dir": str(self.run_dir),
+            "resume": None if self.resume is None else str(self.resume),
+            "agent": asdict(self.agent),
+            "train": asdict(self.train),
+            "env": self.env,
+        }
+
 
 def parse_settings(cfg: Mapping[str, Any]) -> RunSettings:
     """Validate the root config; out-of-range or unknown settings raise ``ConfigError`` naming the key."""
@@ -145,6 +157,7 @@ class TrainResult:
     agent: SAC
     steps: int
     episodes: int
+    updates: int  # gradient updates (each updates every network once)
     last_eval_return: float | None
     resumed_from: int | None  # the checkpoint's step when the run was resumed
 
@@ -153,8 +166,9 @@ class Trainer:
     """Owns the env, agent, buffer, generators and counters of one run; :meth:`run` trains to the end."""
 
     def __init__(self, cfg: Mapping[str, Any]) -> None:
-        self.config = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
-        s = self.settings = parse_settings(self.config)
+        raw = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
+        s = self.settings = parse_settings(raw)
+        self.config = s.effective_config()  # defaults filled in: what config.yaml, checkpoints and resume compare
         torch.set_num_threads(s.torch_threads)
         self.env, self.eval_env = make_env(s.env), make_env(s.env)
         self.actions = BoxActions(self.env.action_space)
@@ -198,12 +212,18 @@ class Trainer:
             bar.close()
             self.logger.close()
         return TrainResult(
-            self.settings.run_dir, self.agent, self.step, self.episode, self.last_eval_return, self.resumed_from
+            self.settings.run_dir,
+            self.agent,
+            self.step,
+            self.episode,
+            self.updates,
+            self.last_eval_return,
+            self.resumed_from,
         )
 
     def _start_episode(self) -> Episode:
         obs, _ = self.env.reset(seed=int(self.rng.integers(2**31 - 1)))
-        return Episode([self._checked_obs(obs, "reset")])
+        return Episode([self._checked_obs(obs, "reset observation")])
 
     def _env_step(self, episode: Episode) -> bool:
         """Act, step the env, store the transition; True when the episode ended (terminated or truncated)."""
@@ -215,7 +235,7 @@ class Trainer:
         next_obs, reward, terminated, truncated, info = self.env.step(self.actions.to_env(action))
         next_obs = self._checked_obs(next_obs, "observation")
         if not np.isfinite(reward):
-            self._diverged("reward", float(reward))
+            self._diverged("reward", float(reward), self.step + 1)
         self.buffer.add(obs, action, float(reward), next_obs, bool(terminated))
         self.step += 1
         episode.observations.append(next_obs)
@@ -226,12 +246,12 @@ class Trainer:
 
     def _train_and_evaluate(self) -> None:
         t = self.settings.train
-        if self.step >= t.warmup_steps:
+        if self.step > t.warmup_steps:  # as stable-baselines3: the first update follows warm-up step + 1
             for _ in range(t.updates_per_step):
                 try:
                     self._stats = self.agent.update(self.buffer.sample(self.agent.config.batch_size, self.rng))
                 except NonFiniteLossError as err:
-                    self._diverged(err.term, err.value)
+                    self._diverged(err.term, err.value, self.step)
                 self.updates += 1
         if t.log_every and self.step % t.log_every == 0:
             self._log_progress()
@@ -323,15 +343,18 @@ class Trainer:
         obs = np.asarray(obs, np.float32).ravel()
         if not np.all(np.isfinite(obs)):
             bad = np.flatnonzero(~np.isfinite(obs)).tolist()
-            self._diverged(f"{term} (components {bad})", float(obs[bad[0]]))
+            self._diverged(f"{term} (components {bad})", float(obs[bad[0]]), self.step + 1)
         return obs
 
-    def _diverged(self, term: str, value: float) -> None:
-        """Write the last good state (before the failing update/transition) and stop with a clear message."""
+    def _diverged(self, term: str, value: float, step: int) -> None:
+        """Write the last good state (before the failing update/transition) and stop with a clear message.
+
+        ``step``: the env step (1-based) that produced the value, or after which the failing update ran.
+        """
         path = self.settings.run_dir / LAST_GOOD
         save_checkpoint(self._state(), path)
         raise TrainingDivergedError(
-            f"training stopped at step {self.step}: {term} is {value}. The state just before it is in {path}; "
+            f"training stopped at step {step}: {term} is {value}. The state just before it is in {path}; "
             f"the run resumes from its last episode-boundary checkpoint ({self.settings.run_dir / CHECKPOINT}). "
             "Check the env's observations/rewards for NaN/inf, or lower agent.lr."
         )

@@ -1,0 +1,143 @@
+"""vical's SAC vs stable-baselines3's SAC on Pendulum-v1, measured side by side in one process.
+
+Both agents get the same settings (2 x 256 MLPs, batch 256, lr 3e-4, gamma 0.99, tau 0.005, automatic
+temperature, clipped double-Q, 100 random warm-up steps, one update per env step, 2 torch threads),
+the same number of env steps and the same seeds; runs alternate per seed so both see the same machine
+load. Printed per agent: the final deterministic return (mean over ``--eval-episodes`` fixed-seed
+episodes, then mean +- std over seeds) and gradient updates per second of training wall time
+(env interaction included, for both). ``--authors`` adds vical's SAC with the calibration paper's
+authors' settings (``conf/agent/sac_authors.yaml``).
+
+    .venv/bin/python experiments/bench_sac.py                      # 6000 steps, seeds 0 1 2
+    .venv/bin/python experiments/bench_sac.py --steps 2000 --seeds 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+from hydra import compose, initialize_config_dir
+
+from vical.rl.trainer import BoxActions, train
+
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
+EVAL_SEED = 10_000  # evaluation episode i starts from reset(seed=EVAL_SEED + i), for every agent
+WARMUP = 100  # stable-baselines3's default learning_starts
+THREADS = 2
+
+
+def evaluate(act: Callable[[np.ndarray], np.ndarray], episodes: int) -> float:
+    """Mean undiscounted return of the deterministic policy ``act(obs) -> env action`` over fixed-seed episodes."""
+    env = gym.make("Pendulum-v1")
+    returns = []
+    for i in range(episodes):
+        obs, _ = env.reset(seed=EVAL_SEED + i)
+        total, done = 0.0, False
+        while not done:
+            obs, reward, terminated, truncated, _ = env.step(act(obs))
+            total += float(reward)
+            done = terminated or truncated
+        returns.append(total)
+    return float(np.mean(returns))
+
+
+def run_sb3(seed: int, steps: int, episodes: int) -> tuple[float, float]:
+    """(final return, updates/s) of stable-baselines3 SAC with the shared settings."""
+    from stable_baselines3 import SAC as SB3SAC
+
+    model = SB3SAC(
+        "MlpPolicy",
+        gym.make("Pendulum-v1"),
+        learning_rate=3e-4,
+        buffer_size=1_000_000,
+        learning_starts=WARMUP,
+        batch_size=256,
+        tau=0.005,
+        gamma=0.99,
+        train_freq=1,
+        gradient_steps=1,
+        ent_coef="auto",
+        policy_kwargs={"net_arch": [256, 256]},
+        seed=seed,
+        device="cpu",
+    )
+    torch.set_num_threads(THREADS)
+    start = time.perf_counter()
+    model.learn(total_timesteps=steps)
+    elapsed = time.perf_counter() - start
+    final = evaluate(lambda obs: model.predict(obs, deterministic=True)[0], episodes)
+    return final, model._n_updates / elapsed
+
+
+def run_vical(seed: int, steps: int, episodes: int, agent: str) -> tuple[float, float]:
+    """(final return, updates/s) of vical's SAC composed from conf/train.yaml with ``agent=<agent>``."""
+    with tempfile.TemporaryDirectory() as run_dir, initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+        overrides = [
+            f"agent={agent}",
+            f"seed={seed}",
+            f"torch_threads={THREADS}",
+            f"run_dir={run_dir}",
+            f"train.total_steps={steps}",
+            f"train.warmup_steps={WARMUP}",
+            "train.eval_every=0",
+            "train.plot_every_episodes=0",
+            "train.checkpoint_every=0",
+            "train.progress=false",
+        ]
+        cfg = compose("train", overrides=overrides)
+        start = time.perf_counter()
+        result = train(cfg)
+        elapsed = time.perf_counter() - start
+    actions = BoxActions(gym.make("Pendulum-v1").action_space)
+    final = evaluate(lambda obs: actions.to_env(result.agent.act(obs, deterministic=True)), episodes)
+    return final, result.updates / elapsed
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--steps", type=int, default=6000, help="env steps per training run")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    parser.add_argument("--eval-episodes", type=int, default=10)
+    parser.add_argument("--authors", action="store_true", help="also run agent=sac_authors")
+    args = parser.parse_args()
+
+    agents = {"stable-baselines3 SAC": lambda s: run_sb3(s, args.steps, args.eval_episodes)}
+    agents["vical SAC (agent=sac)"] = lambda s: run_vical(s, args.steps, args.eval_episodes, "sac")
+    if args.authors:
+        agents["vical SAC (agent=sac_authors)"] = lambda s: run_vical(s, args.steps, args.eval_episodes, "sac_authors")
+    results: dict[str, list[tuple[float, float]]] = {name: [] for name in agents}
+    load_start = os.getloadavg()
+    for seed in args.seeds:
+        for name, run in agents.items():
+            final, rate = run(seed)
+            results[name].append((final, rate))
+            print(f"seed {seed}  {name:32s} final return {final:8.1f}  updates/s {rate:6.1f}", flush=True)
+    print_table(args, results, load_start, os.getloadavg())
+
+
+def print_table(args: argparse.Namespace, results: dict, load_start: tuple, load_end: tuple) -> None:
+    print(
+        f"\nPendulum-v1, {args.steps} env steps, seeds {args.seeds}, {args.eval_episodes} deterministic eval episodes"
+        f" per seed; load average (1 min) {load_start[0]:.2f} at start, {load_end[0]:.2f} at end; {os.cpu_count()} CPUs"
+    )
+    print("| agent | final return (mean +- std over seeds) | updates/s (mean +- std) | updates/s ratio to SB3 |")
+    print("|---|---|---|---|")
+    sb3_rate = np.mean([rate for _, rate in results["stable-baselines3 SAC"]])
+    for name, rows in results.items():
+        finals, rates = np.array(rows).T
+        print(
+            f"| {name} | {finals.mean():.1f} +- {finals.std():.1f} | {rates.mean():.1f} +- {rates.std():.1f} "
+            f"| {rates.mean() / sb3_rate:.2f} |"
+        )
+
+
+if __name__ == "__main__":
+    main()

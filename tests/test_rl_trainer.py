@@ -1,0 +1,214 @@
+"""Trainer: determinism, exact resume, refusal of incompatible checkpoints, NaN handling, logging, config errors."""
+
+from pathlib import Path
+from typing import ClassVar
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from vical.config import ConfigError
+from vical.rl.checkpoint import IncompatibleCheckpointError, load_checkpoint
+from vical.rl.trainer import CHECKPOINT, LAST_GOOD, TrainingDivergedError, train
+
+PENDULUM_50 = {"_target_": "gymnasium.make", "id": "Pendulum-v1", "max_episode_steps": 50}
+
+
+def tiny_config(run_dir: Path, env: dict | None = None, seed: int = 0, **train_settings) -> dict:
+    """A complete vical-train config shrunk for speed: 16-unit nets, 50-step Pendulum episodes, 600 steps."""
+    settings = {
+        "total_steps": 600,
+        "warmup_steps": 100,
+        "eval_every": 200,
+        "eval_episodes": 1,
+        "log_every": 50,
+        "plot_every_episodes": 4,
+        "checkpoint_every": 100,
+        "progress": False,
+        **train_settings,
+    }
+    return {
+        "seed": seed,
+        "torch_threads": 1,
+        "run_dir": str(run_dir),
+        "resume": None,
+        "agent": {"hidden_sizes": [16, 16], "batch_size": 32},
+        "env": dict(env or PENDULUM_50),
+        "train": settings,
+    }
+
+
+def parameters(agent) -> dict[str, torch.Tensor]:
+    return {k: v.clone() for k, v in agent.state_dict().items()}
+
+
+def assert_same_parameters(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys()
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+
+
+def test_same_seed_gives_identical_parameters_and_another_seed_does_not(tmp_path):
+    first = train(tiny_config(tmp_path / "a"))
+    second = train(tiny_config(tmp_path / "b"))
+    other = train(tiny_config(tmp_path / "c", seed=1))
+    assert (first.steps, first.episodes, first.updates) == (600, 12, 500)
+    assert_same_parameters(parameters(first.agent), parameters(second.agent))
+    assert not torch.equal(
+        first.agent.state_dict()["policy.mlp.weights.0"], other.agent.state_dict()["policy.mlp.weights.0"]
+    )
+    assert not any(p.name.endswith(".tmp") for p in (tmp_path / "a").iterdir())  # atomic writes leave no temp files
+
+
+def test_resumed_run_continues_exactly_as_the_uninterrupted_run(tmp_path):
+    full = train(tiny_config(tmp_path / "full"))
+    part = train(tiny_config(tmp_path / "part", total_steps=300))
+    assert load_checkpoint(tmp_path / "part" / CHECKPOINT)["counters"]["step"] == 300
+    resumed_cfg = tiny_config(tmp_path / "ignored", total_steps=600) | {"resume": str(tmp_path / "part")}
+    resumed = train(resumed_cfg)
+    assert part.steps == 300 and resumed.resumed_from == 300
+    assert (resumed.steps, resumed.episodes, resumed.updates) == (full.steps, full.episodes, full.updates)
+    assert_same_parameters(parameters(full.agent), parameters(resumed.agent))
+    # the interrupted run's events after the checkpoint are purged, so curves have no duplicate steps
+    events = EventAccumulator(str(tmp_path / "part" / "tb")).Reload()
+    steps = [e.step for e in events.Scalars("charts/episodic_return")]
+    assert steps == sorted(set(steps)) and steps[-1] == 600
+
+
+def test_checkpoint_from_an_incompatible_config_is_refused_listing_the_keys(tmp_path):
+    train(tiny_config(tmp_path / "run", total_steps=200))
+    cfg = tiny_config(tmp_path / "run", total_steps=400) | {"resume": str(tmp_path / "run")}
+    cfg["agent"] = {"hidden_sizes": [16, 16], "batch_size": 32, "gamma": 0.9}
+    cfg["train"]["warmup_steps"] = 50
+    with pytest.raises(IncompatibleCheckpointError) as err:
+        train(cfg)
+    message = str(err.value)
+    assert "agent.gamma: 0.99 (checkpoint) vs 0.9 (now)" in message
+    assert "train.warmup_steps: 100 (checkpoint) vs 50 (now)" in message
+    assert "total_steps" not in message.split("only")[0]  # a longer run is a legitimate resume
+
+
+class NonFiniteAt(gym.Wrapper):
+    """Pendulum whose observation or reward becomes ``value`` from env step ``at`` on (1-based, over episodes)."""
+
+    def __init__(self, env: gym.Env, at: int, value: float, where: str) -> None:
+        super().__init__(env)
+        self.at, self.value, self.where, self.count = at, value, where, 0
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.count += 1
+        if self.count >= self.at:
+            obs = obs.copy()
+            if self.where == "obs":
+                obs[1] = self.value
+            else:
+                reward = self.value
+        return obs, reward, terminated, truncated, info
+
+
+def non_finite_pendulum(at: int, value: float, where: str) -> gym.Env:
+    return NonFiniteAt(gym.make("Pendulum-v1", max_episode_steps=50), at, value, where)
+
+
+def bad_env(at: int, value: float, where: str) -> dict:
+    return {"_target_": f"{__name__}.non_finite_pendulum", "at": at, "value": value, "where": where}
+
+
+def test_nan_observation_stops_training_naming_step_and_term_after_saving_the_last_good_state(tmp_path):
+    with pytest.raises(TrainingDivergedError, match=r"step 137: observation \(components \[1\]\) is nan"):
+        train(tiny_config(tmp_path, env=bad_env(137, float("nan"), "obs")))
+    last_good = load_checkpoint(tmp_path / LAST_GOOD)
+    assert last_good["counters"]["step"] == 136
+    assert all(torch.isfinite(v).all() for v in last_good["agent"]["model"].values())
+    assert load_checkpoint(tmp_path / CHECKPOINT)["counters"]["step"] == 100  # the resumable episode boundary
+
+
+def test_infinite_loss_stops_training_naming_the_loss(tmp_path):
+    # a finite but huge reward overflows the squared Q error in float32 once a batch draws such a transition
+    with pytest.raises(TrainingDivergedError, match=r"step (\d+): losses/q_loss is inf") as err:
+        train(tiny_config(tmp_path, env=bad_env(120, 1e30, "reward")))
+    step = int(err.value.args[0].split("step ")[1].split(":")[0])
+    state = load_checkpoint(tmp_path / LAST_GOOD)
+    assert step >= 120 and state["counters"]["step"] == step
+    assert all(torch.isfinite(v).all() for v in state["agent"]["model"].values())
+
+
+class Reach1D(gym.Env):
+    """x' = x + 0.2 a, reward -x^2, 20 steps; reports calib/ and coverage/ terms and draws its own trajectory."""
+
+    observation_space = gym.spaces.Box(-10.0, 10.0, (1,), np.float32)
+    action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+    figures_drawn: ClassVar[list[tuple[int, int]]] = []
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.x, self.t = float(self.np_random.uniform(-1, 1)), 0
+        return np.array([self.x], np.float32), {}
+
+    def step(self, action):
+        self.x += 0.2 * float(action[0])
+        self.t += 1
+        info = {"coverage/progress": self.t / 20, "calib/error_pct": abs(self.x), "debug/ignored": 1.0}
+        return np.array([self.x], np.float32), -(self.x**2), False, self.t >= 20, info
+
+    def trajectory_figure(self, observations, actions):
+        import matplotlib.pyplot as plt
+
+        Reach1D.figures_drawn.append((observations.shape[0], actions.shape[0]))
+        fig, ax = plt.subplots()
+        ax.plot(observations[:, 0])
+        return fig
+
+
+def test_tensorboard_gets_namespaced_scalars_env_terms_hyperparameters_and_trajectory_images(tmp_path):
+    Reach1D.figures_drawn.clear()
+    train(tiny_config(tmp_path, env={"_target_": f"{__name__}.Reach1D"}, total_steps=200, plot_every_episodes=5))
+    events = EventAccumulator(str(tmp_path / "tb"), size_guidance={"images": 0, "scalars": 0}).Reload()
+    tags = set(events.Tags()["scalars"])
+    expected = {
+        "charts/episodic_return", "charts/episodic_length", "charts/eval_return_mean", "losses/q_loss",
+        "losses/v_loss", "losses/policy_loss", "losses/alpha", "time/updates_per_second",
+        "coverage/progress", "calib/error_pct",
+    }  # fmt: skip
+    assert expected <= tags and "debug/ignored" not in tags
+    assert [e.value for e in events.Scalars("coverage/progress")][:3] == pytest.approx([0.05, 0.10, 0.15])
+    assert [e.step for e in events.Images("charts/trajectory")] == [100, 200]  # episodes 5 and 10 of 20 steps
+    assert Reach1D.figures_drawn == [(21, 20), (21, 20)]  # the env's own hook drew them
+    assert "hyperparameters/text_summary" in events.Tags()["tensors"]
+
+
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"train": {"total_steps": 0}}, r"train\.total_steps must be a number in \[1, inf\), got 0"),
+        ({"train": {"warmup_steps": 1.5}}, r"train\.warmup_steps must be an integer, got 1\.5"),
+        ({"train": {"evaluate_every": 5}}, r"train: unknown setting\(s\) \['evaluate_every'\]"),
+        ({"torch_threads": 0}, r"torch_threads must be a number in \[1, inf\), got 0"),
+        ({"seed": -1}, r"seed must be a number in \[0, inf\), got -1"),
+        ({"env": {"id": "Pendulum-v1"}}, r"env must be a mapping with a _target_"),
+        ({"env": {"_target_": "gymnasium.make", "id": "CartPole-v1"}}, r"env action space must be a 1-D gymnasium Box"),
+    ],
+)
+def test_bad_config_fails_at_start_naming_the_key(tmp_path, change, message):
+    cfg = tiny_config(tmp_path)
+    for key, value in change.items():
+        cfg[key] = cfg[key] | value if key == "train" else value
+    with pytest.raises(ConfigError, match=message):
+        train(cfg)
+
+
+def test_resume_of_a_directory_without_checkpoint_says_what_to_do(tmp_path):
+    with pytest.raises(FileNotFoundError, match="resume=<run dir> must name a run directory"):
+        train(tiny_config(tmp_path) | {"resume": str(tmp_path / "nothing")})
+
+
+@pytest.mark.slow
+def test_default_agent_learns_pendulum_swing_up(tmp_path):
+    cfg = tiny_config(tmp_path, env={"_target_": "gymnasium.make", "id": "Pendulum-v1"}, total_steps=6000)
+    cfg["agent"] = {}
+    cfg["train"] |= {"warmup_steps": 1000, "eval_every": 6000, "eval_episodes": 10, "checkpoint_every": 0}
+    result = train(cfg)
+    assert result.last_eval_return > -300  # random policy: about -1200; swing-up solved: about -150
