@@ -227,9 +227,17 @@ class RenderBackend:
         detector: corner detector (e.g. ``vical.calib.detection.detect_checkerboard``).
         render_size: (W, H) [px] of the undistorted render; larger than the camera image so that
             the warp has the rays beyond the pinhole's field of view that barrel distortion pulls in.
+        camera_name: the rig's MuJoCo camera (its headlight lights the scene).
     """
 
-    def __init__(self, model, target: Target, detector: Detector, render_size: tuple[int, int] = (704, 528)) -> None:
+    def __init__(
+        self,
+        model,
+        target: Target,
+        detector: Detector,
+        render_size: tuple[int, int] = (704, 528),
+        camera_name: str = "cam",
+    ) -> None:
         os.environ.setdefault("MUJOCO_GL", "egl")
         import mujoco  # after MUJOCO_GL: the GL backend is chosen at import
 
@@ -242,6 +250,7 @@ class RenderBackend:
             )
         self.target = target
         self.detector = detector
+        self._camera_name = model.camera(camera_name).name
         self._renderer = mujoco.Renderer(model, height=height, width=width)
         self._size = (width, height)
         self.camera: CameraModel | None = None
@@ -261,7 +270,9 @@ class RenderBackend:
         """
         if self._maps is None:
             raise RuntimeError("RenderBackend.set_camera(camera) must be called before rendering")
-        self._renderer.update_scene(data)
+        # The scene camera's update places the headlight along the rig's camera; pose and frustum
+        # are then replaced by the exposure's.
+        self._renderer.update_scene(data, camera=self._camera_name)
         for gl_camera in self._renderer.scene.camera:
             set_gl_camera(gl_camera, T_world_cam, self.pinhole)
         rgb = self._renderer.render()
