@@ -155,11 +155,6 @@ class ImuNoiseProcess:
         self._rng = rng
         self._bias = np.concatenate([np.asarray(gyro_bias, float), np.asarray(accel_bias, float)])
 
-    @property
-    def bias(self) -> np.ndarray:
-        """(6,) current ``[gyro (3) rad/s, accel (3) m/s^2]`` bias (the next sample's)."""
-        return self._bias.copy()
-
     def apply(self, gyro: np.ndarray, accel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Noisy gyro (N, 3) [rad/s] and accel (N, 3) [m/s^2] of ideal ones, and the biases (N, 6) used."""
         n = len(gyro)
