@@ -62,14 +62,22 @@ def initial_camera(observations: list[FrameObservation], model: str, size: tuple
     return CameraModel(model, w, h, fx, fy, centre[0], centre[1], np.zeros(4))
 
 
-def pnp(camera: CameraModel, obs: FrameObservation) -> tuple[np.ndarray, float] | None:
-    """Pose ``T_cam_target`` (4, 4) of one frame and its approximate reprojection RMS [px], or None on failure.
-
-    Pixels are undistorted with the camera model first, so both distortion models share one path.
-    """
-    xy = camera.pixels_to_normalized(obs.uv)
+def undistorted(camera: CameraModel, uv: np.ndarray) -> np.ndarray:
+    """Undistorted normalised coordinates (N, 2) of pixels (N, 2) (one batched Newton solve)."""
+    xy = camera.pixels_to_normalized(uv)
     if np.any(camera.dist != 0) or np.any(camera.distortion_center_offset != 0):
         xy = camera.undistort(xy)
+    return xy
+
+
+def pnp(camera: CameraModel, obs: FrameObservation, xy: np.ndarray | None = None) -> tuple[np.ndarray, float] | None:
+    """Pose ``T_cam_target`` (4, 4) of one frame and its approximate reprojection RMS [px], or None on failure.
+
+    Pixels are undistorted with the camera model first (or taken as the given undistorted
+    normalised ``xy`` (K, 2)), so both distortion models share one path.
+    """
+    if xy is None:
+        xy = undistorted(camera, obs.uv)
     obj = np.ascontiguousarray(obs.points, dtype=np.float64)
     img = np.ascontiguousarray(xy, dtype=np.float64)
     ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)  # planar target
@@ -90,11 +98,14 @@ def frame_poses(
     camera: CameraModel, observations: list[FrameObservation], min_corners: int = MIN_INIT_CORNERS
 ) -> dict[int, tuple[np.ndarray, float]]:
     """PnP poses ``{observation index: (T_cam_target, rms [px])}`` of frames good enough to start from."""
+    used = [k for k, obs in enumerate(observations) if len(obs.ids) >= min_corners]
+    if not used:
+        return {}
+    xy_all = undistorted(camera, np.concatenate([observations[k].uv for k in used]))
+    splits = np.cumsum([len(observations[k].ids) for k in used])[:-1]
     poses = {}
-    for k, obs in enumerate(observations):
-        if len(obs.ids) < min_corners:
-            continue
-        result = pnp(camera, obs)
+    for k, xy in zip(used, np.split(xy_all, splits), strict=True):
+        result = pnp(camera, observations[k], xy)
         if result is not None and result[1] < MAX_PNP_RMS_PX:
             poses[k] = result
     return poses

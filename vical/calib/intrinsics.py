@@ -146,7 +146,7 @@ def calibrate_intrinsics(
     camera = camera_from_gtsam(calibration, camera0)
     T_cam_target = {k: invert_transform(solution.values.atPose3(pose_key(k)).matrix()) for k in poses}
     residuals, frame_index = reprojection_residuals(camera, observations, T_cam_target)
-    covariance = joint_covariance(graph, solution.values, [K_KEY])[np.ix_(MODEL_INDEX, MODEL_INDEX)]
+    covariance = joint_covariance(graph, solution.values, [K_KEY], ordering)[np.ix_(MODEL_INDEX, MODEL_INDEX)]
     if pixel_sigma is None:
         sigma_px = estimated_pixel_sigma(residuals, 6 * len(poses) + len(MODEL_INDEX))
         covariance = covariance * (sigma_px / sigma_graph) ** 2

@@ -315,12 +315,14 @@ def _extrinsic_jacobian(T_cam_imu: np.ndarray) -> np.ndarray:
     return J
 
 
-def _parameter_covariance(g: _Graph, values: gtsam.Values, est: _Estimate, joint: bool) -> np.ndarray:
-    keys = ([K_KEY] if joint else []) + [E_KEY, D_KEY, _key("b", 0)]
+def _parameter_covariance(g: _Graph, values: gtsam.Values, est: _Estimate, joint: bool, fixed_offset: bool):
+    """(P, P) covariance in the order of the result's parameter names; a fixed time offset gets zero variance."""
+    offset_keys = [] if fixed_offset else [D_KEY]
+    keys = ([K_KEY] if joint else []) + [E_KEY, *offset_keys, _key("b", 0)]
     cov = joint_covariance(g.graph, values, keys)
-    blocks = ([np.eye(9)[MODEL_INDEX]] if joint else []) + [_extrinsic_jacobian(est.T_cam_imu), np.eye(1), np.eye(6)]
-    rows = sum(b.shape[0] for b in blocks)
-    J = np.zeros((rows, cov.shape[0]))
+    offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
+    blocks = ([np.eye(9)[MODEL_INDEX]] if joint else []) + [_extrinsic_jacobian(est.T_cam_imu), offset_block, np.eye(6)]
+    J = np.zeros((sum(b.shape[0] for b in blocks), cov.shape[0]))
     r = c = 0
     for b in blocks:
         J[r : r + b.shape[0], c : c + b.shape[1]] = b
@@ -365,7 +367,7 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
     joint = task == "joint"
     values = solution.values
     camera = problem.camera
-    covariance = _parameter_covariance(g, values, est, joint)
+    covariance = _parameter_covariance(g, values, est, joint, not problem.options.estimate_time_offset)
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
     estimate = np.concatenate(
         ([camera.intrinsics, camera.dist] if joint else [])

@@ -1,0 +1,41 @@
+"""The root-clique marginal covariance equals gtsam.Marginals; singular problems become CalibrationError."""
+
+import gtsam
+import numpy as np
+import pytest
+
+from vical.calib import intrinsics
+from vical.calib.errors import CalibrationError
+from vical.calib.initialization import frame_poses, initial_camera
+from vical.calib.observations import collect_observations
+from vical.calib.solver import joint_covariance, optimize
+from vical.calib.synthetic import make_recording
+
+
+@pytest.fixture(scope="module")
+def solved_intrinsic_graph():
+    rec = make_recording(duration=4.0, pixel_sigma=0.3, seed=9)
+    obs = collect_observations(rec.frames, rec.target)
+    camera = initial_camera(obs, "radtan", (640, 480))
+    poses = frame_poses(camera, obs)
+    graph, values = intrinsics._build_graph(camera, obs, poses, rec.target, 1.0, None)
+    return graph, optimize(graph, values).values, sorted(poses)
+
+
+def test_joint_covariance_matches_gtsam_marginals(solved_intrinsic_graph):
+    graph, values, frames = solved_intrinsic_graph
+    keys = [intrinsics.K_KEY, intrinsics.pose_key(frames[3])]
+    ours = joint_covariance(graph, values, keys)
+    reference = gtsam.Marginals(graph, values).jointMarginalCovariance(keys).fullMatrix()
+    assert np.allclose(ours, reference, rtol=1e-6, atol=1e-12 * np.abs(reference).max())
+
+
+def test_singular_graph_is_a_calibration_error():
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    values.insert(0, gtsam.Pose3())
+    values.insert(1, gtsam.Pose3())
+    noise = gtsam.noiseModel.Isotropic.Sigma(6, 0.1)
+    graph.add(gtsam.BetweenFactorPose3(0, 1, gtsam.Pose3(), noise))  # no prior: the gauge is free
+    solution = optimize(graph, values)  # Levenberg-Marquardt's damping still finds a point
+    with pytest.raises(CalibrationError, match="singular"):
+        joint_covariance(graph, solution.values, [1])
