@@ -8,7 +8,6 @@ with ``images=true`` the rendered frames are also written as ``<out>/images/<t_n
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import hydra
@@ -65,7 +64,6 @@ def record(cfg: DictConfig) -> Path:
     out = Path(str(cfg.out))
     if out.exists() and not cfg.overwrite:
         raise FileExistsError(f"out={out} already exists; choose another directory or pass overwrite=true")
-    os.environ.setdefault("MUJOCO_GL", "egl")
     sim = PandaSim(SimConfig.from_mapping(cfg.sim))
     rng = np.random.default_rng(int(cfg.seed))
     truth = sample_sensor(sampling, rng, asymmetric=bool(cfg.task.asymmetric_distortion))

@@ -17,11 +17,11 @@ The exposure pose is interpolated between the physics steps around the exposure 
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
+import mujoco
 import numpy as np
 
 from vical.config import require_range
@@ -192,7 +192,7 @@ def distortion_maps(camera: CameraModel, pinhole: CameraModel) -> tuple[np.ndarr
     return src[:, 0].reshape(shape).astype(np.float32), src[:, 1].reshape(shape).astype(np.float32)
 
 
-def set_gl_camera(gl_camera, T_world_cam: np.ndarray, pinhole: CameraModel) -> None:
+def set_gl_camera(gl_camera: mujoco.MjvGLCamera, T_world_cam: np.ndarray, pinhole: CameraModel) -> None:
     """Point one of MuJoCo's scene cameras (``mjvGLCamera``) along an OpenCV pose with a pinhole's frustum.
 
     MuJoCo's GL camera looks along ``forward`` with ``up`` as image up; the OpenCV frame looks
@@ -232,15 +232,12 @@ class RenderBackend:
 
     def __init__(
         self,
-        model,
+        model: mujoco.MjModel,
         target: Target,
         detector: Detector,
         render_size: tuple[int, int] = (704, 528),
         camera_name: str = "cam",
     ) -> None:
-        os.environ.setdefault("MUJOCO_GL", "egl")
-        import mujoco  # after MUJOCO_GL: the GL backend is chosen at import
-
         width, height = (int(s) for s in render_size)
         max_w, max_h = int(model.vis.global_.offwidth), int(model.vis.global_.offheight)
         if width > max_w or height > max_h:
@@ -263,7 +260,7 @@ class RenderBackend:
         self.pinhole = render_pinhole(camera, *self._size)
         self._maps = distortion_maps(camera, self.pinhole)
 
-    def image(self, data, T_world_cam: np.ndarray) -> np.ndarray:
+    def image(self, data: mujoco.MjData, T_world_cam: np.ndarray) -> np.ndarray:
         """Grey image (H, W) uint8 of the camera at pose ``T_world_cam``, through the lens distortion.
 
         ``data`` supplies the scene state (the board, lights); the camera pose is ``T_world_cam``.
@@ -279,7 +276,7 @@ class RenderBackend:
         grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
         return cv2.remap(grey, self._maps[0], self._maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
-    def observe(self, data, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def observe(self, data: mujoco.MjData, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Detected corners (K, 2) [px], ids (K,) and the image (H, W) uint8 at ``T_world_cam``."""
         image = self.image(data, T_world_cam)
         corners, ids = self.detector(image, self.target)

@@ -23,6 +23,8 @@ from vical.data import CameraFrames, ImuSamples, Recording, SensorTruth, Target,
 from vical.geometry import make_transform
 from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
 from vical.sim.imu import ImuSimulator, ImuSiteReader
+from vical.sim.motion import MotionResult
+from vical.sim.robot import PandaSim
 from vical.sim.sampling import SensorSampling, sensor_imu_pose
 from vical.sim.scene import camera_pose_cv, set_imu_pose
 
@@ -54,7 +56,7 @@ class SensorRecorder:
 
     def __init__(
         self,
-        sim,
+        sim: PandaSim,
         target: Target,
         sampling: SensorSampling,
         detector: Detector | None = None,
@@ -119,7 +121,7 @@ class SensorRecorder:
         self._path_length = 0.0
         self._duration = 0.0
 
-    def on_step(self, sim, t_ns: int) -> None:
+    def on_step(self, sim: PandaSim, t_ns: int) -> None:
         """``PandaSim`` step callback: ``data``'s derived quantities belong to time ``t_ns``."""
         data = sim.data
         reading = self._reader.read(data, t_ns, self._step_ns)  # refuses steps before start()
@@ -137,7 +139,7 @@ class SensorRecorder:
             self._next_stamp += self._cam_period_ns
             self._before = None
 
-    def add_motion(self, result) -> None:
+    def add_motion(self, result: MotionResult) -> None:
         """Account a finished ``MotionResult`` (path length [m] and time [s]) to the recording."""
         self._path_length += float(result.path_length)
         self._duration += float(result.duration + result.settle_time)
