@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from vical.calib.nominal import R_CAM_BODY, nominal_T_cam_imu
+from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.synthetic import GRAVITY, Excitation, euler_body_rates, imu_kinematics, make_recording
 from vical.data import NS_PER_S, Target
-from vical.geometry import euler_to_matrix, so3_log
+from vical.geometry import R_CAM_BODY, euler_to_matrix, so3_log
 
 
 def test_euler_body_rates_match_finite_differences():

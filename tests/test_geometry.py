@@ -5,8 +5,11 @@ import numpy as np
 import pytest
 
 from vical.geometry import (
+    R_CAM_BODY,
     CameraModel,
     CameraModelError,
+    body_imu_from_cam_imu,
+    cam_imu_from_body_imu,
     euler_to_matrix,
     invert_transform,
     make_transform,
@@ -123,3 +126,12 @@ def test_folding_distortion_is_reported():
     CameraModel.from_hfov(1.0, dist=[-0.05, 0.02, 0, 0]).check_invertible()
     with pytest.raises(CameraModelError, match="not invertible"):
         CameraModel.from_hfov(1.0, dist=[-2.0, 0.0, 0, 0]).check_invertible()
+
+
+def test_camera_body_to_optical_frame_axes():
+    # docs/conventions.md: body forward -> optical z, body left -> optical -x, body up -> optical -y.
+    assert np.allclose(R_CAM_BODY @ [1, 0, 0], [0, 0, 1])
+    assert np.allclose(R_CAM_BODY @ [0, 1, 0], [-1, 0, 0])
+    assert np.allclose(R_CAM_BODY @ [0, 0, 1], [0, -1, 0])
+    T_body_imu = make_transform(so3_exp([0.1, -0.2, 1.5]), [0.06, 0.01, -0.1])
+    assert np.allclose(body_imu_from_cam_imu(cam_imu_from_body_imu(T_body_imu)), T_body_imu)

@@ -7,9 +7,8 @@ import pytest
 import yaml
 
 from vical.config import ConfigError
-from vical.geometry import matrix_to_euler
+from vical.geometry import R_CAM_BODY, matrix_to_euler
 from vical.sim.sampling import (
-    R_CAM_BODY,
     SensorSampling,
     mean_sensor,
     sample_sensor,

@@ -10,9 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from vical.geometry import euler_to_matrix, make_transform
+from vical.geometry import cam_imu_from_body_imu, euler_to_matrix, make_transform
 
-R_CAM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
 NOMINAL_IMU_POSITION_BODY = np.array([0.06, 0.0, -0.10])  # [m] IMU origin in the camera body frame
 NOMINAL_IMU_RPY_BODY = np.array([0.0, 0.0, 1.57])  # [rad] roll, pitch, yaw of the IMU in the body frame
 
@@ -21,6 +20,5 @@ def nominal_T_cam_imu(
     position_body: np.ndarray = NOMINAL_IMU_POSITION_BODY, rpy_body: np.ndarray = NOMINAL_IMU_RPY_BODY
 ) -> np.ndarray:
     """(4, 4) ``T_cam_imu`` of an IMU at ``position_body`` [m], Euler angles ``rpy_body`` [rad], in the camera body."""
-    T_cam_body = make_transform(R_CAM_BODY, np.zeros(3))
     T_body_imu = make_transform(euler_to_matrix(np.asarray(rpy_body, float)), np.asarray(position_body, float))
-    return T_cam_body @ T_body_imu
+    return cam_imu_from_body_imu(T_body_imu)

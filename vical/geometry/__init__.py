@@ -1,6 +1,7 @@
 """Pure geometry: rigid transforms, rotation parameterisations and camera models."""
 
 from vical.geometry.camera import DISTORTION_MODELS, CameraModel, CameraModelError
+from vical.geometry.frames import R_CAM_BODY, T_CAM_BODY, body_imu_from_cam_imu, cam_imu_from_body_imu
 from vical.geometry.transforms import (
     euler_to_matrix,
     interpolate_transform,
@@ -20,8 +21,12 @@ from vical.geometry.transforms import (
 
 __all__ = [
     "DISTORTION_MODELS",
+    "R_CAM_BODY",
+    "T_CAM_BODY",
     "CameraModel",
     "CameraModelError",
+    "body_imu_from_cam_imu",
+    "cam_imu_from_body_imu",
     "euler_to_matrix",
     "interpolate_transform",
     "invert_transform",

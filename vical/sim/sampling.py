@@ -20,11 +20,14 @@ import numpy as np
 
 from vical.config import ConfigError, from_mapping, require, require_range
 from vical.data import ImuNoise, SensorTruth
-from vical.geometry import CameraModel, CameraModelError, euler_to_matrix, invert_transform, make_transform
-
-# Optical frame from camera body frame: body forward -> optical z, body left -> -x, body up -> -y.
-R_CAM_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
-T_CAM_BODY = make_transform(R_CAM_BODY, np.zeros(3))
+from vical.geometry import (
+    CameraModel,
+    CameraModelError,
+    body_imu_from_cam_imu,
+    cam_imu_from_body_imu,
+    euler_to_matrix,
+    make_transform,
+)
 
 NOISE_UNITS = ("continuous", "discrete")
 IMU_SAMPLING = ("average", "instant")
@@ -252,7 +255,7 @@ def sample_sensor(cfg: SensorSampling, rng: np.random.Generator, asymmetric: boo
     accel_bias = cfg.imu.accel_bias_std * rng.standard_normal(3)
     return SensorTruth(
         camera=camera,
-        T_cam_imu=T_CAM_BODY @ T_body_imu,
+        T_cam_imu=cam_imu_from_body_imu(T_body_imu),
         time_offset=time_offset,
         imu_noise=cfg.imu.kalibr_noise(),
         gyro_bias=gyro_bias,
@@ -270,9 +273,9 @@ def mean_sensor(cfg: SensorSampling) -> SensorTruth:
         cfg.camera.distortion,
     )
     T_body_imu = make_transform(euler_to_matrix(cfg.extrinsic.rpy_mean), np.asarray(cfg.extrinsic.position_mean))
-    return SensorTruth(camera, T_CAM_BODY @ T_body_imu, cfg.time_offset.mean, cfg.imu.kalibr_noise())
+    return SensorTruth(camera, cam_imu_from_body_imu(T_body_imu), cfg.time_offset.mean, cfg.imu.kalibr_noise())
 
 
 def sensor_imu_pose(truth: SensorTruth) -> np.ndarray:
     """``T_body_imu`` (4, 4) of a sensor: the IMU pose in the camera body frame."""
-    return invert_transform(T_CAM_BODY) @ truth.T_cam_imu
+    return body_imu_from_cam_imu(truth.T_cam_imu)
