@@ -16,6 +16,8 @@ initial bias.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import mujoco
 import numpy as np
 
@@ -27,49 +29,64 @@ class ImuSimulationError(RuntimeError):
     """IMU readings that do not arrive at every physics step."""
 
 
-class ImuSiteReader:
-    """Ideal IMU readings of a site from MuJoCo's ``gyro`` and ``accelerometer`` sensors.
+@dataclass(frozen=True)
+class SiteReading:
+    """Ideal IMU reading and ground-truth state of a site at one physics step.
 
-    MuJoCo evaluates the accelerometer with the acceleration of its forward pass, while the
-    ``implicit``/``implicitfast`` integrators advance the velocity with a different one (velocity
-    dependent forces such as the actuators' PD damping are treated implicitly). The recorded
-    specific force must be that of the motion that actually happens, so the reading is corrected
-    by the site Jacobian times the difference, ``R^T J_p ((v_{k+1} - v_k) / h - qacc_k)``; the
-    correction is zero with the explicit Euler integrator. Measured on the Panda scene with
-    ``implicitfast``: without it the accelerometer was off by up to 0.1 m/s^2 during motions.
-
-    Args:
-        model: the compiled scene; sensors ``accel_sensor`` and ``gyro_sensor`` sit on ``site``.
+    Attributes:
+        t_ns: time of the physics state [ns].
+        reading: (6,) ``[gyro (3) rad/s, specific force (3) m/s^2]`` in the site frame.
+        T_world_site: (4, 4) site pose.
+        v_world: (3,) [m/s] site velocity, world axes.
+        omega_site: (3,) [rad/s] site angular velocity, site axes (= the gyro reading).
     """
 
-    def __init__(
-        self, model: mujoco.MjModel, site: str = "imu", accel_sensor: str = "accel", gyro_sensor: str = "gyro"
-    ):
+    t_ns: int
+    reading: np.ndarray
+    T_world_site: np.ndarray
+    v_world: np.ndarray
+    omega_site: np.ndarray
+
+
+class ImuSiteReader:
+    """Ideal IMU readings of a site: the angular rate and specific force of the executed motion.
+
+    A reading at physics step ``k`` comes from the site poses of steps ``k - 1``, ``k``, ``k + 1``
+    by central differences: angular rate ``(log(R_k^T R_{k+1}) - log(R_k^T R_{k-1})) / 2h`` and
+    specific force ``R_k^T ((p_{k+1} - 2 p_k + p_{k-1}) / h^2 - g)``. These are exact (to O(h^2))
+    for the pose trajectory that the camera observes, so the two sensors agree in time.
+
+    Why not MuJoCo's ``gyro`` and ``accelerometer`` sensors, which sit on the same site: its
+    integrators are semi-implicit (``q_{k+1} = q_k + h v_{k+1}``), so the velocity ``v_k`` that the
+    sensors read belongs to the step before ``t_k``, half a step earlier than the pose ``q_k``;
+    with ``implicitfast`` the accelerometer also uses the forward-pass acceleration, not the one
+    the implicitly damped actuators produce. Measured on the Panda scene: the raw accelerometer
+    was off by up to 0.1 m/s^2 during motions, and the half-step lead of the gyro made the
+    calibrator find a 0.46 ms camera-IMU time offset on recordings simulated with none. The
+    sensors stay in the scene as a cross-check (``tests/test_sim_imu.py``) and read the same
+    values at rest.
+
+    Readings lag one physics step: ``read`` after the step of ``t_{k+1}`` returns step ``k``.
+    """
+
+    def __init__(self, model: mujoco.MjModel, site: str = "imu"):
         self.model = model
         self._site = model.site(site).id
-        for name in (accel_sensor, gyro_sensor):
-            sensor = model.sensor(name)
-            if model.sensor_objid[sensor.id] != self._site:
-                raise ValueError(f"sensor {name!r} must sit on site {site!r}")
-        accel = model.sensor_adr[model.sensor(accel_sensor).id]
-        gyro = model.sensor_adr[model.sensor(gyro_sensor).id]
-        self._accel, self._gyro = slice(accel, accel + 3), slice(gyro, gyro + 3)
-        self._jac = np.zeros((6, model.nv))  # [translational; rotational] site Jacobian of the last read
-        self._qvel = np.zeros(model.nv)  # velocity of the state the next read belongs to
-        self._qvel_read = np.zeros(model.nv)  # velocity of the state of the last read
-        self._dqacc = np.zeros(model.nv)
+        self._gravity = np.array(model.opt.gravity, dtype=float)
+        self._poses: list[tuple[np.ndarray, np.ndarray]] = []  # (p, R) of the last up to 3 steps
         self._t_ns: int | None = None
 
     def reset(self, data: mujoco.MjData, t_ns: int) -> None:
-        """Remember the velocity of the state at ``t_ns`` (before the next physics step)."""
-        self._qvel[:] = data.qvel
+        """Start over: the next ``read`` must be that of the physics step starting at ``t_ns``."""
+        del data  # the first read brings the pose of t_ns itself
+        self._poses = []
         self._t_ns = int(t_ns)
 
-    def read(self, data: mujoco.MjData, t_ns: int, step_ns: int) -> np.ndarray:
-        """``[gyro (3) rad/s, specific force (3) m/s^2]`` (6,) in the site frame at ``t_ns``.
+    def read(self, data: mujoco.MjData, t_ns: int, step_ns: int) -> SiteReading | None:
+        """The reading of the step before ``t_ns``, or None while fewer than three poses are known.
 
-        Call right after the ``mj_step`` that started at ``t_ns`` (``data``'s sensors and
-        kinematics are those of ``t_ns``, its ``qvel`` that of ``t_ns + step_ns``).
+        Call right after the ``mj_step`` that started at ``t_ns`` (``data``'s kinematics are those
+        of ``t_ns``).
         """
         if self._t_ns is None:
             raise ImuSimulationError("IMU reader got a physics step before reset(data, t_ns) (SensorRecorder.start)")
@@ -78,24 +95,32 @@ class ImuSiteReader:
                 f"IMU reader expected the physics step starting at {self._t_ns} ns, got {t_ns} ns; "
                 "every physics step must be reported (reset the reader after moving without it)"
             )
-        jac = self._jac
-        mujoco.mj_jacSite(self.model, data, jac[:3], jac[3:], self._site)
-        # Executed minus forward-pass joint acceleration.
-        np.subtract(data.qvel, self._qvel, out=self._dqacc)
-        self._dqacc *= 1e9 / step_ns
-        self._dqacc -= data.qacc
-        reading = np.empty(6)
-        reading[:3] = data.sensordata[self._gyro]
-        # R^T (J_p dqacc), written as (J_p dqacc) R.
-        reading[3:] = data.sensordata[self._accel] + (jac[:3] @ self._dqacc) @ data.site_xmat[self._site].reshape(3, 3)
-        self._qvel_read, self._qvel = self._qvel, self._qvel_read
-        self._qvel[:] = data.qvel
         self._t_ns = t_ns + step_ns
-        return reading
+        pose = (data.site_xpos[self._site].copy(), data.site_xmat[self._site].reshape(3, 3).copy())
+        self._poses = [*self._poses[-2:], pose]
+        if len(self._poses) < 3:
+            return None
+        return self._central_difference(t_ns - step_ns, step_ns * 1e-9)
 
-    def site_velocity(self) -> tuple[np.ndarray, np.ndarray]:
-        """Linear (3,) [m/s] and angular (3,) [rad/s] velocity, world axes, of the site at the last read's time."""
-        return self._jac[:3] @ self._qvel_read, self._jac[3:] @ self._qvel_read
+    def _central_difference(self, t_ns: int, h: float) -> SiteReading:
+        (p_m, R_m), (p_0, R_0), (p_p, R_p) = self._poses
+        omega = (_step_rotation_log(R_0.T @ R_p) - _step_rotation_log(R_0.T @ R_m)) / (2.0 * h)
+        accel_world = (p_p - 2.0 * p_0 + p_m) / (h * h)
+        reading = np.concatenate([omega, R_0.T @ (accel_world - self._gravity)])
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R_0, p_0
+        return SiteReading(t_ns, reading, T, (p_p - p_m) / (2.0 * h), omega)
+
+
+def _step_rotation_log(dR: np.ndarray) -> np.ndarray:
+    """Rotation vector (3,) [rad] of a rotation by less than pi/2 (one physics step's rotation)."""
+    vee = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
+    sin_angle = float(np.sqrt(vee @ vee))
+    if sin_angle < 1e-12:
+        return vee
+    if dR[0, 0] + dR[1, 1] + dR[2, 2] < 1.0:
+        raise ImuSimulationError("the IMU site rotated by more than 90 deg in one physics step")
+    return vee * (np.arcsin(min(sin_angle, 1.0)) / sin_angle)
 
 
 def window_weights(steps_per_sample: int, sampling: str) -> tuple[np.ndarray, np.ndarray]:

@@ -20,9 +20,8 @@ import mujoco
 import numpy as np
 
 from vical.data import CameraFrames, ImuSamples, Recording, SensorTruth, Target, Trajectory
-from vical.geometry import make_transform
 from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
-from vical.sim.imu import ImuSimulator, ImuSiteReader
+from vical.sim.imu import ImuSimulator, ImuSiteReader, SiteReading
 from vical.sim.motion import MotionResult
 from vical.sim.robot import PandaSim
 from vical.sim.sampling import SensorSampling, sensor_imu_pose
@@ -81,7 +80,6 @@ class SensorRecorder:
         needs_render = sampling.backend == "render" or keep_images
         self.render = RenderBackend(sim.model, target, detector, render_size) if needs_render else None
         model = sim.model
-        self._imu_site = model.site("imu").id
         self._reader = ImuSiteReader(model)
         self.truth: SensorTruth | None = None
 
@@ -124,10 +122,11 @@ class SensorRecorder:
     def on_step(self, sim: PandaSim, t_ns: int) -> None:
         """``PandaSim`` step callback: ``data``'s derived quantities belong to time ``t_ns``."""
         data = sim.data
-        reading = self._reader.read(data, t_ns, self._step_ns)  # refuses steps before start()
-        self._imu.add_reading(t_ns, reading)
-        if t_ns % (self._imu_steps * self._step_ns) == 0:
-            self._log_truth(t_ns)
+        site = self._reader.read(data, t_ns, self._step_ns)  # refuses steps before start()
+        if site is not None:  # the reading of the previous step (central differences need this one)
+            self._imu.add_reading(site.t_ns, site.reading)
+            if site.t_ns % (self._imu_steps * self._step_ns) == 0:
+                self._log_truth(site)
         if self._next_stamp is None:
             self._next_stamp = self._first_stamp(t_ns)
         exposure = self._next_stamp + self._offset_ns
@@ -183,15 +182,12 @@ class SensorRecorder:
         if self.keep_images:
             frames["images"].append(image)
 
-    def _log_truth(self, t_ns: int) -> None:
-        data, i = self.sim.data, self._imu_site
-        R = data.site_xmat[i].reshape(3, 3).copy()
-        v_world, omega_world = self._reader.site_velocity()
+    def _log_truth(self, site: SiteReading) -> None:
         log = self._log
-        log.t.append(t_ns)
-        log.T_world_imu.append(make_transform(R, data.site_xpos[i]))
-        log.v_world.append(v_world)
-        log.omega_imu.append(omega_world @ R)
+        log.t.append(site.t_ns)
+        log.T_world_imu.append(site.T_world_site)
+        log.v_world.append(site.v_world)
+        log.omega_imu.append(site.omega_site)
 
     def _trajectory(self, imu: ImuSamples) -> Trajectory:
         log = self._log
