@@ -17,7 +17,7 @@ def solved_intrinsic_graph():
     rec = make_recording(duration=4.0, pixel_sigma=0.3, seed=9)
     obs = collect_observations(rec.frames, rec.target)
     camera = initial_camera(obs, "radtan", (640, 480))
-    poses = frame_poses(camera, obs)
+    poses = {k: T for k, (T, _) in frame_poses(camera, obs).items()}
     graph, values = intrinsics._build_graph(camera, obs, poses, rec.target, 1.0, None)
     return graph, optimize(graph, values).values, sorted(poses)
 

@@ -193,6 +193,8 @@ def _write_outputs(out: Path, result: CalibrationResult, rec: Recording, args, n
     if not args.no_report:
         write_report(out, result)
     print(summary_table(result, errors))
+    for w in result.warnings:
+        print(f"warning: {w}")
     for w in result.weak_parameters[:3]:
         print(f"weak: {w.name} (1-sigma {w.sigma:.3g}): {w.hint}")
     print(f"outputs written to {out}")

@@ -11,6 +11,8 @@ from vical.geometry import CameraModel, make_transform
 
 MIN_INIT_CORNERS = 12  # frames with fewer corners gave metre-level PnP errors; skip them for initialisation
 MAX_INIT_VIEWS = 20  # homographies used for the closed-form focal length
+HOMOGRAPHY_OUTLIER_FACTOR = 5.0  # a view fitting its homography this many times worse than the median is not used
+MIN_HOMOGRAPHY_OUTLIER_PX = 3.0  # [px] ... unless its fit is still this good
 MAX_PNP_RMS_PX = 20.0  # [px] a PnP pose that reprojects worse than this is not used as a starting point
 
 
@@ -52,11 +54,35 @@ def focal_from_homographies(observations: list[FrameObservation], centre: np.nda
     return float(1.0 / np.sqrt(ab[0])), float(1.0 / np.sqrt(ab[1]))
 
 
+def _homography_rms(obs: FrameObservation, centre: np.ndarray) -> float:
+    """RMS [px] of the corners about the frame's plane homography (inf when it is degenerate)."""
+    H, _ = cv2.findHomography(obs.points[:, :2], obs.uv - centre, method=0)
+    if H is None or not np.all(np.isfinite(H)):
+        return np.inf
+    uv = cv2.perspectiveTransform(obs.points[:, None, :2].astype(np.float64), H).reshape(-1, 2)
+    return float(np.sqrt(np.mean(np.sum((uv - (obs.uv - centre)) ** 2, axis=1))))
+
+
+def _consistent_views(observations: list[FrameObservation], centre: np.ndarray) -> list[FrameObservation]:
+    """Views whose corners fit a plane homography about as well as most views do.
+
+    Lens distortion makes every view fit a homography only approximately; a view with scrambled
+    ids or far-off corners fits many times worse and would corrupt Zhang's closed form.
+    """
+    rms = np.array([_homography_rms(o, centre) for o in observations])
+    finite = rms[np.isfinite(rms)]
+    if not len(finite):
+        return observations
+    limit = max(HOMOGRAPHY_OUTLIER_FACTOR * float(np.median(finite)), MIN_HOMOGRAPHY_OUTLIER_PX)
+    return [o for o, r in zip(observations, rms, strict=True) if r <= limit] or observations
+
+
 def initial_camera(observations: list[FrameObservation], model: str, size: tuple[int, int]) -> CameraModel:
     """A distortion-free camera of ``model`` with Zhang's focal lengths and the image centre as principal point."""
     w, h = size
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
     usable = [o for o in observations if len(o.ids) >= MIN_INIT_CORNERS] or observations
+    usable = _consistent_views(usable, centre)
     usable = usable[:: max(1, len(usable) // MAX_INIT_VIEWS)]  # a spread-out subset is plenty for a start
     fx, fy = focal_from_homographies(usable, centre)
     return CameraModel(model, w, h, fx, fy, centre[0], centre[1], np.zeros(4))

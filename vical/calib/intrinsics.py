@@ -9,6 +9,7 @@ plane homographies (principal point at the image centre, no distortion), then Pn
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import gtsam
 import numpy as np
@@ -18,6 +19,7 @@ from vical.calib.gtsam_camera import MODEL_INDEX, kind_of, pixel_noise, skew_pri
 from vical.calib.gtsam_camera import from_gtsam as camera_from_gtsam
 from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera
 from vical.calib.observations import FrameObservation, collect_observations, image_size
+from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ResidualStats
 from vical.calib.solver import joint_covariance, optimize
 from vical.calib.uncertainty import weak_parameters
@@ -58,7 +60,7 @@ def add_landmarks(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, targe
 def _build_graph(
     camera: CameraModel,
     observations: list[FrameObservation],
-    poses: dict[int, tuple[np.ndarray, float]],
+    poses: dict[int, np.ndarray],
     target: Target,
     sigma_px: float,
     huber_k: float | None,
@@ -70,12 +72,39 @@ def _build_graph(
     values.insert(K_KEY, calibration)
     graph.add(skew_prior(K_KEY, calibration))
     noise = pixel_noise(sigma_px, huber_k)
-    for k, (T_cam_target, _) in poses.items():
+    for k, T_cam_target in poses.items():
         values.insert(pose_key(k), gtsam.Pose3(invert_transform(T_cam_target)))
         obs = observations[k]
         for uv, i in zip(obs.uv, obs.ids, strict=True):
             graph.add(kind.sfm_factor(uv, noise, pose_key(k), landmark_key(int(i)), K_KEY))
     return graph, values
+
+
+@dataclass
+class _Solve:
+    """One intrinsic solve over fixed observations: ``solve(camera0, poses)`` from a starting point.
+
+    Returns the calibrated camera, ``{observation index: T_cam_target}``, the graph, the solution
+    and the elimination ordering (the latter three for the covariance).
+    """
+
+    observations: list[FrameObservation]
+    target: Target
+    sigma_px: float
+    huber_k: float | None
+    max_iterations: int
+
+    def __call__(self, camera0: CameraModel, poses: dict[int, np.ndarray]):
+        graph, values = _build_graph(camera0, self.observations, poses, self.target, self.sigma_px, self.huber_k)
+        # Frame poses first, then the shared variables: COLAMD would eliminate the target points early
+        # and make every pose pair dense.
+        ordering = [pose_key(k) for k in poses] + [landmark_key(i) for i in range(self.target.num_points)] + [K_KEY]
+        solution = optimize(graph, values, self.max_iterations, "intrinsic calibration", ordering)
+        radtan = camera0.distortion == "radtan"
+        calibration = solution.values.atCal3DS2(K_KEY) if radtan else solution.values.atCal3Fisheye(K_KEY)
+        camera = camera_from_gtsam(calibration, camera0)
+        T_cam_target = {k: invert_transform(solution.values.atPose3(pose_key(k)).matrix()) for k in poses}
+        return camera, T_cam_target, graph, solution, ordering
 
 
 def reprojection_residuals(
@@ -137,14 +166,14 @@ def calibrate_intrinsics(
             f"(of {len(frames)} frames); collect more views of the whole target"
         )
     sigma_graph = 1.0 if pixel_sigma is None else float(pixel_sigma)
-    graph, values = _build_graph(camera0, observations, poses, target, sigma_graph, huber_k)
-    # Frame poses first, then the shared variables: COLAMD would eliminate the target points early and
-    # make every pose pair dense.
-    ordering = [pose_key(k) for k in poses] + [landmark_key(i) for i in range(target.num_points)] + [K_KEY]
-    solution = optimize(graph, values, max_iterations, "intrinsic calibration", ordering)
-    calibration = solution.values.atCal3DS2(K_KEY) if model == "radtan" else solution.values.atCal3Fisheye(K_KEY)
-    camera = camera_from_gtsam(calibration, camera0)
-    T_cam_target = {k: invert_transform(solution.values.atPose3(pose_key(k)).matrix()) for k in poses}
+    solve = _Solve(observations, target, sigma_graph, huber_k, max_iterations)
+    camera, T_cam_target, graph, solution, ordering = solve(camera0, {k: T for k, (T, _) in poses.items()})
+    # Wrong detections pull the least-squares fit: drop them and solve again from this solution.
+    rejection = reject_outliers(camera, observations, T_cam_target, min(MIN_INIT_CORNERS, target.num_points))
+    if rejection.changed:
+        solve.observations = observations = rejection.observations
+        camera, T_cam_target, graph, solution, ordering = solve(camera, rejection.poses)
+    poses = T_cam_target
     residuals, frame_index = reprojection_residuals(camera, observations, T_cam_target)
     covariance = joint_covariance(graph, solution.values, [K_KEY], ordering)[np.ix_(MODEL_INDEX, MODEL_INDEX)]
     if pixel_sigma is None:
@@ -175,7 +204,7 @@ def calibrate_intrinsics(
         solve_time=time.perf_counter() - start,
         status=solution.status,
         num_frames=len(poses),
-        warnings=_dropped_frames_warning(len(frames), len(poses)),
+        warnings=rejection.warnings + _dropped_frames_warning(len(frames), len(poses)),
     )
 
 

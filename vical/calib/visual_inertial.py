@@ -33,6 +33,7 @@ from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses
 from vical.calib.intrinsics import add_landmarks, estimated_pixel_sigma, intrinsic_names, landmark_key
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.observations import FrameObservation
+from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats
 from vical.calib.solver import joint_covariance, optimize
 from vical.calib.time_alignment import align, rotation_increments
@@ -47,6 +48,8 @@ ACCEL_BIAS_PRIOR_SIGMA = 1.0  # [m/s^2] weak prior on the first accelerometer bi
 MIN_PIXEL_SIGMA = 0.01  # [px] floor of the estimated corner noise (noise-free data would weight pixels infinitely)
 RECENTRE_OFFSET = 1e-3  # [s] re-linearise the states at the new offset when the in-graph correction exceeds this
 MAX_ROUNDS = 3
+MIN_GAP_WARNING = 0.5  # [s] a stretch without target views this long (and ...
+GAP_WARNING_FACTOR = 5.0  # ... this many typical frame intervals) is reported
 
 E_KEY, G_KEY, D_KEY, K_KEY = (gtsam.symbol(c, 0) for c in "egdk")
 EXTRINSIC_NAMES = ["rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "time_offset"]
@@ -132,13 +135,16 @@ def _prepare(
     frame_t_ns = np.array([o.t_ns for o in frames_obs], dtype=np.int64)
     t0_ns = int(min(imu.t[0], frame_t_ns.min())) if len(imu) else int(frame_t_ns.min())
     _check_overlap(imu, frame_t_ns, t0_ns)
-    poses = frame_poses(camera, frames_obs, min(MIN_INIT_CORNERS, target.num_points))
+    min_corners = min(MIN_INIT_CORNERS, target.num_points)
+    initial = {k: T for k, (T, _) in frame_poses(camera, frames_obs, min_corners).items()}
+    rejection = reject_outliers(camera, frames_obs, initial, min_corners)
+    frames_obs, poses = rejection.observations, rejection.poses
     if len(poses) < 3:
         raise CalibrationError(
             f"only {len(poses)} frames have a usable target pose; camera-IMU calibration needs a sequence of views"
         )
     ids = sorted(poses)
-    residuals = np.concatenate([_pnp_residuals(camera, frames_obs[k], poses[k][0]) for k in ids])
+    residuals = np.concatenate([_pnp_residuals(camera, frames_obs[k], poses[k]) for k in ids])
     sigma = options.pixel_sigma
     if sigma is None:
         sigma = max(estimated_pixel_sigma(residuals, 6 * len(ids)), MIN_PIXEL_SIGMA)
@@ -148,7 +154,7 @@ def _prepare(
         observations=frames_obs,
         frame_ids=ids,
         frame_times=seconds_since(frame_t_ns[ids], t0_ns),
-        T_target_cam=np.array([invert_transform(poses[k][0]) for k in ids]),
+        T_target_cam=np.array([invert_transform(poses[k]) for k in ids]),
         t_imu=seconds_since(imu.t, t0_ns),
         gyro=imu.gyro,
         accel=imu.accel,
@@ -156,6 +162,7 @@ def _prepare(
         options=options,
         t0_ns=t0_ns,
         sigma_px=float(sigma),
+        warnings=list(rejection.warnings),
     )
 
 
@@ -305,6 +312,33 @@ def _solve_rounds(problem: _Problem, est: _Estimate, joint: bool):
     return g, solution, new, iterations
 
 
+# ---------------------------------------------------------------------------------------- data notes
+def _span_warnings(problem: _Problem, g: _Graph) -> list[str]:
+    """A note when frames with a target pose fell outside the IMU's time span and got no state."""
+    outside = len(problem.frame_ids) - len(g.states)
+    if outside == 0:
+        return []
+    frames = problem.frame_times
+    return [
+        f"{outside} frames with a target pose lie outside the IMU samples' time span "
+        f"({problem.t_imu[0]:.3f}..{problem.t_imu[-1]:.3f} s after the recording start; frames span "
+        f"{frames[0]:.3f}..{frames[-1]:.3f} s) and were dropped"
+    ]
+
+
+def _gap_warnings(state_times: np.ndarray) -> list[str]:
+    """Notes on stretches without usable target views; the IMU factor across each one bridges it."""
+    if len(state_times) < 2:
+        return []
+    dt = np.diff(state_times)
+    limit = max(MIN_GAP_WARNING, GAP_WARNING_FACTOR * float(np.median(dt)))
+    return [
+        f"no usable target view for {dt[n]:.2f} s ({state_times[n]:.2f}..{state_times[n + 1]:.2f} s after the "
+        "recording start, IMU clock): one IMU factor bridges the gap, with less accuracy"
+        for n in np.flatnonzero(dt > limit)
+    ]
+
+
 # ---------------------------------------------------------------------------------------- outputs
 def _extrinsic_jacobian(T_cam_imu: np.ndarray) -> np.ndarray:
     """(6, 6) map from the tangent of ``E = T_imu_cam`` to [rotation error of R_cam_imu, t_cam_imu]."""
@@ -419,4 +453,5 @@ def run_visual_inertial(
     problem = _prepare(observations, imu, camera, target, imu_noise, options)
     est = _initial_estimate(problem, T_guess, float(initial_time_offset))
     g, solution, est, iterations = _solve_rounds(problem, est, task == "joint")
+    problem.warnings += _span_warnings(problem, g) + _gap_warnings(g.state_times)
     return _result(task, problem, g, solution, est, iterations, start)

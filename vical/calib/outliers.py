@@ -1,0 +1,154 @@
+"""Wrong detections: corners far from where the fitted target pose puts them, and frames that fit no pose.
+
+Real detectors return a few bad corners (a reflection mistaken for a junction, a tag decoded on
+the wrong board) and, rarely, frames whose ids are scrambled. Least squares lets each of them
+pull the whole solution, so they are removed before the final solve:
+
+- the corner noise is estimated robustly from the median residual norm (for 2-D Gaussian noise of
+  sigma per axis the norm is Rayleigh distributed with median ``sigma sqrt(2 ln 2)``);
+- a corner whose residual exceeds ``OUTLIER_SIGMAS`` of that sigma (and ``MIN_OUTLIER_PX``) is
+  an outlier;
+- a frame that loses more than ``MAX_OUTLIER_FRACTION`` of its corners is dropped whole: its
+  detection as such is not trustworthy.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from vical.calib.initialization import pnp
+from vical.calib.observations import FrameObservation
+from vical.geometry import CameraModel
+
+OUTLIER_SIGMAS = 5.0  # a Gaussian corner exceeds 5 sigma per axis about once in 3e5 corners
+MIN_OUTLIER_PX = 1.0  # [px] never call a corner an outlier below this (noise-free data has sigma ~ 0)
+MAX_OUTLIER_FRACTION = 0.25  # a frame losing more of its corners than this is dropped whole
+_RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
+
+
+def robust_sigma_of_norms(norms: np.ndarray) -> float:
+    """Per-axis corner noise [px] from residual norms (N,) [px], insensitive to a minority of outliers."""
+    return float(np.median(norms) / _RAYLEIGH_MEDIAN) if len(norms) else 0.0
+
+
+def keep_inliers(obs: FrameObservation, inliers: np.ndarray) -> FrameObservation:
+    """The observation restricted to the corners where the mask ``inliers`` (K,) is True."""
+    return replace(obs, uv=obs.uv[inliers], ids=obs.ids[inliers], points=obs.points[inliers])
+
+
+def frame_is_outlier(inliers: np.ndarray, min_corners: int) -> bool:
+    """True when a frame keeps fewer than ``min_corners`` or lost more than ``MAX_OUTLIER_FRACTION``."""
+    return int(inliers.sum()) < min_corners or (~inliers).mean() > MAX_OUTLIER_FRACTION
+
+
+def robust_pose(
+    camera: CameraModel, obs: FrameObservation, threshold: float, min_corners: int
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """PnP pose ``T_cam_target`` (4, 4) and inlier mask (K,), removing the worst corner until all fit.
+
+    Each round refits without the corner of largest residual, so one far-off corner cannot drag
+    the pose and make its neighbours look wrong. Returns None when the frame is an outlier
+    (``frame_is_outlier``) or PnP fails.
+    """
+    inliers = np.ones(len(obs.ids), dtype=bool)
+    max_removed = int(np.floor(MAX_OUTLIER_FRACTION * len(obs.ids)))
+    for _ in range(max_removed + 1):
+        if inliers.sum() < min_corners:
+            return None
+        subset = keep_inliers(obs, inliers)
+        fit = pnp(camera, subset)
+        if fit is None:
+            return None
+        T = fit[0]
+        uv, _ = camera.project(subset.points @ T[:3, :3].T + T[:3, 3])
+        norms = np.linalg.norm(subset.uv - uv, axis=1)
+        if norms.max() <= threshold:
+            return T, inliers
+        inliers[np.flatnonzero(inliers)[int(np.argmax(norms))]] = False
+    return None
+
+
+def rejection_warnings(num_frames: int, dropped: list[int], corners: dict[int, int], threshold: float) -> list[str]:
+    """Plain-language notes on dropped frames (their recording indices) and rejected corners per frame."""
+    notes = []
+    if dropped:
+        notes.append(
+            f"{len(dropped)} of {num_frames} frames with detections fit no target pose "
+            f"(wrong or scrambled detections) and were dropped: frames {_listing(dropped)}"
+        )
+    if corners:
+        notes.append(
+            f"{sum(corners.values())} corners in {len(corners)} frames were rejected as wrong detections "
+            f"(reprojection error > {threshold:.2f} px after fitting the frame's pose): "
+            f"frames {_listing(sorted(corners))}"
+        )
+    return notes
+
+
+def _listing(indices: list[int], limit: int = 12) -> str:
+    shown = ", ".join(str(i) for i in indices[:limit])
+    return shown + (f", ... ({len(indices) - limit} more)" if len(indices) > limit else "")
+
+
+@dataclass(frozen=True)
+class Rejection:
+    """Observations and poses after removing wrong detections.
+
+    Attributes:
+        observations: the input list with outlier corners removed (same length and order).
+        poses: ``{observation index: T_cam_target (4, 4)}`` of the frames kept.
+        warnings: plain-language notes on what was removed (empty when nothing was).
+        threshold: [px] the residual norm above which corners were rejected.
+    """
+
+    observations: list[FrameObservation]
+    poses: dict[int, np.ndarray]
+    warnings: list[str]
+    threshold: float
+
+    @property
+    def changed(self) -> bool:
+        return bool(self.warnings)
+
+
+def _residual_norms(camera: CameraModel, obs: FrameObservation, T_cam_target: np.ndarray) -> np.ndarray:
+    uv, _ = camera.project(obs.points @ T_cam_target[:3, :3].T + T_cam_target[:3, 3])
+    return np.linalg.norm(obs.uv - uv, axis=1)
+
+
+def reject_outliers(
+    camera: CameraModel, observations: list[FrameObservation], poses: dict[int, np.ndarray], min_corners: int
+) -> Rejection:
+    """Remove corners and frames that the fitted poses do not explain.
+
+    Args:
+        camera: the (calibrated or known) camera.
+        observations: every frame's observation.
+        poses: ``{observation index: T_cam_target (4, 4)}`` fitted so far (PnP or a solve); the
+            residual threshold comes from these frames. Frames with at least ``min_corners``
+            corners but no pose are tried again (a far-off corner can make plain PnP fail).
+        min_corners: fewest corners a frame must keep.
+    """
+    if not poses:
+        return Rejection(list(observations), {}, [], MIN_OUTLIER_PX)
+    norms = {k: _residual_norms(camera, observations[k], T) for k, T in poses.items()}
+    threshold = max(OUTLIER_SIGMAS * robust_sigma_of_norms(np.concatenate(list(norms.values()))), MIN_OUTLIER_PX)
+    cleaned, kept, dropped, rejected = list(observations), {}, [], {}
+    for k, obs in enumerate(observations):
+        if k in norms and norms[k].max() <= threshold:
+            kept[k] = poses[k]
+            continue
+        if k not in norms and len(obs.ids) < min_corners:
+            continue
+        fit = robust_pose(camera, obs, threshold, min_corners)
+        if fit is None:
+            dropped.append(obs.index)
+            continue
+        kept[k], inliers = fit
+        if not inliers.all():
+            cleaned[k] = keep_inliers(obs, inliers)
+            rejected[obs.index] = int((~inliers).sum())
+    notes = rejection_warnings(len(observations), dropped, rejected, threshold)
+    return Rejection(cleaned, kept, notes, threshold)
