@@ -5,8 +5,9 @@ temperature, clipped double-Q, 100 random warm-up steps, one update per env step
 the same number of env steps and the same seeds; runs alternate per seed so both see the same machine
 load. Printed per agent: the final deterministic return (mean over ``--eval-episodes`` fixed-seed
 episodes, then mean +- std over seeds) and gradient updates per second of training wall time
-(env interaction included, for both). ``--authors`` adds vical's SAC with the calibration paper's
-authors' settings (``conf/agent/sac_authors.yaml``).
+(env interaction included, for both). vical runs twice: float32 throughout, and with its hidden-to-hidden
+matmuls in bfloat16 (``agent.hidden_precision=bfloat16``). ``--authors`` adds vical's SAC with the
+calibration paper's authors' settings (``conf/agent/sac_authors.yaml``).
 
     .venv/bin/python experiments/bench_sac.py                      # 6000 steps, seeds 0 1 2
     .venv/bin/python experiments/bench_sac.py --steps 2000 --seeds 0
@@ -77,11 +78,11 @@ def run_sb3(seed: int, steps: int, episodes: int) -> tuple[float, float]:
     return final, model._n_updates / elapsed
 
 
-def run_vical(seed: int, steps: int, episodes: int, agent: str) -> tuple[float, float]:
-    """(final return, updates/s) of vical's SAC composed from conf/train.yaml with ``agent=<agent>``."""
+def run_vical(seed: int, steps: int, episodes: int, agent_overrides: list[str]) -> tuple[float, float]:
+    """(final return, updates/s) of vical's SAC composed from conf/train.yaml with ``agent_overrides``."""
     with tempfile.TemporaryDirectory() as run_dir, initialize_config_dir(str(CONF_DIR), version_base="1.3"):
         overrides = [
-            f"agent={agent}",
+            *agent_overrides,
             f"seed={seed}",
             f"torch_threads={THREADS}",
             f"run_dir={run_dir}",
@@ -109,17 +110,22 @@ def main() -> None:
     parser.add_argument("--authors", action="store_true", help="also run agent=sac_authors")
     args = parser.parse_args()
 
-    agents = {"stable-baselines3 SAC": lambda s: run_sb3(s, args.steps, args.eval_episodes)}
-    agents["vical SAC (agent=sac)"] = lambda s: run_vical(s, args.steps, args.eval_episodes, "sac")
+    variants = {
+        "vical SAC (agent=sac)": ["agent=sac"],
+        "vical SAC (agent=sac, bfloat16 hidden)": ["agent=sac", "agent.hidden_precision=bfloat16"],
+    }
     if args.authors:
-        agents["vical SAC (agent=sac_authors)"] = lambda s: run_vical(s, args.steps, args.eval_episodes, "sac_authors")
+        variants["vical SAC (agent=sac_authors)"] = ["agent=sac_authors"]
+    agents = {"stable-baselines3 SAC": lambda s: run_sb3(s, args.steps, args.eval_episodes)}
+    for name, overrides in variants.items():
+        agents[name] = lambda s, o=overrides: run_vical(s, args.steps, args.eval_episodes, o)
     results: dict[str, list[tuple[float, float]]] = {name: [] for name in agents}
     load_start = os.getloadavg()
     for seed in args.seeds:
         for name, run in agents.items():
             final, rate = run(seed)
             results[name].append((final, rate))
-            print(f"seed {seed}  {name:32s} final return {final:8.1f}  updates/s {rate:6.1f}", flush=True)
+            print(f"seed {seed}  {name:40s} final return {final:8.1f}  updates/s {rate:6.1f}", flush=True)
     print_table(args, results, load_start, os.getloadavg())
 
 

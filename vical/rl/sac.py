@@ -31,6 +31,8 @@ from vical.config import ConfigError, require, require_range
 from vical.rl.buffer import Batch
 from vical.rl.networks import QNetworks, TanhGaussianPolicy, ValueNetwork
 
+HIDDEN_DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
+
 
 @dataclass
 class SACConfig:
@@ -38,6 +40,8 @@ class SACConfig:
 
     alpha: entropy temperature, a positive number (fixed) or ``"auto"`` (tuned toward ``target_entropy``,
     default ``-act_dim``, starting from ``init_alpha``).
+    hidden_precision: dtype of the hidden-to-hidden matmuls (see ``EnsembleMLP``): ``float32`` or
+    ``bfloat16`` (about 4x faster matmuls on CPUs with AVX512-BF16, much slower on CPUs without it).
     """
 
     hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
@@ -51,6 +55,7 @@ class SACConfig:
     target_entropy: float | None = None
     log_std_min: float = -20.0
     log_std_max: float = 2.0
+    hidden_precision: str = "float32"
 
     def __post_init__(self) -> None:
         self.hidden_sizes = list(self.hidden_sizes)
@@ -72,6 +77,12 @@ class SACConfig:
         if self.target_entropy is not None:
             require_range("agent.target_entropy", self.target_entropy)
         require_range("agent.log_std_max", self.log_std_max, self.log_std_min, None, low_open=True)
+        require(
+            self.hidden_precision in HIDDEN_DTYPES,
+            "agent.hidden_precision",
+            f"one of {sorted(HIDDEN_DTYPES)}",
+            self.hidden_precision,
+        )
 
     @property
     def auto_alpha(self) -> bool:
@@ -99,12 +110,12 @@ class SAC(nn.Module):
             raise ConfigError(f"SAC needs obs_dim >= 1 and act_dim >= 1, got obs_dim={obs_dim}, act_dim={act_dim}")
         self.config = config
         self.generator = torch.Generator().manual_seed(seed)
-        hidden = config.hidden_sizes
+        hidden, dtype = config.hidden_sizes, HIDDEN_DTYPES[config.hidden_precision]
         self.policy = TanhGaussianPolicy(
-            obs_dim, act_dim, hidden, config.log_std_min, config.log_std_max, self.generator
+            obs_dim, act_dim, hidden, config.log_std_min, config.log_std_max, self.generator, dtype
         )
-        self.q = QNetworks(obs_dim, act_dim, hidden, config.n_q, self.generator)
-        self.v = ValueNetwork(obs_dim, hidden, self.generator)
+        self.q = QNetworks(obs_dim, act_dim, hidden, config.n_q, self.generator, dtype)
+        self.v = ValueNetwork(obs_dim, hidden, self.generator, dtype)
         self.v_target = copy.deepcopy(self.v).requires_grad_(False)
         if config.auto_alpha:
             self.log_alpha = nn.Parameter(torch.tensor(math.log(config.init_alpha)))

@@ -170,7 +170,8 @@ class Trainer:
         s = self.settings = parse_settings(raw)
         self.config = s.effective_config()  # defaults filled in: what config.yaml, checkpoints and resume compare
         torch.set_num_threads(s.torch_threads)
-        self.env, self.eval_env = make_env(s.env), make_env(s.env)
+        self.env = make_env(s.env)
+        self._eval_env: gym.Env | None = None  # built at the first evaluation
         self.actions = BoxActions(self.env.action_space)
         obs_dim = int(np.prod(self.env.observation_space.shape))
         act_dim = self.act_dim = self.env.action_space.shape[0]
@@ -185,8 +186,7 @@ class Trainer:
         s.run_dir.mkdir(parents=True, exist_ok=True)
         if s.resume:
             self._restore(load_checkpoint(s.resume / CHECKPOINT))
-        else:
-            atomic_write(s.run_dir / "config.yaml", lambda f: f.write(OmegaConf.to_yaml(self.config).encode()))
+        atomic_write(s.run_dir / "config.yaml", lambda f: f.write(OmegaConf.to_yaml(self.config).encode()))
         self.logger = TrainLogger(s.run_dir / "tb", s.train.info_prefixes, purge_step=self.step or None)
         self._stats: dict[str, torch.Tensor] = {}
 
@@ -287,11 +287,13 @@ class Trainer:
         )
 
     def _eval_episode(self, seed: int) -> float:
-        obs, _ = self.eval_env.reset(seed=seed)
+        if self._eval_env is None:
+            self._eval_env = make_env(self.settings.env)
+        obs, _ = self._eval_env.reset(seed=seed)
         total = 0.0
         for _ in range(self.settings.train.eval_max_episode_steps):
             action = self.agent.act(np.asarray(obs, np.float32).ravel(), deterministic=True)
-            obs, reward, terminated, truncated, _ = self.eval_env.step(self.actions.to_env(action))
+            obs, reward, terminated, truncated, _ = self._eval_env.step(self.actions.to_env(action))
             total += float(reward)
             if terminated or truncated:
                 break
