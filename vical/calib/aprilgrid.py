@@ -21,6 +21,7 @@ from vical.data.target import Target
 # OpenCV returns a marker's corners top-left, top-right, bottom-right, bottom-left as the tag is
 # printed (top = board +y); Kalibr orders them counter-clockwise from (min x, min y).
 _CV_TO_KALIBR = [3, 2, 1, 0]
+WINDOW_FRACTION = 0.75  # search half-window / (gap or black border, the smaller) [px / px]
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 1e-3)
 
 
@@ -84,14 +85,21 @@ def _valid_tags(
 def _refine(image: np.ndarray, quads: np.ndarray, target: Target) -> tuple[np.ndarray, np.ndarray]:
     """Sub-pixel corners (4T, 2) and a mask (4T,) of corners the refinement moved out of its window.
 
-    The search window stays inside the smaller of the gap between tags and the tag's black
-    border (0.2 tag sizes), measured on each tag's shortest side in the image.
+    Each tag's search window stays inside the smaller of the gap between tags and the tag's black
+    border (0.2 tag sizes), measured on that tag's shortest side in the image: one window for all
+    tags, sized by the smallest, left the corners of large tags at aruco's contour vertices
+    (2-3 px off) whenever a partial or oblique view also held a small tag.
     """
-    raw = quads.reshape(-1, 2)
-    side = np.min(np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2))
-    half = int(np.clip(np.floor(0.5 * side * min(target.tag_spacing, 0.2)), 1, 8))
-    refined = cv2.cornerSubPix(
-        image, np.ascontiguousarray(raw, dtype=np.float32).reshape(-1, 1, 2), (half, half), (-1, -1), _SUBPIX_CRITERIA
-    ).reshape(-1, 2)
-    moved = np.max(np.abs(refined - raw), axis=1) > half
+    sides = np.min(np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2), axis=1)  # (T,) [px]
+    halves = np.clip(np.floor(WINDOW_FRACTION * sides * min(target.tag_spacing, 0.2)), 1, 8).astype(int)
+    refined = quads.reshape(-1, 2).copy()
+    moved = np.zeros(len(refined), dtype=bool)
+    for half in np.unique(halves):
+        rows = (np.flatnonzero(halves == half)[:, None] * 4 + np.arange(4)).ravel()
+        raw = np.ascontiguousarray(quads.reshape(-1, 2)[rows], dtype=np.float32).reshape(-1, 1, 2)
+        out = cv2.cornerSubPix(image, raw.copy(), (int(half), int(half)), (-1, -1), _SUBPIX_CRITERIA).reshape(-1, 2)
+        shift = np.max(np.abs(out - raw.reshape(-1, 2)), axis=1)
+        # cornerSubPix hands back the start point unchanged when its estimate leaves the window.
+        moved[rows] = (shift > half) | (shift == 0.0)
+        refined[rows] = out
     return refined.astype(np.float64), moved

@@ -109,6 +109,9 @@ def pnp(camera: CameraModel, obs: FrameObservation, xy: np.ndarray | None = None
     ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)  # planar target
     if not ok:
         return None
+    # IPPE solves from the plane homography, not for the least reprojection error: on a wide grid
+    # seen in perspective its residuals reached 2.4 px with 0.25 px corner noise.
+    rvec, tvec = cv2.solvePnPRefineLM(obj, img, np.eye(3), None, rvec, tvec)
     R = cv2.Rodrigues(rvec)[0]
     T = make_transform(R, tvec.ravel())
     p_cam = obs.points @ R.T + tvec.ravel()
