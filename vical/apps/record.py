@@ -15,6 +15,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
+from vical.calib.aprilgrid import detect_aprilgrid
 from vical.calib.detection import detect_checkerboard
 from vical.config import ConfigError, require
 from vical.data import Recording
@@ -67,7 +68,8 @@ def record(cfg: DictConfig) -> Path:
     sim = PandaSim(SimConfig.from_mapping(cfg.sim))
     rng = np.random.default_rng(int(cfg.seed))
     truth = sample_sensor(sampling, rng, asymmetric=bool(cfg.task.asymmetric_distortion))
-    detector = detect_checkerboard if sampling.backend == "render" else None
+    detector = detect_aprilgrid if sim.cfg.board.kind == "aprilgrid" else detect_checkerboard
+    detector = detector if sampling.backend == "render" else None
     size = tuple(int(s) for s in cfg.render_size)
     recorder = SensorRecorder(sim, sim.cfg.board.target, sampling, detector, bool(cfg.images), render_size=size)
     try:

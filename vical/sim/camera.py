@@ -4,12 +4,13 @@ Both backends take the camera's optical-frame pose ``T_world_cam`` (OpenCV axes,
 ``docs/conventions.md``) at the exposure instant and return the target corners it sees:
 
 - ``ProjectBackend``: analytic projection of the target's points through the camera model,
-  visibility rules that mirror what a checkerboard detector needs (``VisibilityRules``), and
-  Gaussian pixel noise. Fast; used for training.
+  visibility rules that mirror what the detector needs (``VisibilityRules``: the whole
+  checkerboard, or the aprilgrid tags seen whole in a partial view), and Gaussian pixel noise.
+  Fast; used for training.
 - ``RenderBackend``: MuJoCo renders a wider undistorted pinhole image at that pose (offscreen,
   EGL), the image is warped through the lens distortion (``cv2.remap`` with maps from
-  undistorting every output pixel) and an injected detector finds the corners. Frames where the
-  detector does not find the whole board report no corners, as a real detector.
+  undistorting every output pixel) and an injected detector finds the corners, as a real one
+  would (the whole checkerboard or nothing; the aprilgrid tags it decodes).
 
 The exposure pose is interpolated between the physics steps around the exposure instant
 (``interpolate_pose``), so time offsets below one physics step are represented.
@@ -48,7 +49,7 @@ def interpolate_pose(t_ns: int, t0_ns: int, T0: np.ndarray, t1_ns: int, T1: np.n
 
 @dataclass(frozen=True)
 class VisibilityRules:
-    """When the analytic backend reports a view, mirroring what the checkerboard detector needs.
+    """When the analytic backend reports a view, mirroring what the target's detector needs.
 
     Defaults were measured with the ``render`` backend and ``detect_checkerboard`` over 300
     random views (``docs/sensors.md``): detection succeeded in 25 % of views whose grid fits with
@@ -63,15 +64,26 @@ class VisibilityRules:
             the board centre (grazing views fail detection).
         min_corner_spacing_px: smallest image distance [px] between neighbouring corners (smaller
             squares blur together).
+        tag_border_px: aprilgrid: a tag is seen when its square keeps this distance [px] from the
+            image edge (``detect_aprilgrid``'s ``min_border_px``); partial views report the tags
+            that pass, with their four corners each.
+        min_tag_px: aprilgrid: shortest tag side [px] in the image (smaller tags do not decode).
+
+    For an aprilgrid, ``max_obliquity`` applies per tag (line of sight to the tag's centre) and
+    ``margin_squares``, ``border_px`` and ``min_corner_spacing_px`` do not apply.
     """
 
     margin_squares: float = 0.5
     border_px: float = 0.0
     max_obliquity: float = 1.05
     min_corner_spacing_px: float = 8.0
+    tag_border_px: float = 4.0
+    min_tag_px: float = 32.0
 
     def __post_init__(self) -> None:
         require_range("visibility.margin_squares", self.margin_squares, 0.0, 5.0)
+        require_range("visibility.tag_border_px", self.tag_border_px, 0.0)
+        require_range("visibility.min_tag_px", self.min_tag_px, 0.0)
         require_range("visibility.border_px", self.border_px, 0.0)
         require_range("visibility.max_obliquity", self.max_obliquity, 0.0, np.pi / 2, high_open=True)
         require_range("visibility.min_corner_spacing_px", self.min_corner_spacing_px, 0.0)
@@ -87,6 +99,14 @@ def grid_outline(target: Target, margin_squares: float, per_edge: int = 16) -> n
     corners = np.array([[-dx, -dy, 0.0], [-dx, y1, 0.0], [x1, y1, 0.0], [x1, -dy, 0.0]])
     s = np.linspace(0.0, 1.0, per_edge, endpoint=False)[:, None]
     return np.vstack([corners[i] + s * (corners[(i + 1) % 4] - corners[i]) for i in range(4)])
+
+
+def tag_outlines(target: Target, per_edge: int = 4) -> np.ndarray:
+    """(T, 4 * per_edge, 3) [m] board points along each aprilgrid tag's square (edges bend under distortion)."""
+    corners = target.points[target.tag_corner_ids(np.arange(target.num_tags))]  # (T, 4, 3) counter-clockwise
+    s = np.linspace(0.0, 1.0, per_edge, endpoint=False)[None, :, None]
+    edges = [corners[:, i, None] + s * (corners[:, (i + 1) % 4, None] - corners[:, i, None]) for i in range(4)]
+    return np.concatenate(edges, axis=1)
 
 
 class ProjectBackend:
@@ -111,15 +131,58 @@ class ProjectBackend:
         self.T_world_board = np.asarray(T_world_board, dtype=float)
         self.pixel_noise_px = float(pixel_noise_px)
         self.rules = rules or VisibilityRules()
-        self._points_and_outline = np.vstack([target.points, grid_outline(target, self.rules.margin_squares)])
         self._ids = np.arange(target.num_points, dtype=np.int64)
         self._cos_max_obliquity = float(np.cos(self.rules.max_obliquity))
+        if target.kind == "checkerboard":
+            self._points_and_outline = np.vstack([target.points, grid_outline(target, self.rules.margin_squares)])
+        else:
+            self._tag_ids = target.tag_corner_ids(np.arange(target.num_tags))  # (T, 4)
+            self._tag_outlines = tag_outlines(target)  # (T, P, 3)
 
-    def ideal_corners(self, camera: CameraModel, T_world_cam: np.ndarray) -> np.ndarray | None:
-        """Noise-free corner pixels (N, 2) in id order, or None when the rules say the board is not seen."""
+    def _cam_board(self, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         R_world_cam, t_world_cam = T_world_cam[:3, :3], T_world_cam[:3, 3]
         R_cam_board = R_world_cam.T @ self.T_world_board[:3, :3]
         t_cam_board = (self.T_world_board[:3, 3] - t_world_cam) @ R_world_cam
+        return R_cam_board, t_cam_board
+
+    def ideal_observation(self, camera: CameraModel, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Noise-free corners (K, 2) [px] and their ids (K,) the rules say are seen (empty when none).
+
+        A checkerboard is seen whole or not at all (``ideal_corners``); an aprilgrid reports the
+        four corners of every tag that passes the rules (``ideal_tags``).
+        """
+        if self.target.kind == "aprilgrid":
+            return self.ideal_tags(camera, T_world_cam)
+        uv = self.ideal_corners(camera, T_world_cam)
+        return _NO_CORNERS if uv is None else (uv, self._ids.copy())
+
+    def ideal_tags(self, camera: CameraModel, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Aprilgrid corners (K, 2) [px] and ids (K,), sorted by id, of the tags the rules say are seen.
+
+        A tag is seen when its centre is in front of the camera within ``max_obliquity`` of the
+        board normal, its square projects ``tag_border_px`` inside the image, and its shortest
+        side is at least ``min_tag_px``.
+        """
+        R, t = self._cam_board(T_world_cam)
+        outline = self._tag_outlines
+        centres = outline.mean(axis=1) @ R.T + t  # (T, 3)
+        distance = np.linalg.norm(centres, axis=1)
+        seen = (centres[:, 2] > 0) & (-(centres @ R[:, 2]) >= self._cos_max_obliquity * distance)
+        uv_out, front = camera.project(outline.reshape(-1, 3) @ R.T + t)
+        inside = front & camera.in_image(uv_out, self.rules.tag_border_px)
+        seen &= inside.reshape(outline.shape[:2]).all(axis=1)
+        uv_pts, front_pts = camera.project(self.target.points @ R.T + t)
+        quads = uv_pts[self._tag_ids]  # (T, 4, 2)
+        side = np.linalg.norm(quads - np.roll(quads, 1, axis=1), axis=2).min(axis=1)
+        seen &= front_pts[self._tag_ids].all(axis=1) & (side >= self.rules.min_tag_px)
+        ids = np.sort(self._tag_ids[seen].ravel())
+        return uv_pts[ids], ids
+
+    def ideal_corners(self, camera: CameraModel, T_world_cam: np.ndarray) -> np.ndarray | None:
+        """Noise-free checkerboard corner pixels (N, 2) in id order, or None when the board is not seen."""
+        if self.target.kind != "checkerboard":
+            raise ValueError(f"ideal_corners is for checkerboards; use ideal_observation for a {self.target.kind}")
+        R_cam_board, t_cam_board = self._cam_board(T_world_cam)
         if not self._faces_camera(R_cam_board, t_cam_board):
             return None
         # One projection of the grid points followed by the enlarged outline.
@@ -135,10 +198,10 @@ class ProjectBackend:
         self, camera: CameraModel, T_world_cam: np.ndarray, rng: np.random.Generator
     ) -> tuple[np.ndarray, np.ndarray]:
         """Corners (K, 2) [px] with pixel noise and their ids (K,); empty when the board is not seen."""
-        uv = self.ideal_corners(camera, T_world_cam)
-        if uv is None:
+        uv, ids = self.ideal_observation(camera, T_world_cam)
+        if not len(ids):
             return _NO_CORNERS
-        return uv + self.pixel_noise_px * rng.standard_normal(uv.shape), self._ids.copy()
+        return uv + self.pixel_noise_px * rng.standard_normal(uv.shape), ids
 
     def _faces_camera(self, R_cam_board: np.ndarray, t_cam_board: np.ndarray) -> bool:
         center = R_cam_board @ self.target.center + t_cam_board

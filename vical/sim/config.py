@@ -69,23 +69,30 @@ class PhysicsConfig:
 
 @dataclass(frozen=True)
 class BoardConfig:
-    """The checkerboard target and where it stands.
+    """The calibration target (checkerboard or Kalibr aprilgrid) and where it stands.
 
     At the robot's home pose the board centre lies ``distance`` in front of the camera along its
-    optical axis (shifted by ``offset``), facing the camera with grid rows going down the image and
-    columns going right; ``tilt_rpy`` then rotates the board about its centre.
+    optical axis (shifted by ``offset``), facing the camera upright as printed (checkerboard: grid
+    rows going down the image and columns going right; aprilgrid: tag 0 at the bottom left, board
+    x to the right and y up); ``tilt_rpy`` then rotates the board about its centre.
 
     Attributes:
-        rows, cols: inner corners (the paper's board: 6 x 7 = 7 x 8 squares).
-        square: square side [m].
-        border_squares: white border width [squares].
+        kind: ``"checkerboard"`` or ``"aprilgrid"``.
+        rows, cols: checkerboard: inner corners (the paper's board: 6 x 7 = 7 x 8 squares);
+            aprilgrid: tags (Kalibr's tagRows, tagCols).
+        square: checkerboard square side [m]; aprilgrid: tag size [m] (Kalibr's tagSize).
+        tag_spacing: aprilgrid only: gap between tags / tag size (Kalibr's tagSpacing).
+        border_squares: checkerboard only: white border width [squares] (an aprilgrid carries
+            Kalibr's own margin, see ``Target.aprilgrid_image``).
         distance: optical-axis distance from the camera at home to the board centre [m].
         offset: (2,) [m] board centre shift along the camera body's y (left) and z (up) axes.
         tilt_rpy: (3,) [rad] rotation of the board about its centre, Euler [roll, pitch, yaw] in
             the board frame.
-        px_per_square: texture resolution [texture px per square].
+        px_per_square: texture resolution [texture px per square, or per tag side: a multiple
+            of 10 (the tag's bits) for which the gap is a whole number of pixels].
     """
 
+    kind: str = "checkerboard"
     rows: int = 6
     cols: int = 7
     square: float = 0.07
@@ -94,8 +101,19 @@ class BoardConfig:
     offset: tuple[float, float] = (0.0, 0.0)
     tilt_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
     px_per_square: int = 100
+    tag_spacing: float = 0.3
 
     def __post_init__(self) -> None:
+        require(self.kind in ("checkerboard", "aprilgrid"), "sim.board.kind", "checkerboard or aprilgrid", self.kind)
+        if self.kind == "aprilgrid":
+            require_range("sim.board.tag_spacing", self.tag_spacing, 0.05, 1.0)
+            gap = self.tag_spacing * self.px_per_square
+            require(
+                self.px_per_square % 10 == 0 and abs(gap - round(gap)) < 1e-6,
+                "sim.board.px_per_square",
+                "a multiple of 10 for which px_per_square * tag_spacing is whole (aprilgrid texture)",
+                self.px_per_square,
+            )
         for name in ("rows", "cols", "px_per_square"):
             value = getattr(self, name)
             require(isinstance(value, int) and value >= 2, f"sim.board.{name}", "an integer >= 2", value)
@@ -114,6 +132,8 @@ class BoardConfig:
     @property
     def target(self) -> Target:
         """The board's point geometry."""
+        if self.kind == "aprilgrid":
+            return Target.aprilgrid(self.rows, self.cols, self.square, self.tag_spacing)
         return Target.checkerboard(rows=self.rows, cols=self.cols, square=self.square)
 
 

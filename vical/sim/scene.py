@@ -1,8 +1,9 @@
-"""The MuJoCo calibration scene: Panda + sensor rig + checkerboard, and the frames code reads from it.
+"""The MuJoCo calibration scene: Panda + sensor rig + calibration board, and the frames code reads from it.
 
-``build_model`` compiles ``assets/scene.xml`` with the board placed and textured from the sim
-config. Frame conventions are those of ``docs/conventions.md``; this module holds the one
-MuJoCo-to-OpenCV camera conversion of vical (``camera_pose_cv``).
+The board is a checkerboard or a Kalibr aprilgrid (``sim.board.kind``). ``build_model``
+compiles ``assets/scene.xml`` with the board placed and textured from the sim config. Frame
+conventions are those of ``docs/conventions.md``; this module holds the one MuJoCo-to-OpenCV
+camera conversion of vical (``camera_pose_cv``).
 """
 
 from __future__ import annotations
@@ -26,6 +27,9 @@ _MJ_TO_CV = np.diag([1.0, -1.0, -1.0])
 # Board axes in the camera body frame when the board faces the camera upright: grid rows (board x)
 # go down the image (-body z), columns (board y) go right (-body y), board z points back (-body x).
 _R_BODY_BOARD_FACING = np.array([[0.0, 0.0, -1.0], [0.0, -1.0, 0.0], [-1.0, 0.0, 0.0]])
+# An aprilgrid upright as printed: board x goes right (-body y), y up (+body z), z points back (-body x).
+_R_BODY_APRILGRID_FACING = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+APRILGRID_BITS_PER_TAG = 10  # tag36h11: 6 data bits + 2 black border bits on each side
 
 
 class SceneError(RuntimeError):
@@ -33,14 +37,20 @@ class SceneError(RuntimeError):
 
 
 def board_texture_png(target: Target, border_squares: float, px_per_square: int) -> bytes:
-    """PNG bytes of the printed board (``Target.pattern_image``) for MuJoCo's asset dict.
+    """PNG bytes of the printed board for MuJoCo's asset dict.
 
-    MuJoCo maps the first texture row to the plane's +y edge and texture columns along +x; the
-    pattern's rows follow board x and its columns board y, so the image is transposed and then
-    flipped top-to-bottom, after which texture column = board x and row 0 = largest board y.
+    MuJoCo maps the first texture row to the plane's +y edge and texture columns along +x.
+    Checkerboard (``Target.pattern_image``): the pattern's rows follow board x and its columns
+    board y, so the image is transposed and then flipped top-to-bottom, after which texture
+    column = board x and row 0 = largest board y. Aprilgrid (``Target.aprilgrid_image``, with
+    ``px_per_square / 10`` px per tag bit): already drawn with columns along board x and row 0 at
+    the largest board y, so it is used as it is.
     """
-    img = target.pattern_image(px_per_square=px_per_square, border_squares=border_squares)
-    img = np.ascontiguousarray(img.T[::-1])
+    if target.kind == "aprilgrid":
+        img = target.aprilgrid_image(px_per_bit=px_per_square // APRILGRID_BITS_PER_TAG)
+    else:
+        img = target.pattern_image(px_per_square=px_per_square, border_squares=border_squares)
+        img = np.ascontiguousarray(img.T[::-1])
     ok, png = cv2.imencode(".png", img)
     if not ok:
         raise SceneError("could not encode the board texture as PNG")
@@ -48,7 +58,15 @@ def board_texture_png(target: Target, border_squares: float, px_per_square: int)
 
 
 def board_half_size(target: Target, border_squares: float) -> np.ndarray:
-    """(2,) [m] half extent of the printed board (squares + white border) along board x and y."""
+    """(2,) [m] half extent of the printed board along board x and y, centred on ``target.center``.
+
+    Checkerboard: the squares and ``border_squares`` of white. Aprilgrid: the tags, their gaps and
+    Kalibr's margin of two gaps on every side (``Target.aprilgrid_image``).
+    """
+    if target.kind == "aprilgrid":
+        size, gap = target.row_spacing, target.tag_spacing * target.row_spacing
+        tags = np.array([target.cols, target.rows])  # board x runs along the tag columns
+        return 0.5 * (tags * size + (tags + 3) * gap)
     squares = np.array([target.rows + 1, target.cols + 1]) + 2.0 * border_squares
     return 0.5 * squares * np.array([target.row_spacing, target.col_spacing])
 
@@ -62,7 +80,8 @@ def board_pose_from_camera(T_world_body: np.ndarray, board: BoardConfig) -> np.n
     """
     target = board.target
     centre_body = np.array([board.distance, board.offset[0], board.offset[1]])
-    R_world_board = T_world_body[:3, :3] @ _R_BODY_BOARD_FACING @ euler_to_matrix(board.tilt_rpy)
+    facing = _R_BODY_APRILGRID_FACING if target.kind == "aprilgrid" else _R_BODY_BOARD_FACING
+    R_world_board = T_world_body[:3, :3] @ facing @ euler_to_matrix(board.tilt_rpy)
     centre_world = T_world_body[:3, :3] @ centre_body + T_world_body[:3, 3]
     return make_transform(R_world_board, centre_world - R_world_board @ target.center)
 
