@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from vical.data import CameraFrames, DataError, ImuSamples, SensorTruth, Target, TargetError, seconds_since
+from vical.data.target import KALIBR_TAG36H11_ID0, kalibr_tag_bits
 from vical.geometry import CameraModel
 
 
@@ -100,3 +101,19 @@ def test_aprilgrid_image_layout():
     assert np.all(image[h - 12 :, :] == 255) and np.all(image[:, :12] == 255)
     with pytest.raises(TargetError, match="whole number of pixels"):
         Target.aprilgrid(2, 2, 0.1, 0.33).aprilgrid_image(px_per_bit=1)
+
+
+def test_aprilgrid_image_prints_tags_as_kalibr_does():
+    """Data bits of tags 0-3 equal Kalibr's print of its tag36h11 codes (kalibr_create_target_pdf).
+
+    Tag 0's code fixes OpenCV's turn (``opencv_tag_turns``); tags 1-3 check it independently.
+    """
+    kalibr_codes = [KALIBR_TAG36H11_ID0, 0xD97F18B49, 0xDD280910E, 0xE479E9C98]
+    t = Target.aprilgrid(tag_rows=2, tag_cols=2, tag_size=0.1, tag_spacing=0.3)
+    image = t.aprilgrid_image(px_per_bit=10)  # 100 px tags, 30 px gaps, 60 px margin
+    h = image.shape[0]
+    for k, code in enumerate(kalibr_codes):
+        top, left = h - 60 - (k // 2) * 130 - 100, 60 + (k % 2) * 130
+        cells = image[top + 25 : top + 80 : 10, left + 25 : left + 80 : 10] < 128  # 6 x 6 data cell centres
+        assert np.array_equal(cells, kalibr_tag_bits(code)), k
+    assert not np.array_equal(kalibr_tag_bits(kalibr_codes[1]), np.rot90(kalibr_tag_bits(kalibr_codes[1]), 2))

@@ -1,16 +1,20 @@
 """Aprilgrid detection with point ids in Kalibr's numbering (``vical.data.Target``).
 
 Tags are found with OpenCV's aruco module and its ``DICT_APRILTAG_36h11`` dictionary, reading a
-2-bit black border as Kalibr's grids are printed. As in Kalibr's ``GridCalibrationTargetAprilgrid``:
-tags with an id outside the grid, tags seen twice (a stray tag in the scene) and tags with a
-corner closer than ``min_border_px`` to the image edge are dropped; the tag corners are refined
-with ``cv2.cornerSubPix`` (they are X-junctions with the grid's black corner squares) and a corner
-the refinement moves out of its search window is dropped. (Aruco's unrefined corners are contour
-vertices, about 2-3 px off at these junctions, so Kalibr's 1.2 px displacement limit for its own
-detector's corners does not transfer.) Partial views give the corners of the tags seen.
+2-bit black border as Kalibr's grids are printed; aruco's corner order is matched to Kalibr's on a
+printed grid (``corner_order``), since OpenCV's AprilTag orientation differs between versions.
+As in Kalibr's ``GridCalibrationTargetAprilgrid``: tags with an id outside the grid, tags seen
+twice (a stray tag in the scene) and tags with a corner closer than ``min_border_px`` to the image
+edge are dropped; the tag corners are refined with ``cv2.cornerSubPix`` (they are X-junctions with
+the grid's black corner squares) and a corner the refinement moves out of its search window (or
+cannot refine) is dropped. (Aruco's unrefined corners are contour vertices, about 2-3 px off at
+these junctions, so Kalibr's 1.2 px displacement limit for its own detector's corners does not
+transfer.) Partial views give the corners of the tags seen.
 """
 
 from __future__ import annotations
+
+import functools
 
 import cv2
 import numpy as np
@@ -18,11 +22,35 @@ import numpy as np
 from vical.calib.errors import CalibrationError
 from vical.data.target import Target
 
-# OpenCV returns a marker's corners top-left, top-right, bottom-right, bottom-left as the tag is
-# printed (top = board +y); Kalibr orders them counter-clockwise from (min x, min y).
-_CV_TO_KALIBR = [3, 2, 1, 0]
+_PROBE_PX_PER_BIT = 4  # the grid that ``corner_order`` detects to learn aruco's corner order
+_PROBE_PAD_PX = 20
 WINDOW_FRACTION = 0.75  # search half-window / (gap or black border, the smaller) [px / px]
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 1e-3)
+
+
+@functools.cache
+def corner_order() -> np.ndarray:
+    """(4,) ``order`` with aruco's corner ``order[j]`` = Kalibr's corner ``j`` of a tag as Kalibr prints it.
+
+    Kalibr orders a tag's corners counter-clockwise from (min x, min y) on the print; aruco starts
+    from its own marker image's top-left, and that image is Kalibr's print turned by an amount
+    that changed between OpenCV versions. So the order is measured, once, by detecting a printed
+    grid (``Target.aprilgrid_image``, Kalibr's orientation) whose corner pixels are known.
+    """
+    target = Target.aprilgrid(2, 2, 0.1, 0.3)
+    image = np.pad(target.aprilgrid_image(_PROBE_PX_PER_BIT), _PROBE_PAD_PX, constant_values=255)
+    quads, tag_ids, _ = make_aprilgrid_detector().detectMarkers(image)
+    if tag_ids is None or 0 not in tag_ids:
+        raise CalibrationError("aruco does not detect tag 0 of a printed aprilgrid; check the OpenCV installation")
+    quad = np.asarray(quads[int(np.flatnonzero(np.ravel(tag_ids) == 0)[0])], dtype=float).reshape(4, 2)
+    s = target.row_spacing / (10 * _PROBE_PX_PER_BIT)  # [m/px]
+    margin = 2 * round(target.tag_spacing * 10 * _PROBE_PX_PER_BIT) + _PROBE_PAD_PX
+    xy = target.points[target.tag_corner_ids([0])[0], :2]
+    expected = np.stack([xy[:, 0] / s + margin - 0.5, image.shape[0] - xy[:, 1] / s - margin - 0.5], axis=1)
+    order = np.argmin(np.linalg.norm(expected[:, None] - quad[None], axis=2), axis=1)
+    if sorted(order.tolist()) != [0, 1, 2, 3]:
+        raise CalibrationError(f"cannot match aruco's tag corners to Kalibr's order (got {order.tolist()})")
+    return order
 
 
 def make_aprilgrid_detector() -> cv2.aruco.ArucoDetector:
@@ -56,7 +84,7 @@ def detect_aprilgrid(
     quads, tag_ids, _ = (detector or make_aprilgrid_detector()).detectMarkers(image)
     if tag_ids is None:
         return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
-    quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)[:, _CV_TO_KALIBR]
+    quads = np.asarray(quads, dtype=np.float64).reshape(-1, 4, 2)[:, corner_order()]
     tag_ids = np.asarray(tag_ids, dtype=np.int64).reshape(-1)
     keep = _valid_tags(quads, tag_ids, target, image.shape, min_border_px)
     quads, tag_ids = quads[keep], tag_ids[keep]

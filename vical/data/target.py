@@ -27,10 +27,36 @@ The printed grid is seen from +z: x to the right and y up on the print.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
+
+# Tag 0 of tag36h11 as Kalibr lists it (kalibr_create_target_pdf, from the AprilTags C++ library).
+# Kalibr prints bit ``35 - (6 i + j)`` of the code in data row ``i`` (from the top) and column ``j``
+# (from the left), white where the bit is set. OpenCV's marker images are this print turned by a
+# multiple of 90 deg that depends on the OpenCV version (OpenCV 5.0.0 draws it upside down), so
+# ``aprilgrid_image`` measures the turn on this one code and undoes it.
+KALIBR_TAG36H11_ID0 = 0xD5D628584
+
+
+def kalibr_tag_bits(code: int) -> np.ndarray:
+    """(6, 6) bool data bits of a tag36h11 code as Kalibr prints it, True = black, row 0 at the top."""
+    index = 35 - (6 * np.arange(6)[:, None] + np.arange(6)[None, :])
+    return (code >> index) & 1 == 0
+
+
+@functools.cache
+def opencv_tag_turns() -> int:
+    """Quarter turns ``k`` with ``np.rot90(opencv_marker, k)`` = Kalibr's print of the same tag36h11 id."""
+    dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
+    marker = cv2.aruco.generateImageMarker(dictionary, 0, 100, borderBits=2)
+    bits = marker[25:80:10, 25:80:10] < 128  # centres of the 6 x 6 data cells (10 px each, 2-cell border)
+    for k in range(4):
+        if np.array_equal(np.rot90(bits, k), kalibr_tag_bits(KALIBR_TAG36H11_ID0)):
+            return k
+    raise TargetError("OpenCV's DICT_APRILTAG_36h11 tag 0 matches Kalibr's tag 0 in no orientation")
 
 
 class TargetError(ValueError):
@@ -175,8 +201,9 @@ class Target:
     def aprilgrid_image(self, px_per_bit: int = 10) -> np.ndarray:
         """Grey image (uint8) of the printed aprilgrid, as Kalibr prints it.
 
-        Each tag is a tag36h11 code (OpenCV's ``DICT_APRILTAG_36h11``) with a 2-bit black border:
-        ``10 px_per_bit`` px per ``tag_size``. Black squares of the gap's size sit at every tag
+        Each tag is a tag36h11 code (OpenCV's ``DICT_APRILTAG_36h11``, turned to Kalibr's print
+        orientation: ``opencv_tag_turns``) with a 2-bit black border: ``10 px_per_bit`` px per
+        ``tag_size``. Black squares of the gap's size sit at every tag
         corner (between tags and around the grid), and a white border of one gap surrounds it.
         With ``g`` the gap [px] and ``m = 2 g`` the margin, pixel ``(a, b)`` (row, column) of the
         ``H``-row image has its centre at board ``x = (b + 0.5 - m) s``, ``y = (H - a - 0.5 - m) s``
@@ -196,12 +223,12 @@ class Target:
         width = 2 * margin + self.cols * pitch - gap_px
         image = np.full((height, width), 255, dtype=np.uint8)
         dictionary = cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_APRILTAG_36h11)
+        turns = opencv_tag_turns()
         for k in range(self.num_tags):
             top = height - margin - (k // self.cols) * pitch - tag_px
             left = margin + (k % self.cols) * pitch
-            image[top : top + tag_px, left : left + tag_px] = cv2.aruco.generateImageMarker(
-                dictionary, k, tag_px, borderBits=2
-            )
+            marker = cv2.aruco.generateImageMarker(dictionary, k, tag_px, borderBits=2)
+            image[top : top + tag_px, left : left + tag_px] = np.rot90(marker, turns)
         for i in range(self.rows + 1):
             for j in range(self.cols + 1):
                 top, left = height - margin - i * pitch, margin + j * pitch - gap_px
