@@ -67,7 +67,8 @@ class VisibilityRules:
         tag_border_px: aprilgrid: a tag is seen when its square keeps this distance [px] from the
             image edge (``detect_aprilgrid``'s ``min_border_px``); partial views report the tags
             that pass, with their four corners each.
-        min_tag_px: aprilgrid: shortest tag side [px] in the image (smaller tags do not decode).
+        min_tag_px: aprilgrid: shortest tag side [px] in the image. In renders of a 6 x 6 grid of
+            88 mm tags aruco decoded 70-87 % of the tags 24-40 px wide and every larger one.
 
     For an aprilgrid, ``max_obliquity`` applies per tag (line of sight to the tag's centre) and
     ``margin_squares``, ``border_px`` and ``min_corner_spacing_px`` do not apply.
