@@ -1,0 +1,41 @@
+"""vical-export: a recording with images becomes Kalibr's inputs that read back to the same data."""
+
+import numpy as np
+from test_io_samples import make_recording
+
+from vical.apps.export import main
+from vical.io import open_recording, read_camchain, read_imu_yaml, read_target_yaml, save_recording
+
+
+def test_export_writes_kalibr_inputs_that_read_back(tmp_path, capsys):
+    rec = make_recording()
+    save_recording(rec, tmp_path / "rec")
+    out = tmp_path / "kalibr_in"
+    assert main([str(tmp_path / "rec"), "--out", str(out)]) == 0
+
+    assert read_target_yaml(out / "target.yaml") == rec.target
+    assert read_imu_yaml(out / "imu.yaml") == rec.truth.imu_noise
+    camera, T, shift = read_camchain(out / "camchain.yaml")
+    assert camera == rec.truth.camera and T is None and shift is None
+    _, T_truth, shift_truth = read_camchain(out / "camchain-imucam-truth.yaml")
+    assert np.allclose(T_truth, rec.truth.T_cam_imu) and shift_truth == rec.truth.time_offset
+    for source in ("data.bag", "euroc"):
+        back = open_recording(out / source, rec.target, keep_images=True)
+        assert np.array_equal(back.frames.t, rec.frames.t) and np.array_equal(back.frames.images, rec.frames.images)
+        assert np.array_equal(back.imu.t, rec.imu.t) and np.array_equal(back.imu.gyro, rec.imu.gyro)
+    printed = capsys.readouterr().out
+    assert f"kalibr_calibrate_imu_camera --bag {out / 'data.bag'} --cams {out / 'camchain.yaml'}" in printed
+    assert "--time-calibration" in printed
+
+
+def test_export_refuses_recordings_without_images_and_full_outputs(tmp_path, capsys):
+    save_recording(make_recording(images=False), tmp_path / "rec")
+    assert main([str(tmp_path / "rec"), "--out", str(tmp_path / "a")]) == 2
+    assert "no images" in capsys.readouterr().err
+    save_recording(make_recording(), tmp_path / "rec2")
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "keep.txt").write_text("mine")
+    assert main([str(tmp_path / "rec2"), "--out", str(tmp_path / "b")]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert main([str(tmp_path / "b"), "--out", str(tmp_path / "c")]) == 2
+    assert "not a vical recording directory" in capsys.readouterr().err

@@ -1,0 +1,94 @@
+"""``vical-export``: write a recording with images as Kalibr's inputs (EuRoC folder, ROS1 bag, YAML files).
+
+Example::
+
+    vical-export recordings/demo --out kalibr_in
+
+Writes into ``--out``: ``euroc/mav0/...`` (EuRoC/ASL folder), ``data.bag`` (ROS1, Kalibr's topics),
+``target.yaml`` (Kalibr target), ``imu.yaml`` (Kalibr IMU noise) and, when the recording carries
+its truth (simulator), ``camchain.yaml`` (the true intrinsics, the input of
+``kalibr_calibrate_imu_camera --cams``) and ``camchain-imucam-truth.yaml`` (the true extrinsic and
+time offset, to compare Kalibr's result with). It prints the Kalibr commands to run on them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from vical.data import DataError, ImuNoise, Recording
+from vical.io.bag import write_bag
+from vical.io.errors import FormatError
+from vical.io.euroc import write_euroc
+from vical.io.kalibr import write_camchain_imucam, write_imu_yaml, write_target_yaml
+from vical.io.recording import is_recording_dir, load_recording
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="vical-export", description=__doc__.split("\n\n")[0])
+    p.add_argument("recording", help="vical recording directory with images (vical-record images=true)")
+    p.add_argument("--out", required=True, help="output directory (must not exist unless --overwrite)")
+    p.add_argument("--image-topic", default="/cam0/image_raw", help="bag image topic (default: /cam0/image_raw)")
+    p.add_argument("--imu-topic", default="/imu0", help="bag IMU topic (default: /imu0)")
+    p.add_argument("--overwrite", action="store_true", help="replace existing outputs in --out")
+    return p
+
+
+def kalibr_commands(out: Path, has_truth: bool) -> list[str]:
+    """The Kalibr command lines for the exported files (camera first, then camera-IMU)."""
+    cams = out / "camchain.yaml" if has_truth else Path("camchain-data.yaml")
+    return [
+        f"kalibr_calibrate_cameras --bag {out / 'data.bag'} --topics /cam0/image_raw "
+        f"--models pinhole-radtan --target {out / 'target.yaml'}",
+        f"kalibr_calibrate_imu_camera --bag {out / 'data.bag'} --cams {cams} --imu {out / 'imu.yaml'} "
+        f"--target {out / 'target.yaml'} --time-calibration",
+    ]
+
+
+def export(rec: Recording, out: Path, image_topic: str, imu_topic: str, overwrite: bool) -> list[Path]:
+    """Write the Kalibr inputs of ``rec`` into ``out``; return the written paths."""
+    if rec.frames.images is None:
+        raise FormatError("the recording has no images; record it with images (vical-record images=true)")
+    if out.exists() and not overwrite and any(out.iterdir()):
+        raise FileExistsError(f"{out} exists and is not empty; pass --overwrite to replace its files")
+    out.mkdir(parents=True, exist_ok=True)
+    written = [write_euroc(rec, out / "euroc", overwrite=overwrite)]
+    written.append(write_bag(rec, out / "data.bag", image_topic, imu_topic, overwrite=overwrite))
+    write_target_yaml(out / "target.yaml", rec.target)
+    noise = rec.truth.imu_noise if rec.truth is not None else ImuNoise()
+    write_imu_yaml(out / "imu.yaml", noise, rostopic=imu_topic)
+    written += [out / "target.yaml", out / "imu.yaml"]
+    if rec.truth is not None:
+        truth = rec.truth
+        write_camchain_imucam(out / "camchain.yaml", truth.camera, None, None, rostopic=image_topic)
+        path = out / "camchain-imucam-truth.yaml"
+        write_camchain_imucam(path, truth.camera, truth.T_cam_imu, truth.time_offset, rostopic=image_topic)
+        written += [out / "camchain.yaml", path]
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point; returns the exit status (0 ok, 2 bad input)."""
+    args = build_parser().parse_args(argv)
+    out = Path(args.out)
+    try:
+        if not is_recording_dir(args.recording):
+            raise FormatError(f"{args.recording} is not a vical recording directory (no recording.yaml)")
+        rec = load_recording(args.recording)
+        written = export(rec, out, args.image_topic, args.imu_topic, args.overwrite)
+    except (FormatError, DataError, FileExistsError, FileNotFoundError) as exc:
+        print(f"vical-export: error: {exc}", file=sys.stderr)
+        return 2
+    if rec.truth is None:
+        print("note: no truth in the recording: imu.yaml holds the paper's noise densities, no camchain.yaml")
+    for path in written:
+        print(f"wrote {path}")
+    print("Kalibr, on a machine with Kalibr installed:")
+    for command in kalibr_commands(out, rec.truth is not None):
+        print(f"  {command}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
