@@ -96,6 +96,8 @@ def load_source(args: argparse.Namespace) -> tuple[Recording, tuple[int, int] | 
     """Open ``args.recording`` (detecting corners in its images) and return it with the image size seen."""
     target = read_target_yaml(args.target) if args.target else None
     kind = detect_source(args.recording)
+    if args.task != "intrinsic" and (kind == "image_folder" or (kind == "corners_csv" and not args.imu_csv)):
+        raise CalibrationError(_no_imu_message(kind, args))  # before decoding a single image
     detect = kind in ("euroc", "bag", "image_folder") and not (kind == "euroc" and args.stored_corners)
     detector = SizedDetector(target) if detect and target is not None else None
     rec = open_recording(
