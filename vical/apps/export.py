@@ -35,9 +35,18 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def kalibr_result_name(prefix: str, bag: Path) -> str:
+    """File name Kalibr gives its result for ``bag``: the path without ``<>:/\\|?*`` and ``.bag``."""
+    tag = str(bag).translate({ord(c): None for c in "<>:/\\|?*"}).replace(".bag", "", 1)
+    return f"{prefix}-{tag}.yaml"
+
+
 def kalibr_commands(out: Path, has_truth: bool) -> list[str]:
-    """The Kalibr command lines for the exported files (camera first, then camera-IMU)."""
-    cams = out / "camchain.yaml" if has_truth else Path("camchain-data.yaml")
+    """The Kalibr command lines for the exported files (camera first, then camera-IMU).
+
+    Without the truth, the camera-IMU step takes the camera calibration Kalibr's first step writes.
+    """
+    cams = out / "camchain.yaml" if has_truth else Path(kalibr_result_name("camchain", out / "data.bag"))
     return [
         f"kalibr_calibrate_cameras --bag {out / 'data.bag'} --topics /cam0/image_raw "
         f"--models pinhole-radtan --target {out / 'target.yaml'}",
