@@ -8,7 +8,9 @@ target from the camera pose interpolated between the two physics steps around th
 Clocks. The IMU clock is the simulation clock (``t_ns`` of ``on_step``). Camera frames are
 stamped on a grid of the camera period in the camera clock; the frame stamped ``t_cam`` is
 exposed at IMU time ``t_cam + time_offset`` (Kalibr's sign, ``docs/conventions.md``). Only frames
-whose exposure falls inside the recorded span are kept.
+whose exposure falls inside the span of the IMU samples are kept (as a hardware-synchronised
+sensor would deliver them: the IMU's first sample needs its averaging window, so it starts a
+few physics steps after the motion).
 """
 
 from __future__ import annotations
@@ -150,7 +152,7 @@ class SensorRecorder:
         imu = self._imu.samples()
         return Recording(
             imu=imu,
-            frames=self._camera_frames(),
+            frames=self._camera_frames(imu),
             target=self.target,
             truth=self.truth,
             trajectory=self._trajectory(imu),
@@ -200,10 +202,14 @@ class SensorRecorder:
             omega_imu=np.asarray(log.omega_imu).reshape(-1, 3)[take],
         )
 
-    def _camera_frames(self) -> CameraFrames:
+    def _camera_frames(self, imu: ImuSamples) -> CameraFrames:
         f = self._frames
         images = np.asarray(f["images"], dtype=np.uint8) if self.keep_images and f["images"] else None
-        return CameraFrames(np.asarray(f["t"], dtype=np.int64), f["corners"], f["ids"], images)
+        frames = CameraFrames(np.asarray(f["t"], dtype=np.int64), f["corners"], f["ids"], images)
+        if not len(imu):
+            return frames
+        exposure = frames.t + self._offset_ns
+        return frames.select((exposure >= imu.t[0]) & (exposure <= imu.t[-1]))
 
     def close(self) -> None:
         """Free the renderer's GL context."""
