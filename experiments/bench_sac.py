@@ -21,12 +21,16 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 import torch
 from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig
 
+from vical.rl.buffer import ReplayBuffer
+from vical.rl.sac import SAC
 from vical.rl.trainer import BoxActions, train
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
@@ -50,8 +54,8 @@ def evaluate(act: Callable[[np.ndarray], np.ndarray], episodes: int) -> float:
     return float(np.mean(returns))
 
 
-def run_sb3(seed: int, steps: int, episodes: int) -> tuple[float, float]:
-    """(final return, updates/s) of stable-baselines3 SAC with the shared settings."""
+def run_sb3(seed: int, steps: int, episodes: int) -> tuple[float, float, Any]:
+    """(final return, updates/s, the trained model) of stable-baselines3 SAC with the shared settings."""
     from stable_baselines3 import SAC as SB3SAC
 
     model = SB3SAC(
@@ -75,12 +79,12 @@ def run_sb3(seed: int, steps: int, episodes: int) -> tuple[float, float]:
     model.learn(total_timesteps=steps)
     elapsed = time.perf_counter() - start
     final = evaluate(lambda obs: model.predict(obs, deterministic=True)[0], episodes)
-    return final, model._n_updates / elapsed
+    return final, model._n_updates / elapsed, model
 
 
-def run_vical(seed: int, steps: int, episodes: int, agent_overrides: list[str]) -> tuple[float, float]:
-    """(final return, updates/s) of vical's SAC composed from conf/train.yaml with ``agent_overrides``."""
-    with tempfile.TemporaryDirectory() as run_dir, initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+def vical_config(agent_overrides: list[str], run_dir: str, seed: int, steps: int) -> DictConfig:
+    """conf/train.yaml composed with the benchmark's shared settings and ``agent_overrides``."""
+    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
         overrides = [
             *agent_overrides,
             f"seed={seed}",
@@ -93,13 +97,53 @@ def run_vical(seed: int, steps: int, episodes: int, agent_overrides: list[str]) 
             "train.checkpoint_every=0",
             "train.progress=false",
         ]
-        cfg = compose("train", overrides=overrides)
+        return compose("train", overrides=overrides)
+
+
+def run_vical(seed: int, steps: int, episodes: int, agent_overrides: list[str]) -> tuple[float, float, SAC]:
+    """(final return, updates/s, the trained agent) of vical's SAC with ``agent_overrides``."""
+    with tempfile.TemporaryDirectory() as run_dir:
+        cfg = vical_config(agent_overrides, run_dir, seed, steps)
         start = time.perf_counter()
         result = train(cfg)
         elapsed = time.perf_counter() - start
     actions = BoxActions(gym.make("Pendulum-v1").action_space)
     final = evaluate(lambda obs: actions.to_env(result.agent.act(obs, deterministic=True)), episodes)
-    return final, result.updates / elapsed
+    return final, result.updates / elapsed, result.agent
+
+
+def buffer_from_sb3(model: Any) -> ReplayBuffer:
+    """vical's replay buffer holding the transitions of an SB3 model's buffer (actions in [-1, 1] in both)."""
+    sb3, n = model.replay_buffer, model.replay_buffer.pos
+    buffer = ReplayBuffer(n, sb3.observations.shape[-1], sb3.actions.shape[-1])
+    for i in range(n):
+        terminated = bool(sb3.dones[i, 0]) and not bool(sb3.timeouts[i, 0])
+        buffer.add(
+            sb3.observations[i, 0], sb3.actions[i, 0], sb3.rewards[i, 0], sb3.next_observations[i, 0], terminated
+        )
+    return buffer
+
+
+def interleaved_update_rates(model: Any, agents: dict[str, SAC], chunks: int, per_chunk: int) -> dict[str, float]:
+    """Median updates/s of each agent over ``chunks`` alternating rounds of ``per_chunk`` updates on the same data.
+
+    Alternating short rounds exposes every agent to the same machine load, unlike whole training runs.
+    """
+    buffer, rng = buffer_from_sb3(model), np.random.default_rng(0)
+
+    def ours(agent: SAC) -> None:
+        for _ in range(per_chunk):
+            agent.update(buffer.sample(agent.config.batch_size, rng))
+
+    runners = {"stable-baselines3 SAC": lambda: model.train(gradient_steps=per_chunk, batch_size=256)}
+    runners.update({name: (lambda a=agent: ours(a)) for name, agent in agents.items()})
+    rates: dict[str, list[float]] = {name: [] for name in runners}
+    for _ in range(chunks):
+        for name, run in runners.items():
+            start = time.perf_counter()
+            run()
+            rates[name].append(per_chunk / (time.perf_counter() - start))
+    return {name: float(np.median(r)) for name, r in rates.items()}
 
 
 def main() -> None:
@@ -108,6 +152,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--authors", action="store_true", help="also run agent=sac_authors")
+    parser.add_argument("--chunks", type=int, default=10, help="rounds of the interleaved update-only measurement")
     args = parser.parse_args()
 
     variants = {
@@ -116,32 +161,41 @@ def main() -> None:
     }
     if args.authors:
         variants["vical SAC (agent=sac_authors)"] = ["agent=sac_authors"]
-    agents = {"stable-baselines3 SAC": lambda s: run_sb3(s, args.steps, args.eval_episodes)}
+    runs = {"stable-baselines3 SAC": lambda s: run_sb3(s, args.steps, args.eval_episodes)}
     for name, overrides in variants.items():
-        agents[name] = lambda s, o=overrides: run_vical(s, args.steps, args.eval_episodes, o)
-    results: dict[str, list[tuple[float, float]]] = {name: [] for name in agents}
+        runs[name] = lambda s, o=overrides: run_vical(s, args.steps, args.eval_episodes, o)
+    results: dict[str, list[tuple[float, float]]] = {name: [] for name in runs}
+    trained: dict[str, Any] = {}
     load_start = os.getloadavg()
     for seed in args.seeds:
-        for name, run in agents.items():
-            final, rate = run(seed)
+        for name, run in runs.items():
+            final, rate, trained[name] = run(seed)
             results[name].append((final, rate))
             print(f"seed {seed}  {name:40s} final return {final:8.1f}  updates/s {rate:6.1f}", flush=True)
-    print_table(args, results, load_start, os.getloadavg())
+    sb3_model = trained.pop("stable-baselines3 SAC")
+    update_rates = interleaved_update_rates(sb3_model, trained, args.chunks, per_chunk=50)
+    print_table(args, results, update_rates, load_start, os.getloadavg())
 
 
-def print_table(args: argparse.Namespace, results: dict, load_start: tuple, load_end: tuple) -> None:
+def print_table(
+    args: argparse.Namespace, results: dict, update_rates: dict[str, float], load_start: tuple, load_end: tuple
+) -> None:
     print(
         f"\nPendulum-v1, {args.steps} env steps, seeds {args.seeds}, {args.eval_episodes} deterministic eval episodes"
         f" per seed; load average (1 min) {load_start[0]:.2f} at start, {load_end[0]:.2f} at end; {os.cpu_count()} CPUs"
     )
-    print("| agent | final return (mean +- std over seeds) | updates/s (mean +- std) | updates/s ratio to SB3 |")
-    print("|---|---|---|---|")
+    print(
+        "| agent | final return (mean +- std over seeds) | updates/s, whole runs (mean +- std) | ratio to SB3 "
+        f"| updates/s, interleaved update-only (median of {args.chunks}) | ratio to SB3 |"
+    )
+    print("|---|---|---|---|---|---|")
     sb3_rate = np.mean([rate for _, rate in results["stable-baselines3 SAC"]])
+    sb3_update_rate = update_rates["stable-baselines3 SAC"]
     for name, rows in results.items():
         finals, rates = np.array(rows).T
         print(
             f"| {name} | {finals.mean():.1f} +- {finals.std():.1f} | {rates.mean():.1f} +- {rates.std():.1f} "
-            f"| {rates.mean() / sb3_rate:.2f} |"
+            f"| {rates.mean() / sb3_rate:.2f} | {update_rates[name]:.1f} | {update_rates[name] / sb3_update_rate:.2f} |"
         )
 
 
