@@ -141,13 +141,12 @@ class CameraModel:
 
     def distort(self, xy: np.ndarray) -> np.ndarray:
         """Distorted normalised coordinates (N, 2) of undistorted normalised ``xy`` (N, 2)."""
+        x = np.atleast_2d(np.asarray(xy, dtype=float))
+        distort = _radtan if self.distortion == "radtan" else _equidistant
+        if not self.distortion_center_offset.any():
+            return distort(x, self.dist)
         shift = self._centre_shift()
-        x = np.atleast_2d(np.asarray(xy, dtype=float)) - shift
-        if self.distortion == "radtan":
-            xd = _radtan(x, self.dist)
-        else:
-            xd = _equidistant(x, self.dist)
-        return xd + shift
+        return distort(x - shift, self.dist) + shift
 
     def undistort(self, xy_d: np.ndarray, iterations: int = 30) -> np.ndarray:
         """Undistorted normalised coordinates (N, 2) of distorted ``xy_d`` (N, 2) (Newton's method).
@@ -257,18 +256,21 @@ class CameraModel:
 
 
 def _radtan(x: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
-    k1, k2, p1, p2 = coeffs
+    # Python-float coefficients and preallocated output: this runs for every simulated frame.
+    k1, k2, p1, p2 = coeffs.tolist()
     u, v = x[:, 0], x[:, 1]
-    r2 = u * u + v * v
-    radial = 1.0 + k1 * r2 + k2 * r2 * r2
-    du = 2.0 * p1 * u * v + p2 * (r2 + 2.0 * u * u)
-    dv = p1 * (r2 + 2.0 * v * v) + 2.0 * p2 * u * v
-    return np.stack([u * radial + du, v * radial + dv], axis=1)
+    uu, vv, uv = u * u, v * v, u * v
+    r2 = uu + vv
+    radial = 1.0 + r2 * (k1 + k2 * r2)
+    out = np.empty_like(x)
+    out[:, 0] = u * radial + (2.0 * p1) * uv + p2 * (r2 + 2.0 * uu)
+    out[:, 1] = v * radial + p1 * (r2 + 2.0 * vv) + (2.0 * p2) * uv
+    return out
 
 
 def _equidistant(x: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
-    k1, k2, k3, k4 = coeffs
-    r = np.linalg.norm(x, axis=1)
+    k1, k2, k3, k4 = coeffs.tolist()
+    r = np.sqrt(x[:, 0] * x[:, 0] + x[:, 1] * x[:, 1])
     theta = np.arctan(r)
     t2 = theta * theta
     theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
