@@ -26,7 +26,7 @@ import numpy as np
 from vical.data import CameraFrames, DataError, ImuSamples, Target
 from vical.io.atomic import atomic_file
 from vical.io.checks import check_sampling, parse_timestamp_ns, scale_imu, sort_and_dedupe, warn
-from vical.io.errors import CsvFormatError, FormatError
+from vical.io.errors import CsvFormatError, FormatError, read_text_file
 
 IMU_HEADER = (
     "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
@@ -42,12 +42,7 @@ def read_rows(path: str | os.PathLike, n_fields: int) -> tuple[list[list[str]], 
     A first line that is a header without ``#`` (its first field not a number) is skipped too.
     """
     path = Path(path)
-    if not path.is_file():
-        raise CsvFormatError(f"{path} does not exist or is not a file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CsvFormatError(f"{path} cannot be read as UTF-8 text (binary or corrupt?): {exc}") from exc
+    text = read_text_file(path, CsvFormatError)
     rows, lines = [], []
     for number, line in enumerate(text.splitlines(), start=1):
         line = line.strip()

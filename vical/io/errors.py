@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 
 class FormatError(ValueError):
     """A file that cannot be read as the format it claims to be."""
@@ -21,3 +23,13 @@ class CsvFormatError(FormatError):
 
 class BagFormatError(FormatError):
     """A ROS bag that is corrupt or lacks the requested topics."""
+
+
+def read_text_file(path: Path, error: type[FormatError]) -> str:
+    """The UTF-8 text of ``path``; ``error`` says which file is missing or unreadable."""
+    if not path.is_file():
+        raise error(f"{path} does not exist or is not a file")
+    try:
+        return path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{path} cannot be read as UTF-8 text (binary or corrupt?): {exc}") from exc

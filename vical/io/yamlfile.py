@@ -10,7 +10,7 @@ import numpy as np
 import yaml
 
 from vical.io.atomic import write_text_atomic
-from vical.io.errors import FormatError
+from vical.io.errors import FormatError, read_text_file
 
 
 def load_mapping(path: str | os.PathLike, error: type[FormatError]) -> dict[str, Any]:
@@ -20,12 +20,7 @@ def load_mapping(path: str | os.PathLike, error: type[FormatError]) -> dict[str,
     writes) are accepted: the header is skipped and the tagged matrices read as plain mappings.
     """
     path = Path(path)
-    if not path.is_file():
-        raise error(f"{path} does not exist or is not a file")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise error(f"{path} cannot be read as UTF-8 text: {exc}") from exc
+    text = read_text_file(path, error)
     if text.startswith("%YAML:1.0"):
         text = text.split("\n", 1)[1] if "\n" in text else ""
     try:
