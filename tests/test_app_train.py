@@ -49,14 +49,14 @@ def test_every_agent_config_composes_validates_and_builds_its_env(tmp_path, agen
         assert (a.gamma, a.tau, a.lr, a.batch_size, a.n_q, a.alpha) == (0.9, 0.01, 3e-4, 128, 1, 1.0)
 
 
-def run_app(*args: str, **kwargs) -> subprocess.Popen:
+def run_app(*args: str, cwd: Path) -> subprocess.Popen:
+    """``vical-train`` in a subprocess started outside the repository (the app must find its config anyway)."""
     return subprocess.Popen(
-        [sys.executable, "-m", "vical.apps.train", *args],
-        cwd=ROOT,
+        [str(Path(sys.executable).parent / "vical-train"), *args],
+        cwd=cwd,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
-        **kwargs,
     )
 
 
@@ -72,18 +72,18 @@ def kill_after_first_checkpoint(proc: subprocess.Popen, checkpoint: Path, timeou
 
 def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_path):
     run = tmp_path / "run"
-    proc = run_app(*TINY, f"hydra.run.dir={run}")
+    proc = run_app(*TINY, f"hydra.run.dir={run}", cwd=tmp_path)
     kill_after_first_checkpoint(proc, run / CHECKPOINT)
     assert proc.returncode == -signal.SIGKILL
     killed_at = load_checkpoint(run / CHECKPOINT)["counters"]["step"]
     assert 100 <= killed_at < 600 and not (run / AGENT).exists()
 
     # a resume that changes a setting which alters the numbers is refused, naming it
-    refused = run_app(f"resume={run}", "agent.gamma=0.5")
+    refused = run_app(f"resume={run}", "agent.gamma=0.5", cwd=tmp_path)
     out = refused.communicate(timeout=120)[0]
     assert refused.returncode != 0 and "agent.gamma: 0.99 (checkpoint) vs 0.5 (now)" in out
 
-    resumed = run_app(f"resume={run}")
+    resumed = run_app(f"resume={run}", cwd=tmp_path)
     out = resumed.communicate(timeout=300)[0]
     assert resumed.returncode == 0, out
     assert f"from step {killed_at}" in out and "trained 600 steps" in out

@@ -16,6 +16,10 @@ from omegaconf import DictConfig, OmegaConf
 from vical.config import ConfigError
 from vical.rl.trainer import train
 
+# An absolute path: a relative config_path would resolve against the installed package when the console
+# script runs from another directory.
+CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+
 # hydra.run.dir of a resumed run is the run being resumed, so no second output directory appears.
 OmegaConf.register_new_resolver("vical_resume_or", lambda resume, fresh: resume or fresh, replace=True)
 
@@ -33,7 +37,7 @@ def resumed_config(resume: str, overrides: list[str]) -> DictConfig:
     return cfg
 
 
-@hydra.main(config_path="../../conf", config_name="train", version_base="1.3")
+@hydra.main(config_path=CONF_DIR, config_name="train", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     if cfg.resume:
         cfg = resumed_config(str(cfg.resume), list(HydraConfig.get().overrides.task))
