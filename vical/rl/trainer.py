@@ -211,6 +211,9 @@ class Trainer:
         finally:
             bar.close()
             self.logger.close()
+            for env in (self.env, self._eval_env):
+                if env is not None:
+                    env.close()  # envs may hold renderers or simulator handles
         return TrainResult(
             self.settings.run_dir,
             self.agent,
