@@ -66,7 +66,9 @@ def test_resumed_run_continues_exactly_as_the_uninterrupted_run(tmp_path):
     full = train(tiny_config(tmp_path / "full"))
     part = train(tiny_config(tmp_path / "part", total_steps=300))
     assert load_checkpoint(tmp_path / "part" / CHECKPOINT)["counters"]["step"] == 300
-    resumed_cfg = tiny_config(tmp_path / "ignored", total_steps=600) | {"resume": str(tmp_path / "part")}
+    # logging, evaluation and checkpoint cadence may change on resume: they never touch the training numbers
+    cadence = {"log_every": 10, "eval_every": 100, "plot_every_episodes": 1, "checkpoint_every": 250}
+    resumed_cfg = tiny_config(tmp_path / "ignored", total_steps=600, **cadence) | {"resume": str(tmp_path / "part")}
     resumed = train(resumed_cfg)
     assert part.steps == 300 and resumed.resumed_from == 300
     assert (resumed.steps, resumed.episodes, resumed.updates) == (full.steps, full.episodes, full.updates)

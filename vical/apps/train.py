@@ -1,8 +1,8 @@
 """``vical-train``: the Hydra entry point of :func:`vical.rl.trainer.train` (config: ``conf/train.yaml``).
 
 ``vical-train resume=<run dir>`` continues a run from its checkpoint with the run's saved config; other
-``key=value`` overrides on the command line apply on top (only ``train.total_steps`` and ``train.progress``
-may differ from the checkpoint's config).
+``key=value`` overrides on the command line apply on top (only the length of the run and the cadence of
+logging, evaluation and checkpoints may differ from the checkpoint's config: ``RESUMABLE_KEYS``).
 """
 
 from __future__ import annotations

@@ -10,8 +10,23 @@ from typing import IO, Any
 
 import torch
 
-# Settings a resumed run may change without altering the numbers it produces up to the old end.
-RESUMABLE_KEYS = frozenset({"resume", "run_dir", "train.total_steps", "train.progress"})
+# Settings a resumed run may change: none of them touches the training's random streams or arithmetic
+# (evaluation uses its own env and deterministic actions; logging, plots and checkpoints only read state).
+RESUMABLE_KEYS = frozenset(
+    {
+        "resume",
+        "run_dir",
+        "train.total_steps",
+        "train.progress",
+        "train.log_every",
+        "train.eval_every",
+        "train.eval_episodes",
+        "train.eval_max_episode_steps",
+        "train.plot_every_episodes",
+        "train.checkpoint_every",
+        "train.info_prefixes",
+    }
+)
 
 
 class IncompatibleCheckpointError(ValueError):
