@@ -16,16 +16,19 @@ MIN_HOMOGRAPHY_OUTLIER_PX = 3.0  # [px] ... unless its fit is still this good
 MAX_PNP_RMS_PX = 20.0  # [px] a PnP pose that reprojects worse than this is not used as a starting point
 
 
-def _homography(obs: FrameObservation, centre: np.ndarray) -> np.ndarray | None:
-    """(3, 3) homography from board (x, y) [m] to pixels relative to ``centre``, or None if degenerate."""
+def _homography_fit(obs: FrameObservation, centre: np.ndarray) -> tuple[np.ndarray | None, float]:
+    """Homography (3, 3) from board (x, y) [m] to pixels relative to ``centre``, scaled to a unit first
+    column, and the RMS [px] of the corners about it; ``(None, inf)`` when it is degenerate."""
     H, _ = cv2.findHomography(obs.points[:, :2], obs.uv - centre, method=0)
     if H is None or not np.all(np.isfinite(H)):
-        return None
-    return H / np.linalg.norm(H[:, 0])
+        return None, np.inf
+    uv = cv2.perspectiveTransform(obs.points[:, None, :2].astype(np.float64), H).reshape(-1, 2)
+    rms = float(np.sqrt(np.mean(np.sum((uv - (obs.uv - centre)) ** 2, axis=1))))
+    return H / np.linalg.norm(H[:, 0]), rms
 
 
-def focal_from_homographies(observations: list[FrameObservation], centre: np.ndarray) -> tuple[float, float]:
-    """Zhang's closed form with the principal point fixed at ``centre`` (2,) [px] and zero skew.
+def focal_from_homographies(homographies: list[np.ndarray]) -> tuple[float, float]:
+    """Zhang's closed form with the principal point fixed (the homographies' pixel origin) and zero skew.
 
     With ``B = diag(1/fx^2, 1/fy^2, 1)`` the homography columns satisfy ``h1' B h2 = 0`` and
     ``h1' B h1 = h2' B h2``, two linear equations in ``(1/fx^2, 1/fy^2)`` per view.
@@ -34,10 +37,7 @@ def focal_from_homographies(observations: list[FrameObservation], centre: np.nda
         (fx, fy) [px].
     """
     rows, rhs = [], []
-    for obs in observations:
-        H = _homography(obs, centre)
-        if H is None:
-            continue
+    for H in homographies:
         h1, h2 = H[:, 0], H[:, 1]
         rows += [[h1[0] * h2[0], h1[1] * h2[1]], [h1[0] ** 2 - h2[0] ** 2, h1[1] ** 2 - h2[1] ** 2]]
         rhs += [-h1[2] * h2[2], -(h1[2] ** 2 - h2[2] ** 2)]
@@ -54,27 +54,18 @@ def focal_from_homographies(observations: list[FrameObservation], centre: np.nda
     return float(1.0 / np.sqrt(ab[0])), float(1.0 / np.sqrt(ab[1]))
 
 
-def _homography_rms(obs: FrameObservation, centre: np.ndarray) -> float:
-    """RMS [px] of the corners about the frame's plane homography (inf when it is degenerate)."""
-    H, _ = cv2.findHomography(obs.points[:, :2], obs.uv - centre, method=0)
-    if H is None or not np.all(np.isfinite(H)):
-        return np.inf
-    uv = cv2.perspectiveTransform(obs.points[:, None, :2].astype(np.float64), H).reshape(-1, 2)
-    return float(np.sqrt(np.mean(np.sum((uv - (obs.uv - centre)) ** 2, axis=1))))
-
-
-def _consistent_views(observations: list[FrameObservation], centre: np.ndarray) -> list[FrameObservation]:
-    """Views whose corners fit a plane homography about as well as most views do.
+def _consistent_homographies(fits: list[tuple[np.ndarray | None, float]]) -> list[np.ndarray]:
+    """Homographies of the views that fit theirs about as well as most views do.
 
     Lens distortion makes every view fit a homography only approximately; a view with scrambled
     ids or far-off corners fits many times worse and would corrupt Zhang's closed form.
     """
-    rms = np.array([_homography_rms(o, centre) for o in observations])
+    rms = np.array([r for _, r in fits])
     finite = rms[np.isfinite(rms)]
     if not len(finite):
-        return observations
+        return []
     limit = max(HOMOGRAPHY_OUTLIER_FACTOR * float(np.median(finite)), MIN_HOMOGRAPHY_OUTLIER_PX)
-    return [o for o, r in zip(observations, rms, strict=True) if r <= limit] or observations
+    return [H for H, r in fits if H is not None and r <= limit]
 
 
 def initial_camera(observations: list[FrameObservation], model: str, size: tuple[int, int]) -> CameraModel:
@@ -82,9 +73,8 @@ def initial_camera(observations: list[FrameObservation], model: str, size: tuple
     w, h = size
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
     usable = [o for o in observations if len(o.ids) >= MIN_INIT_CORNERS] or observations
-    usable = _consistent_views(usable, centre)
     usable = usable[:: max(1, len(usable) // MAX_INIT_VIEWS)]  # a spread-out subset is plenty for a start
-    fx, fy = focal_from_homographies(usable, centre)
+    fx, fy = focal_from_homographies(_consistent_homographies([_homography_fit(o, centre) for o in usable]))
     return CameraModel(model, w, h, fx, fy, centre[0], centre[1], np.zeros(4))
 
 
