@@ -16,7 +16,7 @@ initial bias.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -29,21 +29,21 @@ class ImuSimulationError(RuntimeError):
     """IMU readings that do not arrive at every physics step."""
 
 
-@dataclass(frozen=True)
-class SiteReading:
+class SiteReading(NamedTuple):
     """Ideal IMU reading and ground-truth state of a site at one physics step.
 
     Attributes:
         t_ns: time of the physics state [ns].
         reading: (6,) ``[gyro (3) rad/s, specific force (3) m/s^2]`` in the site frame.
-        T_world_site: (4, 4) site pose.
+        p_world: (3,) [m] site position; R_world_site: (3, 3) site orientation.
         v_world: (3,) [m/s] site velocity, world axes.
         omega_site: (3,) [rad/s] site angular velocity, site axes (= the gyro reading).
     """
 
     t_ns: int
     reading: np.ndarray
-    T_world_site: np.ndarray
+    p_world: np.ndarray
+    R_world_site: np.ndarray
     v_world: np.ndarray
     omega_site: np.ndarray
 
@@ -52,9 +52,11 @@ class ImuSiteReader:
     """Ideal IMU readings of a site: the angular rate and specific force of the executed motion.
 
     A reading at physics step ``k`` comes from the site poses of steps ``k - 1``, ``k``, ``k + 1``
-    by central differences: angular rate ``(log(R_k^T R_{k+1}) - log(R_k^T R_{k-1})) / 2h`` and
-    specific force ``R_k^T ((p_{k+1} - 2 p_k + p_{k-1}) / h^2 - g)``. These are exact (to O(h^2))
-    for the pose trajectory that the camera observes, so the two sensors agree in time.
+    by central differences: angular rate ``vee(R_k^T (R_{k+1} - R_{k-1})) / 2h`` (the antisymmetric
+    part; it equals ``(log(R_k^T R_{k+1}) - log(R_k^T R_{k-1})) / 2h`` to third order in the step's
+    rotation, ~1e-9 relative here) and specific force ``R_k^T ((p_{k+1} - 2 p_k + p_{k-1}) / h^2 - g)``.
+    These are exact (to O(h^2)) for the pose trajectory that the camera observes, so the two
+    sensors agree in time.
 
     Why not MuJoCo's ``gyro`` and ``accelerometer`` sensors, which sit on the same site: its
     integrators are semi-implicit (``q_{k+1} = q_k + h v_{k+1}``), so the velocity ``v_k`` that the
@@ -88,39 +90,31 @@ class ImuSiteReader:
         Call right after the ``mj_step`` that started at ``t_ns`` (``data``'s kinematics are those
         of ``t_ns``).
         """
-        if self._t_ns is None:
-            raise ImuSimulationError("IMU reader got a physics step before reset(data, t_ns) (SensorRecorder.start)")
         if self._t_ns != t_ns:
+            if self._t_ns is None:
+                raise ImuSimulationError(
+                    "IMU reader got a physics step before reset(data, t_ns) (SensorRecorder.start)"
+                )
             raise ImuSimulationError(
                 f"IMU reader expected the physics step starting at {self._t_ns} ns, got {t_ns} ns; "
                 "every physics step must be reported (reset the reader after moving without it)"
             )
         self._t_ns = t_ns + step_ns
-        pose = (data.site_xpos[self._site].copy(), data.site_xmat[self._site].reshape(3, 3).copy())
-        self._poses = [*self._poses[-2:], pose]
-        if len(self._poses) < 3:
+        poses = self._poses
+        poses.append((data.site_xpos[self._site].copy(), data.site_xmat[self._site].reshape(3, 3).copy()))
+        if len(poses) < 3:
             return None
+        if len(poses) > 3:
+            del poses[0]
         return self._central_difference(t_ns - step_ns, step_ns * 1e-9)
 
     def _central_difference(self, t_ns: int, h: float) -> SiteReading:
         (p_m, R_m), (p_0, R_0), (p_p, R_p) = self._poses
-        omega = (_step_rotation_log(R_0.T @ R_p) - _step_rotation_log(R_0.T @ R_m)) / (2.0 * h)
-        accel_world = (p_p - 2.0 * p_0 + p_m) / (h * h)
-        reading = np.concatenate([omega, R_0.T @ (accel_world - self._gravity)])
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R_0, p_0
-        return SiteReading(t_ns, reading, T, (p_p - p_m) / (2.0 * h), omega)
-
-
-def _step_rotation_log(dR: np.ndarray) -> np.ndarray:
-    """Rotation vector (3,) [rad] of a rotation by less than pi/2 (one physics step's rotation)."""
-    vee = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
-    sin_angle = float(np.sqrt(vee @ vee))
-    if sin_angle < 1e-12:
-        return vee
-    if dR[0, 0] + dR[1, 1] + dR[2, 2] < 1.0:
-        raise ImuSimulationError("the IMU site rotated by more than 90 deg in one physics step")
-    return vee * (np.arcsin(min(sin_angle, 1.0)) / sin_angle)
+        M = R_0.T @ (R_p - R_m)
+        omega = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]]) * (0.25 / h)
+        accel_world = (p_p - 2.0 * p_0 + p_m) * (1.0 / (h * h))
+        reading = np.concatenate([omega, (accel_world - self._gravity) @ R_0])
+        return SiteReading(t_ns, reading, p_0, R_0, (p_p - p_m) * (0.5 / h), omega)
 
 
 def window_weights(steps_per_sample: int, sampling: str) -> tuple[np.ndarray, np.ndarray]:

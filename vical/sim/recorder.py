@@ -22,6 +22,7 @@ import mujoco
 import numpy as np
 
 from vical.data import CameraFrames, ImuSamples, Recording, SensorTruth, Target, Trajectory
+from vical.geometry import make_transform
 from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
 from vical.sim.imu import ImuSimulator, ImuSiteReader, SiteReading
 from vical.sim.motion import MotionResult
@@ -187,7 +188,7 @@ class SensorRecorder:
     def _log_truth(self, site: SiteReading) -> None:
         log = self._log
         log.t.append(site.t_ns)
-        log.T_world_imu.append(site.T_world_site)
+        log.T_world_imu.append(make_transform(site.R_world_site, site.p_world))
         log.v_world.append(site.v_world)
         log.omega_imu.append(site.omega_site)
 
