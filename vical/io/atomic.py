@@ -15,6 +15,17 @@ from collections.abc import Iterator
 from pathlib import Path
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+def _give_default_permissions(path: Path, base: int) -> None:
+    """``mkstemp``/``mkdtemp`` create private entries (0600/0700); outputs get what ``open`` would give."""
+    os.chmod(path, base & ~_umask())
+
+
 def _fsync_file(path: Path) -> None:
     with open(path, "rb") as f:
         os.fsync(f.fileno())
@@ -33,6 +44,7 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
     os.close(fd)
     tmp = Path(tmp_name)
     try:
+        _give_default_permissions(tmp, 0o666)
         yield tmp
         _fsync_file(tmp)
         os.replace(tmp, final)
@@ -70,6 +82,7 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
     try:
+        _give_default_permissions(tmp, 0o777)
         yield tmp
         _replace_directory(tmp, final, overwrite)
     except BaseException:
