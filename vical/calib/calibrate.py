@@ -120,7 +120,7 @@ def _combine(intrinsic: CalibrationResult, extrinsic: CalibrationResult, elapsed
         parameter_names=names,
         estimate=estimate,
         covariance=covariance,
-        weak_parameters=weak_parameters(names, estimate, covariance, extrinsic.camera),
+        weak_parameters=weak_parameters(names, covariance, extrinsic.camera),
         iterations=intrinsic.iterations + extrinsic.iterations,
         solve_time=elapsed,
         warnings=intrinsic.warnings + extrinsic.warnings,

@@ -88,12 +88,3 @@ def cumulative_angle(t: np.ndarray, gyro: np.ndarray) -> np.ndarray:
     """
     steps = 0.5 * (gyro[1:] + gyro[:-1]) * np.diff(t)[:, None]
     return np.vstack([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
-
-
-def integrate_rotation(t: np.ndarray, gyro: np.ndarray, ta: float, tb: float, bias: np.ndarray) -> np.ndarray:
-    """Rotation (3, 3) of the IMU frame at ``tb`` relative to ``ta`` from bias-corrected gyro samples."""
-    dt, omega, _ = midpoint_segments(t, gyro, np.zeros_like(gyro), ta, tb)
-    R = np.eye(3)
-    for step in batch_so3_exp((omega - bias) * dt[:, None]):
-        R = R @ step
-    return R

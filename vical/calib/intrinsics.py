@@ -114,9 +114,8 @@ def reprojection_residuals(
     res, frame = [], []
     for k, T in T_cam_target.items():
         obs = observations[k]
-        uv, _ = camera.project(obs.points @ T[:3, :3].T + T[:3, 3])
-        res.append(obs.uv - uv)
-        frame.append(np.full(len(uv), obs.index))
+        res.append(obs.residuals(camera, T))
+        frame.append(np.full(len(obs.ids), obs.index))
     return np.concatenate(res), np.concatenate(frame)
 
 
@@ -194,7 +193,7 @@ def calibrate_intrinsics(
         parameter_names=names,
         estimate=estimate,
         covariance=covariance,
-        weak_parameters=weak_parameters(names, estimate, covariance, camera),
+        weak_parameters=weak_parameters(names, covariance, camera),
         reprojection=ResidualStats.of(residuals),
         reprojection_residuals=residuals,
         reprojection_frames=frame_index,

@@ -8,6 +8,7 @@ import numpy as np
 
 from vical.calib.errors import CalibrationError
 from vical.data import CameraFrames, Target
+from vical.geometry import CameraModel
 
 MIN_CORNERS = 4  # a frame needs at least 4 corners to constrain its 6-DoF pose
 
@@ -29,6 +30,11 @@ class FrameObservation:
     uv: np.ndarray
     ids: np.ndarray
     points: np.ndarray
+
+    def residuals(self, camera: CameraModel, T_cam_target: np.ndarray) -> np.ndarray:
+        """Measured minus predicted corner pixels (K, 2) [px] with the target at ``T_cam_target`` (4, 4)."""
+        uv, _ = camera.project(self.points @ T_cam_target[:3, :3].T + T_cam_target[:3, 3])
+        return self.uv - uv
 
 
 def collect_observations(

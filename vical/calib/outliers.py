@@ -38,19 +38,14 @@ def keep_inliers(obs: FrameObservation, inliers: np.ndarray) -> FrameObservation
     return replace(obs, uv=obs.uv[inliers], ids=obs.ids[inliers], points=obs.points[inliers])
 
 
-def frame_is_outlier(inliers: np.ndarray, min_corners: int) -> bool:
-    """True when a frame keeps fewer than ``min_corners`` or lost more than ``MAX_OUTLIER_FRACTION``."""
-    return int(inliers.sum()) < min_corners or (~inliers).mean() > MAX_OUTLIER_FRACTION
-
-
 def robust_pose(
     camera: CameraModel, obs: FrameObservation, threshold: float, min_corners: int
 ) -> tuple[np.ndarray, np.ndarray] | None:
     """PnP pose ``T_cam_target`` (4, 4) and inlier mask (K,), removing the worst corner until all fit.
 
     Each round refits without the corner of largest residual, so one far-off corner cannot drag
-    the pose and make its neighbours look wrong. Returns None when the frame is an outlier
-    (``frame_is_outlier``) or PnP fails.
+    the pose and make its neighbours look wrong. Returns None when the frame is an outlier (fewer
+    than ``min_corners`` left, or more than ``MAX_OUTLIER_FRACTION`` of its corners removed) or PnP fails.
     """
     inliers = np.ones(len(obs.ids), dtype=bool)
     max_removed = int(np.floor(MAX_OUTLIER_FRACTION * len(obs.ids)))
@@ -62,8 +57,7 @@ def robust_pose(
         if fit is None:
             return None
         T = fit[0]
-        uv, _ = camera.project(subset.points @ T[:3, :3].T + T[:3, 3])
-        norms = np.linalg.norm(subset.uv - uv, axis=1)
+        norms = np.linalg.norm(subset.residuals(camera, T), axis=1)
         if norms.max() <= threshold:
             return T, inliers
         inliers[np.flatnonzero(inliers)[int(np.argmax(norms))]] = False
@@ -113,11 +107,6 @@ class Rejection:
         return bool(self.warnings)
 
 
-def _residual_norms(camera: CameraModel, obs: FrameObservation, T_cam_target: np.ndarray) -> np.ndarray:
-    uv, _ = camera.project(obs.points @ T_cam_target[:3, :3].T + T_cam_target[:3, 3])
-    return np.linalg.norm(obs.uv - uv, axis=1)
-
-
 def reject_outliers(
     camera: CameraModel, observations: list[FrameObservation], poses: dict[int, np.ndarray], min_corners: int
 ) -> Rejection:
@@ -133,7 +122,7 @@ def reject_outliers(
     """
     if not poses:
         return Rejection(list(observations), {}, [], MIN_OUTLIER_PX)
-    norms = {k: _residual_norms(camera, observations[k], T) for k, T in poses.items()}
+    norms = {k: np.linalg.norm(observations[k].residuals(camera, T), axis=1) for k, T in poses.items()}
     threshold = max(OUTLIER_SIGMAS * robust_sigma_of_norms(np.concatenate(list(norms.values()))), MIN_OUTLIER_PX)
     cleaned, kept, dropped, rejected = list(observations), {}, [], {}
     for k, obs in enumerate(observations):

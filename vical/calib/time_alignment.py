@@ -93,7 +93,7 @@ def _masked_mean(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
 
 
 def _kabsch_and_bias(theta_cam: np.ndarray, theta_imu: np.ndarray, dt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``R`` minimising ``sum |theta_cam - R (theta_imu - b dt)|^2`` and the bias ``b``, alternating twice."""
+    """``R`` minimising ``sum |theta_cam - R (theta_imu - b dt)|^2`` and the bias ``b``, alternating three times."""
     b = np.zeros(3)
     for _ in range(3):
         H = (theta_imu - b * dt[:, None]).T @ theta_cam
@@ -105,10 +105,15 @@ def _kabsch_and_bias(theta_cam: np.ndarray, theta_imu: np.ndarray, dt: np.ndarra
     return R, b
 
 
-def check_rotation_excitation(t_imu: np.ndarray, gyro: np.ndarray, inc: RotationIncrements) -> None:
-    """Raise when the motion rotates about fewer than two axes (the extrinsic is then unobservable)."""
+def check_rotation_excitation(
+    t_imu: np.ndarray, gyro: np.ndarray, inc: RotationIncrements, offset_guess: float = 0.0
+) -> None:
+    """Raise when the motion rotates about fewer than two axes (the extrinsic is then unobservable).
+
+    The gyro is read over the frame pairs shifted by ``offset_guess`` [s], where the scan starts.
+    """
     angle = cumulative_angle(t_imu, gyro)
-    d, valid = _gyro_increments(t_imu, angle, inc, np.zeros(1))
+    d, valid = _gyro_increments(t_imu, angle, inc, np.array([offset_guess]))
     d = d[0][valid[0]]
     s = np.sqrt(np.linalg.svd(d.T @ d, compute_uv=False)) if len(d) else np.zeros(3)
     if s[1] < MIN_ROTATION_EXCITATION:
@@ -141,7 +146,7 @@ def align(
             "fewer than 3 pairs of consecutive frames with a target pose: the camera-IMU rotation cannot be "
             "initialised; keep the whole target in view for longer stretches of the motion"
         )
-    check_rotation_excitation(t_imu, gyro, inc)
+    check_rotation_excitation(t_imu, gyro, inc, offset_guess)
     angle = cumulative_angle(t_imu, gyro)
     dt = inc.t_end - inc.t_start
     tau = _scan(t_imu, angle, inc, max_offset, offset_guess) if estimate_offset else float(offset_guess)

@@ -62,14 +62,11 @@ def hint(name: str) -> str:
     return "record longer and hold the sensor in several orientations relative to gravity"
 
 
-def weak_parameters(
-    names: list[str], estimate: np.ndarray, covariance: np.ndarray, camera: CameraModel
-) -> list[WeakParameter]:
+def weak_parameters(names: list[str], covariance: np.ndarray, camera: CameraModel) -> list[WeakParameter]:
     """Parameters whose 1-sigma exceeds its threshold, weakest first.
 
     Args:
         names: parameter names (P,), see ``CalibrationResult.parameter_names``.
-        estimate: (P,) estimates (unused by the rule, kept so callers pass a consistent triple).
         covariance: (P, P) marginal covariance.
         camera: the calibrated camera (scales the intrinsic thresholds).
     """

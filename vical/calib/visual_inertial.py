@@ -112,15 +112,18 @@ class _Estimate:
 
 
 # ---------------------------------------------------------------------------------------- preparation
-def _check_overlap(imu: ImuSamples, frame_t_ns: np.ndarray, t0_ns: int) -> None:
+def _check_overlap(imu: ImuSamples, frame_t_ns: np.ndarray, t0_ns: int, offset_guess: float) -> None:
+    """Raise unless the frames, moved to IMU time by the offset guess [s], overlap the IMU samples."""
     if len(imu) < 2:
         raise CalibrationError("the recording has fewer than 2 IMU samples; camera-IMU calibration needs the IMU")
-    lo, hi = frame_t_ns.min(), frame_t_ns.max()
+    shift = round(offset_guess * 1e9)
+    lo, hi = frame_t_ns.min() + shift, frame_t_ns.max() + shift
     if hi < imu.t[0] or lo > imu.t[-1]:
         span = seconds_since(np.array([lo, hi, imu.t[0], imu.t[-1]]), t0_ns)
         raise CalibrationError(
             f"camera frames span {span[0]:.3f}..{span[1]:.3f} s and IMU samples {span[2]:.3f}..{span[3]:.3f} s "
-            "(relative to the recording start): they do not overlap; check that both streams use the same clock"
+            f"(relative to the recording start, frames moved by the time-offset guess {offset_guess:g} s): they do "
+            "not overlap; check that both streams use the same clock or give the offset as the initial guess"
         )
 
 
@@ -131,10 +134,11 @@ def _prepare(
     target: Target,
     noise: ImuNoise,
     options: ViOptions,
+    offset_guess: float,
 ) -> _Problem:
     frame_t_ns = np.array([o.t_ns for o in frames_obs], dtype=np.int64)
     t0_ns = int(min(imu.t[0], frame_t_ns.min())) if len(imu) else int(frame_t_ns.min())
-    _check_overlap(imu, frame_t_ns, t0_ns)
+    _check_overlap(imu, frame_t_ns, t0_ns, offset_guess)
     min_corners = min(MIN_INIT_CORNERS, target.num_points)
     initial = {k: T for k, (T, _) in frame_poses(camera, frames_obs, min_corners).items()}
     rejection = reject_outliers(camera, frames_obs, initial, min_corners)
@@ -144,7 +148,7 @@ def _prepare(
             f"only {len(poses)} frames have a usable target pose; camera-IMU calibration needs a sequence of views"
         )
     ids = sorted(poses)
-    residuals = np.concatenate([_pnp_residuals(camera, frames_obs[k], poses[k]) for k in ids])
+    residuals = np.concatenate([frames_obs[k].residuals(camera, poses[k]) for k in ids])
     sigma = options.pixel_sigma
     if sigma is None:
         sigma = max(estimated_pixel_sigma(residuals, 6 * len(ids)), MIN_PIXEL_SIGMA)
@@ -164,11 +168,6 @@ def _prepare(
         sigma_px=float(sigma),
         warnings=list(rejection.warnings),
     )
-
-
-def _pnp_residuals(camera: CameraModel, obs: FrameObservation, T_cam_target: np.ndarray) -> np.ndarray:
-    uv, _ = camera.project(obs.points @ T_cam_target[:3, :3].T + T_cam_target[:3, 3])
-    return obs.uv - uv
 
 
 def _initial_estimate(problem: _Problem, T_guess: np.ndarray, tau_guess: float) -> _Estimate:
@@ -370,9 +369,8 @@ def _reprojection(problem: _Problem, g: _Graph, values: gtsam.Values, camera: Ca
     for n, k in enumerate(g.states):
         obs = problem.observations[problem.frame_ids[k]]
         T_cam_target = invert_transform(values.atPose3(_key("p", n)).matrix() @ T_imu_cam)
-        uv, _ = camera.project(obs.points @ T_cam_target[:3, :3].T + T_cam_target[:3, 3])
-        res.append(obs.uv - uv)
-        frame.append(np.full(len(uv), obs.index))
+        res.append(obs.residuals(camera, T_cam_target))
+        frame.append(np.full(len(obs.ids), obs.index))
     return np.concatenate(res), np.concatenate(frame)
 
 
@@ -420,7 +418,7 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
         parameter_names=names,
         estimate=estimate,
         covariance=covariance,
-        weak_parameters=weak_parameters(names, estimate, covariance, camera),
+        weak_parameters=weak_parameters(names, covariance, camera),
         reprojection=ResidualStats.of(residuals),
         reprojection_residuals=residuals,
         reprojection_frames=frame_index,
@@ -450,7 +448,7 @@ def run_visual_inertial(
     T_guess = nominal_T_cam_imu() if initial_T_cam_imu is None else np.asarray(initial_T_cam_imu, float)
     if T_guess.shape != (4, 4):
         raise CalibrationError(f"initial_T_cam_imu must be a 4 x 4 transform, got shape {T_guess.shape}")
-    problem = _prepare(observations, imu, camera, target, imu_noise, options)
+    problem = _prepare(observations, imu, camera, target, imu_noise, options, float(initial_time_offset))
     est = _initial_estimate(problem, T_guess, float(initial_time_offset))
     g, solution, est, iterations = _solve_rounds(problem, est, task == "joint")
     problem.warnings += _span_warnings(problem, g) + _gap_warnings(g.state_times)
