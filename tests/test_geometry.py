@@ -27,6 +27,13 @@ def random_rotations(n, seed=0):
     return [so3_exp(rng.normal(size=3) * 1.2) for _ in range(n)]
 
 
+@pytest.mark.parametrize("gap", [1e-9, 1e-6, 1e-5, 9e-5, 1.1e-4, 1e-3])
+def test_so3_log_near_pi_about_a_generic_axis(gap):
+    axis = np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8])
+    w = axis * (np.pi - gap)
+    assert np.abs(so3_log(so3_exp(w)) - w).max() < 1e-9
+
+
 def test_so3_exp_log_roundtrip_including_near_pi():
     rng = np.random.default_rng(1)
     for w in [*list(rng.normal(size=(20, 3))), np.array([np.pi - 1e-6, 0, 0]), np.array([0, 0, 1e-10])]:

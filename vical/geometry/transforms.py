@@ -36,17 +36,16 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
 def so3_log(R: np.ndarray) -> np.ndarray:
     """Rotation vector (3,) [rad] of the rotation matrix ``R`` (3, 3); angle in [0, pi]."""
     R = np.asarray(R, dtype=float)
+    vee = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin(theta) axis
     cos_theta = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    theta = float(np.arccos(cos_theta))
-    vee = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    theta = float(np.arctan2(0.5 * np.linalg.norm(vee), cos_theta))  # well conditioned at 0 and pi
     if theta < 1e-6:
         return 0.5 * vee
     if np.pi - theta < 1e-4:
-        # Near pi the antisymmetric part vanishes: take the axis from the symmetric part.
-        B = (R + np.eye(3)) / 2.0
-        axis = np.sqrt(np.clip(np.diag(B), 0.0, None))
-        k = int(np.argmax(axis))
-        axis = B[k] / axis[k]
+        # Near pi the antisymmetric part vanishes: the symmetric part is cos I + (1 - cos) a a^T.
+        aaT = ((R + R.T) / 2.0 - cos_theta * np.eye(3)) / (1.0 - cos_theta)
+        k = int(np.argmax(np.diag(aaT)))
+        axis = aaT[:, k] / np.sqrt(aaT[k, k])
         axis /= np.linalg.norm(axis)
         if np.dot(axis, vee) < 0:
             axis = -axis
