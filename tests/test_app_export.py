@@ -3,7 +3,7 @@
 import numpy as np
 from test_io_samples import make_recording
 
-from vical.apps.export import main
+from vical.apps.export import kalibr_commands, main
 from vical.io import open_recording, read_camchain, read_imu_yaml, read_target_yaml, save_recording
 
 
@@ -39,3 +39,12 @@ def test_export_refuses_recordings_without_images_and_full_outputs(tmp_path, cap
     assert "--overwrite" in capsys.readouterr().err
     assert main([str(tmp_path / "b"), "--out", str(tmp_path / "c")]) == 2
     assert "not a vical recording directory" in capsys.readouterr().err
+    (tmp_path / "file").write_text("x")
+    assert main([str(tmp_path / "rec2"), "--out", str(tmp_path / "file")]) == 2
+    assert "is a file" in capsys.readouterr().err
+
+
+def test_kalibr_commands_follow_the_topic_and_the_lens_model(tmp_path):
+    commands = kalibr_commands(tmp_path, True, "/camera/image", "equidistant")
+    assert "--topics /camera/image " in commands[0] and "--models pinhole-equi " in commands[0]
+    assert "--models pinhole-radtan " in kalibr_commands(tmp_path, True)[0]

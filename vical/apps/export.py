@@ -41,15 +41,20 @@ def kalibr_result_name(prefix: str, bag: Path) -> str:
     return f"{prefix}-{tag}.yaml"
 
 
-def kalibr_commands(out: Path, has_truth: bool) -> list[str]:
+KALIBR_MODELS = {"radtan": "pinhole-radtan", "equidistant": "pinhole-equi"}
+
+
+def kalibr_commands(
+    out: Path, has_truth: bool, image_topic: str = "/cam0/image_raw", distortion: str = "radtan"
+) -> list[str]:
     """The Kalibr command lines for the exported files (camera first, then camera-IMU).
 
     Without the truth, the camera-IMU step takes the camera calibration Kalibr's first step writes.
     """
     cams = out / "camchain.yaml" if has_truth else Path(kalibr_result_name("camchain", out / "data.bag"))
     return [
-        f"kalibr_calibrate_cameras --bag {out / 'data.bag'} --topics /cam0/image_raw "
-        f"--models pinhole-radtan --target {out / 'target.yaml'}",
+        f"kalibr_calibrate_cameras --bag {out / 'data.bag'} --topics {image_topic} "
+        f"--models {KALIBR_MODELS[distortion]} --target {out / 'target.yaml'}",
         f"kalibr_calibrate_imu_camera --bag {out / 'data.bag'} --cams {cams} --imu {out / 'imu.yaml'} "
         f"--target {out / 'target.yaml'} --time-calibration",
     ]
@@ -59,6 +64,8 @@ def export(rec: Recording, out: Path, image_topic: str, imu_topic: str, overwrit
     """Write the Kalibr inputs of ``rec`` into ``out``; return the written paths."""
     if rec.frames.images is None:
         raise FormatError("the recording has no images; record it with images (vical-record images=true)")
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"--out {out} is a file; give a directory")
     if out.exists() and not overwrite and any(out.iterdir()):
         raise FileExistsError(f"{out} exists and is not empty; pass --overwrite to replace its files")
     out.mkdir(parents=True, exist_ok=True)
@@ -94,7 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     for path in written:
         print(f"wrote {path}")
     print("Kalibr, on a machine with Kalibr installed:")
-    for command in kalibr_commands(out, rec.truth is not None):
+    distortion = rec.truth.camera.distortion if rec.truth is not None else "radtan"
+    for command in kalibr_commands(out, rec.truth is not None, args.image_topic, distortion):
         print(f"  {command}")
     return 0
 
