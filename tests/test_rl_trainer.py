@@ -62,21 +62,32 @@ def test_same_seed_gives_identical_parameters_and_another_seed_does_not(tmp_path
     assert not any(p.name.endswith(".tmp") for p in (tmp_path / "a").iterdir())  # atomic writes leave no temp files
 
 
+def scalars(run_dir: Path, tag: str) -> list[tuple[int, float]]:
+    events = EventAccumulator(str(run_dir / "tb"), size_guidance={"scalars": 0}).Reload()
+    return [(e.step, e.value) for e in events.Scalars(tag)]
+
+
 def test_resumed_run_continues_exactly_as_the_uninterrupted_run(tmp_path):
     full = train(tiny_config(tmp_path / "full"))
-    part = train(tiny_config(tmp_path / "part", total_steps=300))
+    # checkpoints at steps 150 and 300; the run goes on to 400, logging past its last checkpoint (a killed run)
+    part = train(tiny_config(tmp_path / "part", total_steps=400, checkpoint_every=150))
     assert load_checkpoint(tmp_path / "part" / CHECKPOINT)["counters"]["step"] == 300
     # logging, evaluation and checkpoint cadence may change on resume: they never touch the training numbers
     cadence = {"log_every": 10, "eval_every": 100, "plot_every_episodes": 1, "checkpoint_every": 250}
     resumed_cfg = tiny_config(tmp_path / "ignored", total_steps=600, **cadence) | {"resume": str(tmp_path / "part")}
     resumed = train(resumed_cfg)
-    assert part.steps == 300 and resumed.resumed_from == 300
+    assert part.steps == 400 and resumed.resumed_from == 300
     assert (resumed.steps, resumed.episodes, resumed.updates) == (full.steps, full.episodes, full.updates)
     assert_same_parameters(parameters(full.agent), parameters(resumed.agent))
-    # the interrupted run's events after the checkpoint are purged, so curves have no duplicate steps
-    events = EventAccumulator(str(tmp_path / "part" / "tb")).Reload()
-    steps = [e.step for e in events.Scalars("charts/episodic_return")]
-    assert steps == sorted(set(steps)) and steps[-1] == 600
+    # TensorBoard: the checkpoint step's records (written before the checkpoint) are kept, what the interrupted
+    # run logged after it (steps 301-400) is purged, so each step appears once with the uninterrupted values
+    returns = scalars(tmp_path / "part", "charts/episodic_return")
+    assert returns == scalars(tmp_path / "full", "charts/episodic_return")
+    assert [step for step, _ in returns] == list(range(50, 601, 50))
+    # evaluations: 200 from the first process; 400, 500, 600 from the resumed one (the first's 400 was purged)
+    assert [step for step, _ in scalars(tmp_path / "part", "charts/eval_return_mean")] == [200, 400, 500, 600]
+    losses = [step for step, _ in scalars(tmp_path / "part", "losses/q_loss")]
+    assert losses == [150, 200, 250, 300, *range(310, 601, 10)]
 
 
 def test_checkpoint_from_an_incompatible_config_is_refused_listing_the_keys(tmp_path):

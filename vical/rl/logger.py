@@ -29,8 +29,10 @@ from torch.utils.tensorboard import SummaryWriter
 class TrainLogger:
     """Writes one run's TensorBoard events under ``log_dir``.
 
-    ``purge_step``: on resume, events at or after this step (written by the interrupted run after its
-    last checkpoint) are discarded so the curves continue without duplicates.
+    ``purge_step``: on resume, events at or after this step are discarded so the curves continue without
+    duplicates. The trainer passes the checkpoint's step + 1: a checkpoint at step S is written after
+    every event of step S, so those are kept and only what the interrupted run logged after its
+    checkpoint is purged.
     """
 
     def __init__(self, log_dir: str | Path, info_prefixes: Iterable[str], purge_step: int | None = None) -> None:

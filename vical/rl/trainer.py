@@ -187,7 +187,10 @@ class Trainer:
         if s.resume:
             self._restore(load_checkpoint(s.resume / CHECKPOINT))
         atomic_write(s.run_dir / "config.yaml", lambda f: f.write(OmegaConf.to_yaml(self.config).encode()))
-        self.logger = TrainLogger(s.run_dir / "tb", s.train.info_prefixes, purge_step=self.step or None)
+        # The checkpoint at step S is written after everything logged at step S: keep those events and
+        # purge only what the interrupted run logged after its checkpoint (steps > S).
+        purge = None if self.resumed_from is None else self.resumed_from + 1
+        self.logger = TrainLogger(s.run_dir / "tb", s.train.info_prefixes, purge_step=purge)
         self._stats: dict[str, torch.Tensor] = {}
 
     # ---- the loop -------------------------------------------------------------------------------
