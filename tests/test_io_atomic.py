@@ -27,3 +27,21 @@ def test_atomic_directory_respects_the_umask(tmp_path, umask_022):
         (tmp / "a.txt").write_text("x")
     assert stat.S_IMODE((tmp_path / "rec").stat().st_mode) == 0o755
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".rec.tmp-")]
+
+
+def test_failed_swap_puts_the_old_directory_back(tmp_path, monkeypatch):
+    final = tmp_path / "rec"
+    final.mkdir()
+    (final / "old.txt").write_text("old")
+    real_rename = os.rename
+
+    def rename_failing_into_place(src, dst):
+        if str(src).startswith(str(tmp_path / ".rec.tmp-")):
+            raise OSError("disk gone")
+        real_rename(src, dst)
+
+    monkeypatch.setattr(os, "rename", rename_failing_into_place)
+    with pytest.raises(OSError, match="disk gone"), atomic_directory(final, overwrite=True) as tmp:
+        (tmp / "new.txt").write_text("new")
+    assert (final / "old.txt").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]

@@ -74,9 +74,10 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
     """Yield a temporary sibling directory; on success it is renamed to ``path``.
 
     With ``overwrite`` an existing directory at ``path`` is replaced: it is first renamed aside,
-    the new directory renamed into place, then the old one deleted, so ``path`` always holds
-    either the old or the complete new content. If the body raises, the temporary directory is
-    deleted and ``path`` is untouched.
+    the new directory renamed into place, then the old one deleted; if the second rename fails the
+    old directory is renamed back. ``path`` never holds a partial directory, but between the two
+    renames (two system calls) it briefly does not exist. If the body raises, the temporary
+    directory is deleted and ``path`` is untouched.
     """
     final = check_can_write_dir(path, overwrite)
     final.parent.mkdir(parents=True, exist_ok=True)
@@ -98,5 +99,9 @@ def _replace_directory(tmp: Path, final: Path, overwrite: bool) -> None:
     old = Path(tempfile.mkdtemp(prefix=f".{final.name}.old-", dir=final.parent))
     os.rmdir(old)
     os.rename(final, old)
-    os.rename(tmp, final)
+    try:
+        os.rename(tmp, final)
+    except BaseException:
+        os.rename(old, final)  # put the previous content back
+        raise
     shutil.rmtree(old, ignore_errors=True)
