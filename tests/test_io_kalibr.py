@@ -199,6 +199,13 @@ def test_bad_target_files_name_file_and_key(tmp_path, text, message):
     assert str(path) in str(info.value)
 
 
+def test_camchain_with_non_string_keys_is_refused_clearly(tmp_path):
+    path = tmp_path / "camchain.yaml"
+    path.write_text("1: foo\ncam1: {}\n")
+    with pytest.raises(KalibrFormatError, match=r"no section 'cam0'; the file has \['1', 'cam1'\]"):
+        read_camchain(path)
+
+
 def test_bad_camchain_files(tmp_path):
     truth = make_truth()
     path = tmp_path / "camchain.yaml"

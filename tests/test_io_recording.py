@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 from test_io_samples import assert_frames_equal, make_recording
 
 import vical.io.recording as recording_module
@@ -111,6 +112,15 @@ def test_truncated_manifest_is_named(tmp_path):
     text = (path / "recording.yaml").read_text()
     (path / "recording.yaml").write_text(text[:40])
     with pytest.raises(RecordingFormatError, match=r"recording\.yaml"):
+        load_recording(path)
+
+
+def test_malformed_file_entry_in_manifest_is_named(tmp_path):
+    path = save_recording(make_recording(), tmp_path / "rec")
+    manifest = yaml.safe_load((path / "recording.yaml").read_text())
+    manifest["files"]["imu.npz"] = "imu.npz"
+    (path / "recording.yaml").write_text(yaml.safe_dump(manifest))
+    with pytest.raises(RecordingFormatError, match=r"files\.imu\.npz must give the file's bytes and sha256"):
         load_recording(path)
 
 

@@ -107,8 +107,8 @@ def read_camchain(path: str | os.PathLike, camera: str = "cam0") -> tuple[Camera
     data = load_mapping(path, KalibrFormatError)
     if camera in data:
         entry, where = data[camera], f"{path} [{camera}]"
-    elif any(k.startswith("cam") and k[3:].isdigit() for k in data):
-        raise KalibrFormatError(f"{path}: no section {camera!r}; the file has {sorted(data)}")
+    elif any(isinstance(k, str) and k.startswith("cam") and k[3:].isdigit() for k in data):
+        raise KalibrFormatError(f"{path}: no section {camera!r}; the file has {sorted(map(str, data))}")
     else:
         entry, where = data, str(path)
     if not isinstance(entry, dict):

@@ -170,6 +170,9 @@ def _read_manifest(path: Path) -> dict[str, Any]:
         container = manifest["files"] if key.endswith(".npz") else manifest
         if not isinstance(container, dict) or key not in container:
             raise RecordingFormatError(f"{path}: required entry {key!r} is missing (truncated manifest?)")
+    for name, info in manifest["files"].items():
+        if not isinstance(info, dict) or not {"bytes", "sha256"} <= set(info):
+            raise RecordingFormatError(f"{path}: files.{name} must give the file's bytes and sha256, got {info!r}")
     return manifest
 
 
