@@ -114,10 +114,18 @@ def test_time_offset_shows_up_with_kalibr_sign_in_pnp_poses(offset_recording):
     assert costs[np.argmin(np.abs(shifts + OFFSET * 1e9))] > 10 * costs.min()
 
 
-def test_negative_offset_drops_frames_exposed_before_the_start(sim):
-    truth = replace(mean_sensor(SensorSampling()), time_offset=-OFFSET)
-    rec = _record(sim, truth, steps=[([0.0, 0.0, 0.1], [0.0, 0.0, 0.0])])
-    assert rec.frames.t[0] == 100_000_000  # stamp 0 would be exposed at -12.3 ms
+def test_frames_exposed_outside_the_imu_span_are_dropped(sim):
+    """Only frames exposed within the IMU samples are kept; the offset moves which stamps those are."""
+    first_stamps = {}
+    for offset in (0.0, -0.2, 0.2):
+        truth = replace(mean_sensor(SensorSampling()), time_offset=offset)
+        rec = _record(sim, truth, steps=[([0.0, 0.0, 0.1], [0.0, 0.0, 0.0])])
+        exposure = rec.frames.t + round(offset * 1e9)
+        assert exposure[0] >= rec.imu.t[0] and exposure[-1] <= rec.imu.t[-1]
+        first_stamps[offset] = int(rec.frames.t[0])
+    # The IMU starts at 5 ms: stamp 0 is exposed too early at offset 0, stamps up to 200 ms at -0.2 s,
+    # and at +0.2 s stamp -200 ms is already exposed at 0 ms (too early) but -100 ms lands at 100 ms.
+    assert first_stamps == {0.0: 100_000_000, -0.2: 300_000_000, 0.2: -100_000_000}
 
 
 def test_recording_saves_and_loads_exactly(sim, tmp_path):

@@ -53,8 +53,9 @@ class ImuSiteReader:
 
     A reading at physics step ``k`` comes from the site poses of steps ``k - 1``, ``k``, ``k + 1``
     by central differences: angular rate ``vee(R_k^T (R_{k+1} - R_{k-1})) / 2h`` (the antisymmetric
-    part; it equals ``(log(R_k^T R_{k+1}) - log(R_k^T R_{k-1})) / 2h`` to third order in the step's
-    rotation, ~1e-9 relative here) and specific force ``R_k^T ((p_{k+1} - 2 p_k + p_{k-1}) / h^2 - g)``.
+    part, scaled by ``angle / sin(angle)`` of the step's rotation to second order: then it equals
+    ``(log(R_k^T R_{k+1}) - log(R_k^T R_{k-1})) / 2h`` to ~1e-12 relative) and specific force
+    ``R_k^T ((p_{k+1} - 2 p_k + p_{k-1}) / h^2 - g)``.
     These are exact (to O(h^2)) for the pose trajectory that the camera observes, so the two
     sensors agree in time.
 
@@ -112,6 +113,8 @@ class ImuSiteReader:
         (p_m, R_m), (p_0, R_0), (p_p, R_p) = self._poses
         M = R_0.T @ (R_p - R_m)
         omega = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]]) * (0.25 / h)
+        # The antisymmetric part holds sin(angle) per step: angle / sin(angle) ~ 1 + angle^2 / 6.
+        omega *= 1.0 + (omega @ omega) * (h * h) / 6.0
         accel_world = (p_p - 2.0 * p_0 + p_m) * (1.0 / (h * h))
         reading = np.concatenate([omega, (accel_world - self._gravity) @ R_0])
         return SiteReading(t_ns, reading, p_0, R_0, (p_p - p_m) * (0.5 / h), omega)
