@@ -1,5 +1,6 @@
 """vical-train: every config composes and validates; a killed run resumed from its directory ends exactly as an
-uninterrupted run (SIGKILL of a real subprocess mid-run)."""
+uninterrupted run (SIGKILL of a real subprocess mid-run); user errors are one line and exit status 2; resume
+overrides other than key=value changes of existing keys are refused by name."""
 
 import os
 import signal
@@ -12,7 +13,10 @@ import gymnasium as gym
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
+from vical.apps.train import resumed_config
+from vical.config import ConfigError
 from vical.rl.checkpoint import load_checkpoint
 from vical.rl.trainer import AGENT, CHECKPOINT, make_env, parse_settings, train
 
@@ -81,7 +85,8 @@ def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_p
     # a resume that changes a setting which alters the numbers is refused, naming it
     refused = run_app(f"resume={run}", "agent.gamma=0.5", cwd=tmp_path)
     out = refused.communicate(timeout=120)[0]
-    assert refused.returncode != 0 and "agent.gamma: 0.99 (checkpoint) vs 0.5 (now)" in out
+    assert refused.returncode == 2 and "agent.gamma: 0.99 (checkpoint) vs 0.5 (now)" in out
+    assert out.startswith("vical-train: error: checkpoint") and "Traceback" not in out
 
     resumed = run_app(f"resume={run}", cwd=tmp_path)
     out = resumed.communicate(timeout=300)[0]
@@ -94,3 +99,67 @@ def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_p
     assert final.keys() == expected.keys()
     for key, value in expected.items():
         assert torch.equal(final[key], value), key
+
+
+def test_a_bad_value_is_one_error_line_and_exit_status_2(tmp_path):
+    proc = run_app("train.total_steps=0", f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
+    out = proc.communicate(timeout=120)[0]
+    assert proc.returncode == 2, out
+    assert out == "vical-train: error: train.total_steps must be a number in [1, inf), got 0\n"
+
+
+def test_resume_of_a_missing_directory_is_refused_creating_nothing(tmp_path):
+    proc = run_app("resume=runs/typo", cwd=tmp_path)
+    out = proc.communicate(timeout=120)[0]
+    assert proc.returncode == 2, out
+    assert out.startswith("vical-train: error: resume must be a run directory") and "'runs/typo' does not exist" in out
+    assert list(tmp_path.iterdir()) == []  # neither runs/typo nor any other output directory
+
+
+@pytest.fixture
+def saved_run(tmp_path) -> Path:
+    """A run directory whose config.yaml is a complete (composed, validated) config."""
+    cfg = OmegaConf.to_container(composed([f"run_dir={tmp_path}"]), resolve=True)
+    OmegaConf.save(OmegaConf.create(cfg), tmp_path / "config.yaml")
+    return tmp_path
+
+
+def test_resume_applies_key_value_overrides_to_the_saved_config(saved_run):
+    overrides = [
+        f"resume={saved_run}",
+        "train.total_steps=20000",
+        "train.info_prefixes=[calib/]",
+        "train.progress=false",
+    ]
+    cfg = resumed_config(str(saved_run), overrides)
+    assert cfg.train.total_steps == 20000 and cfg.train.info_prefixes == ["calib/"] and cfg.train.progress is False
+    assert cfg.resume == str(saved_run) and cfg.run_dir == str(saved_run)
+    assert cfg.agent.gamma == 0.99 and cfg.train.warmup_steps == 1000  # everything else as saved
+
+
+@pytest.mark.parametrize(
+    "override, reason",
+    [
+        ("agent=sac_authors", "a config group selection: the saved config already fixes agent"),
+        ("env=pendulum", "a config group selection: the saved config already fixes env"),
+        ("~train.total_steps", "a deletion"),
+        ("+train.total_steps=5", "an addition"),
+        ("++agent.gamma=0.5", "an addition"),
+        ("+sede=3", "an addition"),
+        ("sede=3", "unknown key 'sede'"),
+        ("train.evaluate_every=5", "unknown key 'train.evaluate_every'"),
+        ("train=5", "train is a section"),
+    ],
+)
+def test_resume_refuses_overrides_that_are_not_changes_of_saved_keys(saved_run, override, reason):
+    with pytest.raises(ConfigError) as err:
+        resumed_config(str(saved_run), [f"resume={saved_run}", "train.total_steps=20000", override])
+    message = str(err.value)
+    assert f"{override} ({reason}" in message
+    assert "train.total_steps=20000 (" not in message  # the valid override is not listed
+
+
+def test_resume_lists_every_refused_override(saved_run):
+    with pytest.raises(ConfigError) as err:
+        resumed_config(str(saved_run), ["agent=sac_authors", "~train.total_steps", "+foo=1"])
+    assert all(name in str(err.value) for name in ("agent=sac_authors (", "~train.total_steps (", "+foo=1 ("))
