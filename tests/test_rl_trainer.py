@@ -1,5 +1,6 @@
 """Trainer: determinism, exact resume, refusal of incompatible checkpoints, NaN handling, logging, config errors."""
 
+import os
 from pathlib import Path
 from typing import ClassVar
 
@@ -11,7 +12,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from vical.config import ConfigError
 from vical.rl.checkpoint import IncompatibleCheckpointError, load_checkpoint
-from vical.rl.trainer import CHECKPOINT, LAST_GOOD, TrainingDivergedError, train
+from vical.rl.trainer import AGENT, CHECKPOINT, LAST_GOOD, TrainingDivergedError, train
 
 PENDULUM_50 = {"_target_": "gymnasium.make", "id": "Pendulum-v1", "max_episode_steps": 50}
 
@@ -59,7 +60,11 @@ def test_same_seed_gives_identical_parameters_and_another_seed_does_not(tmp_path
     assert not torch.equal(
         first.agent.state_dict()["policy.mlp.weights.0"], other.agent.state_dict()["policy.mlp.weights.0"]
     )
-    assert not any(p.name.endswith(".tmp") for p in (tmp_path / "a").iterdir())  # atomic writes leave no temp files
+    assert not any(".tmp" in p.name for p in (tmp_path / "a").iterdir())  # atomic writes leave no temp files
+    umask = os.umask(0o022)
+    os.umask(umask)
+    for name in (CHECKPOINT, AGENT, "config.yaml"):  # the permissions open() gives, not a temp file's private 0600
+        assert (tmp_path / "a" / name).stat().st_mode & 0o777 == 0o666 & ~umask, name
 
 
 def scalars(run_dir: Path, tag: str) -> list[tuple[int, float]]:

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from vical.rl.checkpoint import atomic_write
+from vical.io.atomic import atomic_file
 
 _ARRAYS = ("obs", "actions", "rewards", "next_obs", "terminated")
 
@@ -94,7 +94,8 @@ class ReplayBuffer:
         path = Path(path)
         state = self.state_dict()
         arrays = {k: (v.numpy() if isinstance(v, Tensor) else np.asarray(v)) for k, v in state.items()}
-        atomic_write(path, lambda f: np.savez(f, **arrays))
+        with atomic_file(path) as tmp, open(tmp, "wb") as f:  # a file object: np.savez would append .npz to a path
+            np.savez(f, **arrays)
 
     def load(self, path: str | Path) -> None:
         """Restore from a file written by :meth:`save`."""

@@ -1,14 +1,14 @@
-"""Atomic file writes and checkpoint config compatibility."""
+"""Checkpoint files (written atomically with :mod:`vical.io.atomic`) and checkpoint config compatibility."""
 
 from __future__ import annotations
 
-import os
-import uuid
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import torch
+
+from vical.io.atomic import atomic_file
 
 # Settings a resumed run may change: none of them touches the training's random streams or arithmetic
 # (evaluation uses its own env and deterministic actions; logging, plots and checkpoints only read state).
@@ -33,27 +33,10 @@ class IncompatibleCheckpointError(ValueError):
     """A checkpoint written under a config that differs from the current one in a setting that matters."""
 
 
-def atomic_write(path: str | Path, write: Callable[[IO[bytes]], Any]) -> None:
-    """Call ``write(file)`` on a temp file next to ``path``, then ``os.replace`` it onto ``path``.
-
-    A crash at any point leaves either the old file or the complete new one, never a partial file.
-    """
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex}.tmp")
-    try:
-        with open(tmp, "xb") as f:  # created with the user's umask, unlike tempfile's private 0600
-            write(f)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def save_checkpoint(state: dict, path: str | Path) -> None:
-    """``torch.save`` ``state`` to ``path`` atomically."""
-    atomic_write(path, lambda f: torch.save(state, f))
+    """``torch.save`` ``state`` to ``path`` atomically: a crash leaves the old file or the complete new one."""
+    with atomic_file(path) as tmp:
+        torch.save(state, tmp)
 
 
 def load_checkpoint(path: str | Path) -> dict:

@@ -25,8 +25,9 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from vical.config import ConfigError, from_mapping, require, require_range
+from vical.io.atomic import write_text_atomic
 from vical.rl.buffer import ReplayBuffer
-from vical.rl.checkpoint import atomic_write, flatten, load_checkpoint, require_compatible, save_checkpoint
+from vical.rl.checkpoint import flatten, load_checkpoint, require_compatible, save_checkpoint
 from vical.rl.logger import TrainLogger
 from vical.rl.sac import SAC, NonFiniteLossError, SACConfig
 
@@ -186,7 +187,7 @@ class Trainer:
         s.run_dir.mkdir(parents=True, exist_ok=True)
         if s.resume:
             self._restore(load_checkpoint(s.resume / CHECKPOINT))
-        atomic_write(s.run_dir / "config.yaml", lambda f: f.write(OmegaConf.to_yaml(self.config).encode()))
+        write_text_atomic(s.run_dir / "config.yaml", OmegaConf.to_yaml(self.config))
         # The checkpoint at step S is written after everything logged at step S: keep those events and
         # purge only what the interrupted run logged after its checkpoint (steps > S).
         purge = None if self.resumed_from is None else self.resumed_from + 1
