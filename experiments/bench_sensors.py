@@ -74,11 +74,11 @@ def physics_table(sim: PandaSim, sampling: SensorSampling, repeats: int) -> list
     per_step = bare / steps
     return [
         ("motion", f"{steps} physics steps, {frames} camera frames"),
-        ("physics only [us/step]", f"{1e6 * per_step:.1f}"),
-        ("physics + recorder (IMU + project) [us/step]", f"{1e6 * full / steps:.1f}"),
-        ("recorder overhead [% of physics]", f"{100 * (full - bare) / bare:.1f}"),
+        ("move_to physics + control, no sensors [us/step]", f"{1e6 * per_step:.1f}"),
+        ("move_to + recorder (IMU + project) [us/step]", f"{1e6 * full / steps:.1f}"),
+        ("recorder overhead [% of move_to]", f"{100 * (full - bare) / bare:.1f}"),
         ("project backend [us/frame]", f"{1e6 * per_frame:.1f}"),
-        ("project backend amortised [% of a physics step]", f"{100 * per_frame * frames / steps / per_step:.2f}"),
+        ("project backend amortised [% of a move_to step]", f"{100 * per_frame * frames / steps / per_step:.2f}"),
     ]
 
 

@@ -11,9 +11,8 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from vical.apps.record import apply_step, record
+from vical.apps.record import record
 from vical.config import ConfigError
-from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
 from vical.io.recording import load_recording
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -66,10 +65,3 @@ def test_bad_config_names_the_key(tmp_path, override, match):
     with pytest.raises(ConfigError, match=match):
         record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, override))
     assert not (tmp_path / "rec").exists()
-
-
-def test_step_moves_in_world_and_adds_euler_increments():
-    T = make_transform(euler_to_matrix([0.1, -0.2, 0.3]), [1.0, 2.0, 3.0])
-    T2 = apply_step(T, np.array([0.1, 0.0, -0.1, 0.05, 0.1, -0.2]))
-    np.testing.assert_allclose(T2[:3, 3], [1.1, 2.0, 2.9])
-    np.testing.assert_allclose(matrix_to_euler(T2[:3, :3]), [0.15, -0.1, 0.1], atol=1e-12)

@@ -18,6 +18,7 @@ from vical.geometry import (
     quat_to_matrix,
     so3_exp,
     so3_log,
+    step_pose,
     transform_points,
 )
 
@@ -142,3 +143,10 @@ def test_camera_body_to_optical_frame_axes():
     assert np.allclose(R_CAM_BODY @ [0, 0, 1], [0, -1, 0])
     T_body_imu = make_transform(so3_exp([0.1, -0.2, 1.5]), [0.06, 0.01, -0.1])
     assert np.allclose(body_imu_from_cam_imu(cam_imu_from_body_imu(T_body_imu)), T_body_imu)
+
+
+def test_step_pose_moves_in_world_and_adds_euler_increments():
+    T = make_transform(euler_to_matrix([0.1, -0.2, 0.3]), [1.0, 2.0, 3.0])
+    T2 = step_pose(T, [0.1, 0.0, -0.1], [0.05, 0.1, -0.2])
+    np.testing.assert_allclose(T2[:3, 3], [1.1, 2.0, 2.9])
+    np.testing.assert_allclose(matrix_to_euler(T2[:3, :3]), [0.15, -0.1, 0.1], atol=1e-12)

@@ -12,7 +12,6 @@ from vical.config import ConfigError
 from vical.geometry import (
     CameraModel,
     euler_to_matrix,
-    interpolate_transform,
     make_transform,
     so3_exp,
 )
@@ -57,10 +56,14 @@ def _view(sim, target, rng, distance=(0.7, 1.5), tilt=0.35):
 
 
 def test_interpolated_pose_is_exact_between_steps():
-    T0 = make_transform(euler_to_matrix([0.1, 0.2, 0.3]), [1.0, 2.0, 3.0])
-    T1 = make_transform(euler_to_matrix([0.11, 0.19, 0.31]), [1.001, 2.0, 2.999])
+    # Closed form: a rotation about a fixed axis and a straight translation, at 12.3 % of the step.
+    axis = np.array([0.2, -0.6, 0.77]) / np.linalg.norm([0.2, -0.6, 0.77])
+    R_base = euler_to_matrix([0.1, 0.2, 0.3])
+    T0 = make_transform(R_base, [1.0, 2.0, 3.0])
+    T1 = make_transform(R_base @ so3_exp(0.02 * axis), [1.001, 2.0, 2.999])
     T = interpolate_pose(1_000_123, 1_000_000, T0, 1_001_000, T1)
-    np.testing.assert_allclose(T, interpolate_transform(T0, T1, 0.123), atol=1e-15)
+    expected = make_transform(R_base @ so3_exp(0.123 * 0.02 * axis), [1.000123, 2.0, 2.999877])
+    np.testing.assert_allclose(T, expected, atol=1e-15)
     np.testing.assert_allclose(interpolate_pose(5, 5, T0, 6, T1), T0)
     with pytest.raises(ValueError, match="outside the interval"):
         interpolate_pose(7, 5, T0, 6, T1)

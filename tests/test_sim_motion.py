@@ -107,7 +107,7 @@ def test_on_step_reports_pre_step_time_of_derived_quantities(sim):
         np.testing.assert_allclose(site_pos[k], sim.ik.forward(pre_q[k])[0], atol=1e-12)
 
 
-def test_settling_holds_still_and_imu_reads_rest(sim):
+def test_settling_holds_still_and_mujocos_imu_sensors_read_rest(sim):
     sim.reset()
     gyro, accel_norm = [], []
 

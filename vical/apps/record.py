@@ -19,20 +19,13 @@ from vical.calib.aprilgrid import detect_aprilgrid
 from vical.calib.detection import detect_checkerboard
 from vical.config import ConfigError, require
 from vical.data import Recording
-from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
+from vical.geometry import step_pose
 from vical.io.atomic import atomic_directory
 from vical.io.images import write_png
 from vical.io.recording import save_recording
 from vical.sim import PandaSim, SimConfig
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, sample_sensor
-
-
-def apply_step(T_world_ee: np.ndarray, step: np.ndarray) -> np.ndarray:
-    """``T_world_ee`` (4, 4) moved by ``step = [dx, dy, dz, droll, dpitch, dyaw]`` (world translation [m],
-    increments of the world Euler angles [rad])."""
-    euler = matrix_to_euler(T_world_ee[:3, :3]) + step[3:]
-    return make_transform(euler_to_matrix(euler), T_world_ee[:3, 3] + step[:3])
 
 
 def parse_steps(steps) -> np.ndarray:
@@ -75,7 +68,7 @@ def record(cfg: DictConfig) -> Path:
     try:
         recorder.start(truth, rng)
         for step in tqdm(steps, desc="vical-record", unit="step", disable=not cfg.progress):
-            T_goal = apply_step(sim.ee_pose(), step)
+            T_goal = step_pose(sim.ee_pose(), step[:3], step[3:])
             recorder.add_motion(sim.move_to(T_goal, on_step=recorder.on_step, settle_time=float(cfg.settle_time)))
         metadata = {"seed": int(cfg.seed), "config": OmegaConf.to_container(cfg, resolve=True)}
         recording = recorder.recording(metadata)

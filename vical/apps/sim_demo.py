@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
+from vical.geometry import make_transform, matrix_to_euler, step_pose
 from vical.sim import MotionResult, PandaSim, SimConfig
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "conf" / "sim" / "default.yaml"
@@ -23,8 +23,7 @@ def pose_step(T_world_ee: np.ndarray, rho: float, theta: float, phi: float, dpsi
     """``T_world_ee`` (4, 4) moved by ``rho`` [m] along azimuth ``theta`` / polar angle ``phi`` [rad]
     and rotated by Euler increments ``dpsi`` (3,) [rad] (world frame)."""
     direction = np.array([np.sin(phi) * np.cos(theta), np.sin(phi) * np.sin(theta), np.cos(phi)])
-    euler = matrix_to_euler(T_world_ee[:3, :3]) + np.asarray(dpsi)
-    return make_transform(euler_to_matrix(euler), T_world_ee[:3, 3] + rho * direction)
+    return step_pose(T_world_ee, rho * direction, dpsi)
 
 
 def describe(i: int, result: MotionResult) -> str:

@@ -15,6 +15,7 @@ from vical.geometry.transforms import (
     slerp_rotation,
     so3_exp,
     so3_log,
+    step_pose,
     transform_error,
     transform_points,
 )
@@ -39,6 +40,7 @@ __all__ = [
     "slerp_rotation",
     "so3_exp",
     "so3_log",
+    "step_pose",
     "transform_error",
     "transform_points",
 ]

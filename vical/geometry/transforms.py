@@ -134,6 +134,13 @@ def matrix_to_euler(R: np.ndarray) -> np.ndarray:
     return np.array([np.arctan2(R[2, 1], R[2, 2]), pitch, np.arctan2(R[1, 0], R[0, 0])])
 
 
+def step_pose(T: np.ndarray, translation: np.ndarray, euler_increment: np.ndarray) -> np.ndarray:
+    """Pose ``T`` (4, 4) moved by ``translation`` (3,) [m] (world axes) with its Euler angles
+    ``[roll, pitch, yaw]`` (world-fixed, see ``euler_to_matrix``) increased by ``euler_increment`` (3,) [rad]."""
+    euler = matrix_to_euler(T[:3, :3]) + np.asarray(euler_increment, dtype=float)
+    return make_transform(euler_to_matrix(euler), T[:3, 3] + np.asarray(translation, dtype=float))
+
+
 def slerp_rotation(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
     """Geodesic interpolation between rotations: ``R0 @ exp(s * log(R0^T R1))``, ``s`` in [0, 1]."""
     return R0 @ so3_exp(s * so3_log(R0.T @ R1))

@@ -14,7 +14,7 @@ from vical.io.errors import (
     RecordingFormatError,
 )
 from vical.io.euroc import read_euroc, write_euroc
-from vical.io.images import Detector, read_image_folder
+from vical.io.images import ImageDetector, read_image_folder
 from vical.io.kalibr import (
     read_camchain,
     read_imu_yaml,
@@ -29,9 +29,9 @@ from vical.io.sources import detect_source, open_recording
 __all__ = [
     "BagFormatError",
     "CsvFormatError",
-    "Detector",
     "FormatError",
     "FormatWarning",
+    "ImageDetector",
     "KalibrFormatError",
     "RecordingFormatError",
     "detect_source",

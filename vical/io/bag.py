@@ -27,7 +27,7 @@ from tqdm import tqdm
 from vical.data import NS_PER_S, CameraFrames, DataError, ImuSamples, Recording, Target
 from vical.io.checks import check_sampling, scale_imu, sort_and_dedupe
 from vical.io.errors import BagFormatError, FormatError
-from vical.io.images import Detector, check_size, run_detector, to_gray
+from vical.io.images import ImageDetector, check_size, run_detector, to_gray
 
 IMAGE_TYPE, COMPRESSED_TYPE, IMU_TYPE = (
     "sensor_msgs/msg/Image",
@@ -123,7 +123,7 @@ def _imu_msg(t_ns: int, seq: int, gyro: np.ndarray, accel: np.ndarray) -> Any:
 def read_bag(
     path: str | os.PathLike,
     target: Target,
-    detector: Detector | None = None,
+    detector: ImageDetector | None = None,
     image_topic: str = "/cam0/image_raw",
     imu_topic: str | None = "/imu0",
     keep_images: bool = True,
@@ -174,7 +174,7 @@ def _read_streams(
     connections: dict[str, Any],
     path: Path,
     target: Target,
-    detector: Detector | None,
+    detector: ImageDetector | None,
     keep_images: bool,
 ) -> tuple[list, list]:
     """Decode every message of the chosen connections (tqdm progress): frame tuples and IMU rows."""

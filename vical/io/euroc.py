@@ -29,7 +29,7 @@ from vical.io.atomic import atomic_directory
 from vical.io.checks import check_sampling, sort_and_dedupe, warn
 from vical.io.csvfiles import parse_times, read_corners_csv, read_imu_csv, read_rows, write_corners_csv, write_imu_csv
 from vical.io.errors import CsvFormatError, FormatError, KalibrFormatError
-from vical.io.images import Detector, frames_from_images, read_gray, write_png
+from vical.io.images import ImageDetector, frames_from_images, read_gray, write_png
 from vical.io.kalibr import read_camchain, read_imu_yaml
 from vical.io.yamlfile import as_floats, dump_yaml, load_mapping
 
@@ -120,7 +120,7 @@ def _imu_sensor_yaml(rec: Recording) -> dict[str, Any]:
 def read_euroc(
     path: str | os.PathLike,
     target: Target,
-    detector: Detector | None = None,
+    detector: ImageDetector | None = None,
     keep_images: bool = True,
     gyro_unit: str = "rad/s",
     accel_unit: str = "m/s^2",
@@ -129,8 +129,9 @@ def read_euroc(
 
     Corners come from ``detector`` when given, else from ``cam0/corners.csv`` when present,
     else the frames have no detections. Images are checked against the resolution in
-    ``cam0/sensor.yaml`` (or the first image). ``keep_images=False`` decodes images only for
-    detection, bounding memory on long sequences.
+    ``cam0/sensor.yaml`` (or the first image); every image is decoded for that check (and for
+    detection). ``keep_images=False`` drops each decoded image after use, bounding memory on long
+    sequences.
     """
     root = find_euroc_root(path)
     if root is None:

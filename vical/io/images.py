@@ -21,7 +21,7 @@ from vical.data import NS_PER_S, CameraFrames, Target
 from vical.io.checks import warn
 from vical.io.errors import FormatError
 
-Detector = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+ImageDetector = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")
 
 
@@ -78,7 +78,9 @@ def check_size(image: np.ndarray, expected: tuple[int, int] | None, where: str) 
     return size
 
 
-def run_detector(detector: Detector, image: np.ndarray, target: Target, where: str) -> tuple[np.ndarray, np.ndarray]:
+def run_detector(
+    detector: ImageDetector, image: np.ndarray, target: Target, where: str
+) -> tuple[np.ndarray, np.ndarray]:
     """Detections of ``detector`` on ``image`` as (K, 2) float64 and (K,) int64, validated against ``target``."""
     corners, ids = detector(image)
     corners = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
@@ -94,7 +96,7 @@ def frames_from_images(
     t: np.ndarray,
     images: Iterable[tuple[str, np.ndarray]],
     target: Target,
-    detector: Detector | None,
+    detector: ImageDetector | None,
     keep_images: bool,
     expected_size: tuple[int, int] | None = None,
     desc: str = "images",
@@ -125,7 +127,7 @@ def frames_from_images(
 def read_image_folder(
     folder: str | os.PathLike,
     target: Target,
-    detector: Detector | None = None,
+    detector: ImageDetector | None = None,
     rate_hz: float = 10.0,
     t0_ns: int = 0,
     keep_images: bool = True,

@@ -21,7 +21,7 @@ from vical.io.bag import read_bag
 from vical.io.csvfiles import read_corners_csv, read_imu_csv
 from vical.io.errors import FormatError
 from vical.io.euroc import find_euroc_root, read_euroc
-from vical.io.images import Detector, list_images, read_image_folder
+from vical.io.images import ImageDetector, list_images, read_image_folder
 from vical.io.recording import is_recording_dir, load_recording
 
 BAG_MAGIC = b"#ROSBAG V2.0"
@@ -54,7 +54,7 @@ def detect_source(path: str | os.PathLike) -> str:
 def open_recording(
     path: str | os.PathLike,
     target: Target | None = None,
-    detector: Detector | None = None,
+    detector: ImageDetector | None = None,
     imu_csv: str | os.PathLike | None = None,
     image_topic: str = "/cam0/image_raw",
     imu_topic: str | None = "/imu0",

@@ -1,7 +1,8 @@
 """IMU simulation: physics readings at the physics rate -> IMU samples at the IMU rate + noise.
 
-The physics gives the ideal specific force and angular rate of the IMU site at every physics
-step (MuJoCo ``accelerometer`` and ``gyro`` sensors). An IMU sample at time ``t`` is either the
+``ImuSiteReader`` gives the ideal specific force and angular rate of the IMU site at every physics
+step (central differences of the site's executed poses; see its docstring for why not MuJoCo's
+``accelerometer`` and ``gyro`` sensors). An IMU sample at time ``t`` is either the
 reading at ``t`` (``instant``) or the mean of the readings over the sample interval centred on
 ``t`` (``average``, a real IMU's anti-aliasing: what moves faster than the IMU rate is averaged
 out instead of folding into the samples; centring keeps the samples free of a group delay, which

@@ -1,7 +1,8 @@
 """Record a simulated sensor while the Panda moves: IMU, camera frames, ground truth -> ``Recording``.
 
 ``SensorRecorder.on_step`` is the ``PandaSim.move_to`` step callback. At every physics step it
-hands the IMU site's accelerometer and gyro readings to the IMU model (``vical.sim.imu``), keeps
+passes the IMU site's ideal rate and specific force (``ImuSiteReader``, one step late) to the IMU
+model (``vical.sim.imu``), keeps
 the ground-truth IMU state at the IMU sample instants and, at each camera exposure, observes the
 target from the camera pose interpolated between the two physics steps around the exposure.
 

@@ -21,7 +21,7 @@ import mujoco
 import numpy as np
 
 from vical.data import NS_PER_S
-from vical.geometry import make_transform, rotation_angle
+from vical.geometry import make_transform
 from vical.sim.config import NUM_JOINTS, SimConfig
 from vical.sim.kinematics import PANDA_LIMITS, IKResult, PandaIK
 from vical.sim.motion import JointPlan, MotionResult, feedforward_torques, motion_steps, quintic_plan, rest_torque
@@ -270,8 +270,3 @@ class PandaSim:
         T_now = self.ee_pose()
         trace = self._execute(plan, on_step)
         return self._result(T_now, q0, plan, trace, [], t_start)
-
-    def goal_pose_error(self, result: MotionResult) -> tuple[float, float]:
-        """Rotation [rad] and position [m] error of the final pose against the executed goal."""
-        dR = result.T_final[:3, :3].T @ result.T_goal[:3, :3]
-        return rotation_angle(dR), float(np.linalg.norm(result.T_final[:3, 3] - result.T_goal[:3, 3]))
