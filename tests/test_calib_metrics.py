@@ -2,7 +2,9 @@
 
 import numpy as np
 
-from vical.calib.metrics import extrinsic_relative_error, intrinsic_relative_error
+from vical.calib.metrics import calibration_errors, extrinsic_relative_error, intrinsic_relative_error
+from vical.calib.result import CalibrationResult, ResidualStats
+from vical.data import SensorTruth
 from vical.geometry import CameraModel, euler_to_matrix, make_transform
 
 
@@ -17,6 +19,24 @@ def test_intrinsic_relative_error_is_the_norm_of_fx_fy_cx_cy():
 def test_extrinsic_relative_error_of_the_12_vector():
     T_true = make_transform(np.eye(3), [0.0, 0.1, 0.06])
     T_est = make_transform(euler_to_matrix([0.0, 0.0, 0.01]), [0.003, 0.1, 0.06])
-    d_R = np.linalg.norm(T_est[:3, :3] - np.eye(3))
+    # ||Rz(a) - I||_F^2 = 2 (1 - cos a)^2 + 2 sin^2 a = 4 (1 - cos a); ||I||_F^2 = 3.
+    d_R = 2.0 * np.sqrt(1.0 - np.cos(0.01))
     expected = 100 * np.hypot(d_R, 0.003) / np.sqrt(3.0 + 0.1**2 + 0.06**2)
     assert np.isclose(extrinsic_relative_error(T_est, T_true), expected)
+
+
+def test_absolute_errors_in_px_deg_mm_ms():
+    truth_cam = CameraModel("radtan", 640, 480, 500.0, 500.0, 320.0, 240.0)
+    truth = SensorTruth(truth_cam, make_transform(np.eye(3), [0.0, 0.1, 0.06]), time_offset=0.010)
+    est_cam = truth_cam.with_intrinsics(503.0, 496.0, 321.0, 240.0, truth_cam.dist)
+    T_est = make_transform(euler_to_matrix([0.0, 0.0, np.deg2rad(0.5)]), [0.003, 0.1, 0.056])
+    result = CalibrationResult(
+        "joint", est_cam, T_est, 0.0125, np.zeros(3), np.zeros(3), np.zeros(3), [], np.zeros(0),
+        np.zeros((0, 0)), [], ResidualStats.of(np.zeros((0, 2))), np.zeros((0, 2)), np.zeros(0, int), None,
+        0.3, 1, 0.1, "converged", 10,
+    )  # fmt: skip
+    errors = calibration_errors(result, truth)
+    np.testing.assert_allclose(errors.intrinsic_abs_px, [3.0, 4.0, 1.0, 0.0])
+    assert np.isclose(errors.rotation_deg, 0.5)
+    assert np.isclose(errors.translation_mm, 5.0)  # |(3, 0, -4)| mm
+    assert np.isclose(errors.time_offset_ms, 2.5)
