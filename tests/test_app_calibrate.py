@@ -59,3 +59,8 @@ def test_errors_exit_with_status_2_and_a_message(recording_dir, tmp_path, capsys
     assert "does not exist" in capsys.readouterr().err
     assert main([str(path), "--task", "extrinsic", "--out", str(tmp_path / "y")]) == 2
     assert "--intrinsics" in capsys.readouterr().err
+    assert main([str(path), "--max-time-offset", "-0.1", "--out", str(tmp_path / "z")]) == 2
+    assert "max_time_offset must be a number >= 0" in capsys.readouterr().err
+    (tmp_path / "taken").write_text("a file where the output folder should go")
+    assert main([str(path), "--task", "intrinsic", "--out", str(tmp_path / "taken")]) == 2
+    assert "vical-calibrate: error:" in capsys.readouterr().err

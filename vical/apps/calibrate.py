@@ -35,7 +35,7 @@ from vical.calib.result import CalibrationResult
 from vical.calib.visual_inertial import ViOptions
 from vical.data import DataError, ImuNoise, Recording, Target
 from vical.data.target import TargetError
-from vical.geometry import CameraModel
+from vical.geometry import CameraModel, CameraModelError
 from vical.io.errors import FormatError
 from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_camchain_imucam, write_imu_yaml
 from vical.io.sources import detect_source, open_recording
@@ -207,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         run(args)
-    except (CalibrationError, FormatError, DataError, TargetError, FileNotFoundError) as exc:
+    except (CalibrationError, FormatError, DataError, TargetError, CameraModelError, OSError) as exc:
         print(f"vical-calibrate: error: {exc}", file=sys.stderr)
         return 2
     return 0

@@ -80,6 +80,22 @@ class ViOptions:
     max_iterations: int = 50
     gravity_magnitude: float = GRAVITY_MAGNITUDE
 
+    def __post_init__(self) -> None:
+        checks = {
+            "max_time_offset": (self.max_time_offset, "a number >= 0 [s]", self.max_time_offset >= 0),
+            "pixel_sigma": (
+                self.pixel_sigma,
+                "None or a number > 0 [px]",
+                self.pixel_sigma is None or self.pixel_sigma > 0,
+            ),
+            "huber_k": (self.huber_k, "None or a number > 0 [sigmas]", self.huber_k is None or self.huber_k > 0),
+            "max_iterations": (self.max_iterations, "an integer >= 1", self.max_iterations >= 1),
+            "gravity_magnitude": (self.gravity_magnitude, "a number > 0 [m/s^2]", self.gravity_magnitude > 0),
+        }
+        for name, (value, allowed, ok) in checks.items():
+            if not ok:
+                raise CalibrationError(f"calibration option {name} must be {allowed}, got {value!r}")
+
 
 @dataclass
 class _Problem:
