@@ -2,6 +2,7 @@
 
 import copy
 
+import numpy as np
 import pytest
 import torch
 
@@ -118,12 +119,64 @@ def test_non_finite_loss_is_named_and_leaves_parameters_untouched():
     assert all(torch.equal(before[k], v) for k, v in agent.state_dict().items())
 
 
+def policy_mean(agent: SAC, obs: torch.Tensor) -> torch.Tensor:
+    """The policy's pre-squash mean ``(act_dim,)`` for one observation, by a plain forward pass of its weights.
+
+    The policy MLP's output is ``[mean, log_std]``: the mean head is its first ``act_dim`` units.
+    """
+    mlp = agent.policy.mlp
+    x = obs.double()
+    for i, (w, b) in enumerate(zip(mlp.weights, mlp.biases, strict=True)):
+        x = w[0].double() @ x + b[0, :, 0].double()
+        if i < len(mlp.weights) - 1:
+            x = x.relu()
+    return x[:ACT]
+
+
 def test_deterministic_action_is_the_squashed_mean_and_sampling_follows_the_seed():
     a, b = make_agent(), make_agent()
+    for obs in fixed_batch().obs[:5]:
+        expected = torch.tanh(policy_mean(a, obs)).detach().float().numpy()
+        np.testing.assert_allclose(a.act(obs.numpy(), deterministic=True), expected, rtol=1e-5, atol=1e-6)
     obs = fixed_batch().obs[0].numpy()
-    assert (a.act(obs, deterministic=True) == a.act(obs, deterministic=True)).all()
     assert (a.act(obs) == b.act(obs)).all()  # same seed, same noise
     assert not (a.act(obs) == a.act(obs)).all()  # fresh noise on every call
+
+
+def networks_reached(agent: SAC, loss: torch.Tensor) -> set[str]:
+    """Names of the networks whose parameters get a non-zero gradient from ``loss``."""
+    networks = {"q": agent.q, "v": agent.v, "policy": agent.policy, "v_target": agent.v_target}
+    params = {name: list(net.parameters()) for name, net in networks.items()}
+    if agent.config.auto_alpha:
+        params["log_alpha"] = [agent.log_alpha]
+    reached = set()
+    for name, ps in params.items():
+        grads = torch.autograd.grad(loss, ps, retain_graph=True, allow_unused=True)
+        if any(g is not None and bool(g.abs().sum() > 0) for g in grads):
+            reached.add(name)
+    return reached
+
+
+@pytest.mark.parametrize("n_q, alpha", [(2, "auto"), (1, 1.0)])
+def test_each_loss_reaches_only_the_network_it_trains(n_q, alpha):
+    agent = make_agent(n_q=n_q, alpha=alpha)
+    # let the target V take gradients here, so any path from a loss into it would show up
+    agent.v_target.requires_grad_(True)
+    losses, _ = agent.losses(fixed_batch())
+    reached = {name: networks_reached(agent, loss) for name, loss in losses.items()}
+    expected = {"losses/v_loss": {"v"}, "losses/q_loss": {"q"}, "losses/policy_loss": {"policy"}}
+    if alpha == "auto":
+        expected["losses/alpha_loss"] = {"log_alpha"}
+    assert reached == expected
+
+
+def test_target_value_network_is_never_trained():
+    agent = make_agent()
+    assert not any(p.requires_grad for p in agent.v_target.parameters())
+    optimised = {id(p) for group in agent.optimizer.param_groups for p in group["params"]}
+    assert not optimised & {id(p) for p in agent.v_target.parameters()}
+    agent.update(fixed_batch())
+    assert all(p.grad is None for p in agent.v_target.parameters())
 
 
 @pytest.mark.parametrize(

@@ -12,7 +12,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from vical.config import ConfigError
 from vical.rl.checkpoint import IncompatibleCheckpointError, load_checkpoint
-from vical.rl.trainer import AGENT, CHECKPOINT, LAST_GOOD, TrainingDivergedError, train
+from vical.rl.trainer import AGENT, CHECKPOINT, LAST_GOOD, Trainer, TrainingDivergedError, train
 
 PENDULUM_50 = {"_target_": "gymnasium.make", "id": "Pendulum-v1", "max_episode_steps": 50}
 
@@ -179,6 +179,31 @@ class Reach1D(gym.Env):
         fig, ax = plt.subplots()
         ax.plot(observations[:, 0])
         return fig
+
+
+class Reach1DWall(Reach1D):
+    """Reach1D that also terminates (a real end of the MDP) when |x| reaches 1; records every step's flags."""
+
+    flags: ClassVar[list[tuple[bool, bool]]] = []
+
+    def step(self, action):
+        obs, reward, _, truncated, info = super().step(action)
+        terminated = abs(self.x) >= 1.0
+        Reach1DWall.flags.append((terminated, truncated))
+        return obs, reward, terminated, truncated, info
+
+
+def test_trainer_stores_truncations_as_non_terminal_and_terminations_as_terminal(tmp_path):
+    Reach1DWall.flags.clear()
+    env = {"_target_": f"{__name__}.Reach1DWall"}
+    trainer = Trainer(tiny_config(tmp_path, env=env, total_steps=300, eval_every=0, plot_every_episodes=0))
+    trainer.run()
+    terminated, truncated = np.array(Reach1DWall.flags).T  # training steps only: no evaluation env ran
+    assert len(terminated) == len(trainer.buffer) == 300
+    assert (truncated & ~terminated).sum() >= 3 and terminated.sum() >= 3  # both kinds of episode end occurred
+    stored = trainer.buffer.terminated[:300]
+    assert (stored[truncated & ~terminated] == 0).all()  # time limit: the critic bootstraps through it
+    assert (stored == terminated).all()
 
 
 def test_tensorboard_gets_namespaced_scalars_env_terms_hyperparameters_and_trajectory_images(tmp_path):

@@ -38,8 +38,8 @@ HIDDEN_DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
 class SACConfig:
     """Hyperparameters of :class:`SAC` (the defaults are documented and measured in ``docs/rl.md``).
 
-    alpha: entropy temperature, a positive number (fixed) or ``"auto"`` (tuned toward ``target_entropy``,
-    default ``-act_dim``, starting from ``init_alpha``).
+    alpha: entropy temperature, a non-negative number (fixed; 0 = no entropy term) or ``"auto"`` (tuned
+    toward ``target_entropy``, default ``-act_dim``, starting from ``init_alpha``).
     hidden_precision: dtype of the hidden-to-hidden matmuls (see ``EnsembleMLP``): ``float32`` or
     ``bfloat16`` (about 4x faster matmuls on CPUs with AVX512-BF16, much slower on CPUs without it).
     """
@@ -142,10 +142,13 @@ class SAC(nn.Module):
             action = self.policy.sample(obs_t, self.generator)[0]
         return action[0].numpy()
 
-    def update(self, batch: Batch) -> dict[str, Tensor]:
-        """One gradient step on a minibatch; returns the detached losses and diagnostics (tensors, no sync).
+    def losses(self, batch: Batch) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
+        """The losses of one update at the current parameters, with their autograd graphs, and diagnostics.
 
-        Raises :class:`NonFiniteLossError` before any parameter changes if a loss is NaN or infinite.
+        Returns ``(losses, diagnostics)``: ``losses`` maps ``losses/v_loss``, ``losses/q_loss``,
+        ``losses/policy_loss`` (and ``losses/alpha_loss`` with ``alpha: auto``) to scalar tensors, each of
+        which reaches only the parameters it trains; ``diagnostics`` holds detached ``losses/alpha``,
+        ``losses/entropy`` and ``losses/q_mean``. Draws the policy noise from the agent's generator.
         """
         cfg, alpha = self.config, self.alpha
 
@@ -171,6 +174,19 @@ class SAC(nn.Module):
         if cfg.auto_alpha:
             # Temperature: raise alpha while the entropy -log pi is below the target, lower it above.
             losses["losses/alpha_loss"] = -(self.log_alpha * (log_prob.detach() + self.target_entropy)).mean()
+        diagnostics = {
+            "losses/alpha": alpha,
+            "losses/entropy": -log_prob.detach().mean(),
+            "losses/q_mean": q.detach().mean(),
+        }
+        return losses, diagnostics
+
+    def update(self, batch: Batch) -> dict[str, Tensor]:
+        """One gradient step on a minibatch; returns the detached losses and diagnostics (tensors, no sync).
+
+        Raises :class:`NonFiniteLossError` before any parameter changes if a loss is NaN or infinite.
+        """
+        losses, diagnostics = self.losses(batch)
         total = sum(losses.values())
         _require_finite(total, losses)
 
@@ -178,13 +194,9 @@ class SAC(nn.Module):
         total.backward()
         self.optimizer.step()
         with torch.no_grad():
-            torch._foreach_lerp_(list(self.v_target.parameters()), list(self.v.parameters()), cfg.tau)
+            torch._foreach_lerp_(list(self.v_target.parameters()), list(self.v.parameters()), self.config.tau)
 
-        stats = {k: l.detach() for k, l in losses.items()}
-        stats["losses/alpha"] = alpha
-        stats["losses/entropy"] = -log_prob.detach().mean()
-        stats["losses/q_mean"] = q.detach().mean()
-        return stats
+        return {k: l.detach() for k, l in losses.items()} | diagnostics
 
     def training_state(self) -> dict:
         """Networks, optimiser and the sampling generator: everything to continue updates exactly."""
