@@ -86,11 +86,15 @@ def undistorted(camera: CameraModel, uv: np.ndarray) -> np.ndarray:
     return xy
 
 
-def pnp(camera: CameraModel, obs: FrameObservation, xy: np.ndarray | None = None) -> tuple[np.ndarray, float] | None:
+def pnp(
+    camera: CameraModel, obs: FrameObservation, xy: np.ndarray | None = None, refine: bool = True
+) -> tuple[np.ndarray, float] | None:
     """Pose ``T_cam_target`` (4, 4) of one frame and its approximate reprojection RMS [px], or None on failure.
 
     Pixels are undistorted with the camera model first (or taken as the given undistorted
-    normalised ``xy`` (K, 2)), so both distortion models share one path.
+    normalised ``xy`` (K, 2)), so both distortion models share one path. ``refine`` polishes the
+    planar solution to the least reprojection error (needed where the pose itself is used, not
+    where a solve refines it anyway).
     """
     if xy is None:
         xy = undistorted(camera, obs.uv)
@@ -99,9 +103,10 @@ def pnp(camera: CameraModel, obs: FrameObservation, xy: np.ndarray | None = None
     ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)  # planar target
     if not ok:
         return None
-    # IPPE solves from the plane homography, not for the least reprojection error: on a wide grid
-    # seen in perspective its residuals reached 2.4 px with 0.25 px corner noise.
-    rvec, tvec = cv2.solvePnPRefineLM(obj, img, np.eye(3), None, rvec, tvec)
+    if refine:
+        # IPPE solves from the plane homography, not for the least reprojection error: on a wide grid
+        # seen in perspective its residuals reached 2.4 px with 0.25 px corner noise.
+        rvec, tvec = cv2.solvePnPRefineLM(obj, img, np.eye(3), None, rvec, tvec)
     R = cv2.Rodrigues(rvec)[0]
     T = make_transform(R, tvec.ravel())
     p_cam = obs.points @ R.T + tvec.ravel()
@@ -114,9 +119,10 @@ def pnp(camera: CameraModel, obs: FrameObservation, xy: np.ndarray | None = None
 
 
 def frame_poses(
-    camera: CameraModel, observations: list[FrameObservation], min_corners: int = MIN_INIT_CORNERS
+    camera: CameraModel, observations: list[FrameObservation], min_corners: int = MIN_INIT_CORNERS, refine: bool = True
 ) -> dict[int, tuple[np.ndarray, float]]:
-    """PnP poses ``{observation index: (T_cam_target, rms [px])}`` of frames good enough to start from."""
+    """PnP poses ``{observation index: (T_cam_target, rms [px])}`` of frames good enough to start from
+    (``refine``: see ``pnp``)."""
     used = [k for k, obs in enumerate(observations) if len(obs.ids) >= min_corners]
     if not used:
         return {}
@@ -124,7 +130,7 @@ def frame_poses(
     splits = np.cumsum([len(observations[k].ids) for k in used])[:-1]
     poses = {}
     for k, xy in zip(used, np.split(xy_all, splits), strict=True):
-        result = pnp(camera, observations[k], xy)
+        result = pnp(camera, observations[k], xy, refine)
         if result is not None and result[1] < MAX_PNP_RMS_PX:
             poses[k] = result
     return poses

@@ -72,11 +72,13 @@ def _build_graph(
     values.insert(K_KEY, calibration)
     graph.add(skew_prior(K_KEY, calibration))
     noise = pixel_noise(sigma_px, huber_k)
+    landmark_keys = [landmark_key(i) for i in range(target.num_points)]
     for k, T_cam_target in poses.items():
-        values.insert(pose_key(k), gtsam.Pose3(invert_transform(T_cam_target)))
+        key = pose_key(k)
+        values.insert(key, gtsam.Pose3(invert_transform(T_cam_target)))
         obs = observations[k]
-        for uv, i in zip(obs.uv, obs.ids, strict=True):
-            graph.add(kind.sfm_factor(uv, noise, pose_key(k), landmark_key(int(i)), K_KEY))
+        for uv, i in zip(obs.uv, obs.ids.tolist(), strict=True):
+            graph.add(kind.sfm_factor(uv, noise, key, landmark_keys[i], K_KEY))
     return graph, values
 
 
@@ -158,7 +160,8 @@ def calibrate_intrinsics(
     camera0 = initial_camera_guess or initial_camera(observations, model, size)
     if camera0.distortion != model:  # keep the guessed focal length and principal point, start undistorted
         camera0 = CameraModel(model, camera0.width, camera0.height, camera0.fx, camera0.fy, camera0.cx, camera0.cy)
-    poses = frame_poses(camera0, observations, min(MIN_INIT_CORNERS, target.num_points))
+    # Unrefined planar poses: the joint solve refines them, and outliers are judged after it.
+    poses = frame_poses(camera0, observations, min(MIN_INIT_CORNERS, target.num_points), refine=False)
     if len(poses) < MIN_VIEWS:
         raise CalibrationError(
             f"intrinsic calibration needs at least {MIN_VIEWS} frames with a usable target view, got {len(poses)} "
