@@ -154,7 +154,7 @@ def imu_sampling_table(sim: PandaSim) -> list[tuple[str, str]]:
     """Physics-rate readings of the motion, split at the IMU Nyquist frequency; instant vs average."""
     sim.reset()
     reader = ImuSiteReader(sim.model)
-    reader.reset(sim.data, sim.time_ns)
+    reader.reset(sim.time_ns)
     readings = []
 
     def read(s: PandaSim, t: int) -> None:

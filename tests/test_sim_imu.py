@@ -276,7 +276,7 @@ def test_kinematic_gyro_agrees_with_mujocos_gyro_sensor_at_the_midpoint_velocity
     set_imu_pose(sim.model, make_transform(euler_to_matrix([0.1, -0.2, 1.5]), [0.06, 0.01, -0.1]))
     mujoco.mj_forward(sim.model, sim.data)
     reader = ImuSiteReader(sim.model)
-    reader.reset(sim.data, sim.time_ns)
+    reader.reset(sim.time_ns)
     site_id = sim.model.site("imu").id
     velocity = {"before": sim.data.qvel.copy()}
     sensor, midpoint, readings = {}, {}, {}
@@ -320,7 +320,7 @@ def test_reader_matches_a_site_spinning_on_a_circle():
     model = mujoco.MjModel.from_xml_string(SPINNER)
     data = mujoco.MjData(model)
     reader = ImuSiteReader(model)
-    reader.reset(data, 0)
+    reader.reset(0)
     r, w0, alpha, h = 0.3, 2.0, 3.0, 1e-3
     readings = []
     for k in range(400):

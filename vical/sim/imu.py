@@ -80,9 +80,9 @@ class ImuSiteReader:
         self._poses: list[tuple[np.ndarray, np.ndarray]] = []  # (p, R) of the last up to 3 steps
         self._t_ns: int | None = None
 
-    def reset(self, data: mujoco.MjData, t_ns: int) -> None:
-        """Start over: the next ``read`` must be that of the physics step starting at ``t_ns``."""
-        del data  # the first read brings the pose of t_ns itself
+    def reset(self, t_ns: int) -> None:
+        """Start over: the next ``read`` (which brings the pose of ``t_ns`` itself) must be that of the
+        physics step starting at ``t_ns``."""
         self._poses = []
         self._t_ns = int(t_ns)
 
@@ -94,9 +94,7 @@ class ImuSiteReader:
         """
         if self._t_ns != t_ns:
             if self._t_ns is None:
-                raise ImuSimulationError(
-                    "IMU reader got a physics step before reset(data, t_ns) (SensorRecorder.start)"
-                )
+                raise ImuSimulationError("IMU reader got a physics step before reset(t_ns) (SensorRecorder.start)")
             raise ImuSimulationError(
                 f"IMU reader expected the physics step starting at {self._t_ns} ns, got {t_ns} ns; "
                 "every physics step must be reported (reset the reader after moving without it)"

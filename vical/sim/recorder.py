@@ -102,7 +102,7 @@ class SensorRecorder:
         self.truth = truth
         set_imu_pose(self.sim.model, sensor_imu_pose(truth))
         mujoco.mj_forward(self.sim.model, self.sim.data)
-        self._reader.reset(self.sim.data, self.sim.time_ns)
+        self._reader.reset(self.sim.time_ns)
         imu_rng, self._cam_rng = rng.spawn(2)
         self._imu = ImuSimulator(
             self._step_ns,
