@@ -147,6 +147,14 @@ class SensorRecorder:
         self._path_length += float(result.path_length)
         self._duration += float(result.duration + result.settle_time)
 
+    def detections_since(self, first: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        """Corners (K_i, 2) [px] and point ids (K_i,) of the frames observed from index ``first`` on.
+
+        For consumers that follow the data while it is recorded (the calibration environment's
+        coverage); frames are counted from ``start`` in observation order.
+        """
+        return self._frames["corners"][first:], self._frames["ids"][first:]
+
     def recording(self, metadata: dict[str, Any] | None = None) -> Recording:
         """Everything recorded since ``start``; the trajectory holds the truth at the IMU sample times."""
         if self.truth is None:

@@ -1,0 +1,210 @@
+"""``CalibrationEnv``: the paper's calibration MDP as a gymnasium environment.
+
+One episode: a sensor is drawn from the ``sensor`` distributions, the simulated Panda rests at
+its start pose for ``reset_hold`` seconds (first views, still IMU data), then every step moves
+the end effector by one action (``vical.env.actions``) inside the workspace around the start
+pose, in MuJoCo physics, while the IMU and camera record. The camera frames of the step update
+the coverage (``vical.env.coverage``); the state is the coverage plus the current pose offset,
+all normalised to [0, 1]. When every coverage term has reached its threshold the episode
+terminates and the task's calibrator runs once on the whole recording; its error enters the
+terminal reward (``vical.env.rewards``). The step limit truncates the episode.
+
+``info`` carries ``coverage/*`` terms every step and ``calib/*`` results when a calibration ran,
+which ``vical-train`` logs to TensorBoard; ``recording()`` returns the episode's data for
+evaluation.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import Any, ClassVar
+
+import gymnasium as gym
+import numpy as np
+from matplotlib.figure import Figure
+
+from vical.calib.aprilgrid import detect_aprilgrid
+from vical.calib.detection import detect_checkerboard
+from vical.calib.errors import CalibrationError
+from vical.calib.tasks import CalibrationTask, run_task
+from vical.data import Recording, SensorTruth
+from vical.env.actions import action_to_step
+from vical.env.config import MdpConfig
+from vical.env.coverage import Coverage, view_features
+from vical.env.plots import episode_figure
+from vical.env.rewards import step_reward, terminal_reward
+from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
+from vical.sim import PandaSim, SimConfig
+from vical.sim.motion import MotionResult
+from vical.sim.recorder import SensorRecorder
+from vical.sim.sampling import SensorSampling, sample_sensor
+
+OBS_SIZE = 24
+
+
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Angles wrapped into [-pi, pi)."""
+    return (np.asarray(a, dtype=float) + np.pi) % (2 * np.pi) - np.pi
+
+
+class CalibrationEnv(gym.Env):
+    """The calibration MDP (``conf/env/calibration.yaml``).
+
+    Args:
+        sim: the ``sim`` config group (``vical.sim.SimConfig``).
+        sensor: the ``sensor`` config group (``vical.sim.sampling.SensorSampling``).
+        task: the ``task`` config group (``vical.calib.tasks.CalibrationTask``).
+        **mdp: the MDP constants (``vical.env.config.MdpConfig``).
+    """
+
+    metadata: ClassVar[dict] = {"render_modes": []}
+
+    def __init__(self, sim: Mapping[str, Any], sensor: Mapping[str, Any], task: Mapping[str, Any], **mdp: Any) -> None:
+        self.config = MdpConfig.from_config(mdp)
+        self.task = CalibrationTask.from_config(task)
+        self.sampling = SensorSampling.from_config(sensor)
+        self.sim = PandaSim(SimConfig.from_mapping(sim))
+        self.target = self.sim.cfg.board.target
+        detector = detect_aprilgrid if self.target.kind == "aprilgrid" else detect_checkerboard
+        self.recorder = SensorRecorder(
+            self.sim, self.target, self.sampling, detector if self.sampling.backend == "render" else None
+        )
+        self.coverage = Coverage(self.config.workspace, self.config.thresholds, self.config.view_novelty)
+        scale = np.asarray(self.config.action_scale, dtype=np.float32)
+        self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
+        self.observation_space = gym.spaces.Box(0.0, 1.0, (OBS_SIZE,), dtype=np.float32)
+        bounds = self.config.workspace
+        self._bound = np.r_[bounds.position, bounds.orientation]
+        self.truth: SensorTruth | None = None
+        self._steps = 0
+
+    # ------------------------------------------------------------------ gymnasium API
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
+        """Draw a sensor, rest at the start pose for ``reset_hold`` and return the first state."""
+        super().reset(seed=seed)
+        sim_seed, sensor_seed, noise_seed = self.np_random.integers(2**63 - 1, size=3)
+        self.sim.reset(seed=int(sim_seed))
+        self.truth = sample_sensor(
+            self.sampling, np.random.default_rng(sensor_seed), asymmetric=self.task.asymmetric_distortion
+        )
+        self.recorder.start(self.truth, np.random.default_rng(noise_seed))
+        self.coverage.reset()
+        self._T_start = self.sim.ee_pose()
+        self._euler_start = matrix_to_euler(self._T_start[:3, :3])
+        self._offset = np.zeros(6)
+        self._steps = 0
+        self._path_length = 0.0
+        self._frames_seen = 0
+        if self.config.reset_hold > 0:
+            self._record(self.sim.hold(self.config.reset_hold, on_step=self.recorder.on_step))
+        return self._observation(), self._coverage_info()
+
+    def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Execute one direct transformation; reward, termination and info as in the module doc."""
+        if self.truth is None:
+            raise RuntimeError("CalibrationEnv.step called before reset()")
+        a = np.clip(np.asarray(action, dtype=float).reshape(-1), self.action_space.low, self.action_space.high)
+        before = self.coverage.vector()
+        offset_before = self._offset.copy()
+        motion = self.sim.move_to(
+            self._goal_pose(a), on_step=self.recorder.on_step, settle_time=self.config.settle_time
+        )
+        self._record(motion)
+        self._offset = self._current_offset()
+        self.coverage.add_motion(self._offset - offset_before)
+        self._steps += 1
+        w = self.config.reward
+        reward = step_reward(before, self.coverage.vector(), motion.path_length, motion.rotation_length, w)
+        terminated = self.coverage.complete()
+        truncated = not terminated and self._steps >= self.config.max_steps
+        info = self._coverage_info()
+        info["motion/clamped"] = float(motion.clamped)
+        if terminated or (truncated and self.config.calibrate_on_truncation):
+            calib_info = self.calibrate_episode()
+            info.update(calib_info)
+            error = calib_info.get("calib/error_pct")
+            reward += terminal_reward(error, w) if terminated else 0.0
+            if truncated:  # calibrated for the record, but only the terminal condition is paid
+                info["calib/unpaid"] = 1.0
+        return self._observation(), float(reward), terminated, truncated, info
+
+    # ------------------------------------------------------------------ episode data
+    def recording(self) -> Recording:
+        """The episode's recording so far (sensor truth, IMU, frames, trajectory, path length)."""
+        return self.recorder.recording({"task": self.task.name, "steps": self._steps})
+
+    def calibrate_episode(self) -> dict[str, float]:
+        """Run the task's calibrator on the episode's recording; ``calib/*`` info (error, time, ...)."""
+        recording = self.recording()
+        start = time.perf_counter()
+        try:
+            outcome = run_task(self.task, recording)
+        except CalibrationError:
+            return {"calib/failed": 1.0, "calib/solve_time": time.perf_counter() - start}
+        e = outcome.errors
+        info = {
+            "calib/failed": 0.0,
+            "calib/error_pct": outcome.score,
+            "calib/intrinsic_pct": e.intrinsic_pct,
+            "calib/solve_time": time.perf_counter() - start,
+            "calib/frames": float(len(recording.frames)),
+            "calib/path_length": recording.path_length,
+        }
+        for key in ("extrinsic_pct", "rotation_deg", "translation_mm", "time_offset_ms"):
+            value = getattr(e, key)
+            if value is not None:
+                info[f"calib/{key}"] = float(value)
+        return info
+
+    @property
+    def steps(self) -> int:
+        """Steps taken in the current episode."""
+        return self._steps
+
+    @property
+    def pose_offset(self) -> np.ndarray:
+        """(6,) current end-effector offset from the start pose: position [m], Euler angles [rad]."""
+        return self._offset.copy()
+
+    # ------------------------------------------------------------------ internals
+    def _goal_pose(self, action: np.ndarray) -> np.ndarray:
+        """World pose of the action's target, clipped to the workspace around the start pose."""
+        translation, euler_increment = action_to_step(action)
+        target = np.clip(self._offset + np.r_[translation, euler_increment], -self._bound, self._bound)
+        R = euler_to_matrix(self._euler_start + target[3:])
+        return make_transform(R, self._T_start[:3, 3] + target[:3])
+
+    def _current_offset(self) -> np.ndarray:
+        T = self.sim.ee_pose()
+        euler = wrap_angle(matrix_to_euler(T[:3, :3]) - self._euler_start)
+        return np.r_[T[:3, 3] - self._T_start[:3, 3], euler]
+
+    def _record(self, motion: MotionResult) -> None:
+        """Account the motion and feed the frames it produced to the coverage."""
+        self.recorder.add_motion(motion)
+        self._path_length += motion.path_length
+        corners, ids = self.recorder.detections_since(self._frames_seen)
+        self._frames_seen += len(corners)
+        camera = self.truth.camera
+        for c, i in zip(corners, ids, strict=True):
+            view = view_features(c, i, self.target, camera.width, camera.height)
+            if view is not None:
+                self.coverage.add_view(view)
+
+    def _observation(self) -> np.ndarray:
+        pose = np.clip((self._offset + self._bound) / (2 * self._bound), 0.0, 1.0)
+        return np.r_[self.coverage.vector(), pose].astype(np.float32)
+
+    def _coverage_info(self) -> dict[str, float]:
+        info = {f"coverage/{k}": v for k, v in self.coverage.progress().items()}
+        info["coverage/views"] = float(self.coverage.num_views)
+        info["coverage/path_length"] = self._path_length
+        return info
+
+    def trajectory_figure(self, observations: np.ndarray, actions: np.ndarray) -> Figure:
+        """TensorBoard's episode figure (``vical.rl.logger`` calls it when the env has it)."""
+        return episode_figure(observations, self._bound)
+
+    def close(self) -> None:
+        self.recorder.close()

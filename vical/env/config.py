@@ -1,0 +1,141 @@
+"""Settings of the calibration MDP (``conf/env/calibration.yaml``), validated at start-up.
+
+Units: m, rad, s; coverage terms are normalised to [0, 1] (``vical.env.coverage``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from vical.config import from_mapping, require, require_range
+
+
+def _vector(key: str, value: Sequence[float], size: int, positive: bool = True) -> tuple[float, ...]:
+    """``value`` as a tuple of ``size`` finite numbers (> 0 when ``positive``); ConfigError naming ``key``."""
+    try:
+        array = np.asarray(list(value), dtype=float)
+    except (TypeError, ValueError):
+        array = np.zeros(0)
+    ok = array.shape == (size,) and bool(np.all(np.isfinite(array))) and (not positive or bool(np.all(array > 0)))
+    require(ok, key, f"{size} finite numbers{' > 0' if positive else ''}", value)
+    return tuple(float(v) for v in array)
+
+
+@dataclass(frozen=True)
+class Workspace:
+    """Bounds of the end-effector offset from the episode's start pose.
+
+    Attributes:
+        position: (3,) [m] +- bound of the position offset along world x, y, z.
+        orientation: (3,) [rad] +- bound of the offset of the world Euler angles roll, pitch, yaw.
+    """
+
+    position: tuple[float, ...] = (0.08, 0.10, 0.08)
+    orientation: tuple[float, ...] = (0.17, 0.15, 0.12)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position", _vector("env.workspace.position", self.position, 3))
+        object.__setattr__(self, "orientation", _vector("env.workspace.orientation", self.orientation, 3))
+        require(max(self.orientation) < np.pi / 2, "env.workspace.orientation", "bounds < pi/2 rad", self.orientation)
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """Coverage each term must reach for the terminal condition (normalised terms).
+
+    Attributes:
+        polygon_low, polygon_high: every polygon vertex must lie beyond these image fractions
+            (V1 left of and above ``polygon_low``, V3 right of and below ``polygon_high``, ...).
+        area_range: ``A_max - A_min`` of the board's image-area fraction.
+        skew_range: ``eta_max - eta_min`` of the normalised board-edge angle.
+        motion: every component of ``dp_max`` and ``dTheta_max`` (normalised).
+    """
+
+    polygon_low: float = 0.45
+    polygon_high: float = 0.55
+    area_range: float = 0.015
+    skew_range: float = 0.05
+    motion: float = 0.3
+
+    def __post_init__(self) -> None:
+        require_range("env.thresholds.polygon_low", self.polygon_low, 0.0, 0.5, high_open=True)
+        require_range("env.thresholds.polygon_high", self.polygon_high, 0.5, 1.0, low_open=True)
+        for name in ("area_range", "skew_range", "motion"):
+            require_range(f"env.thresholds.{name}", getattr(self, name), 0.0, 1.0, low_open=True)
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Reward weights (``vical.env.rewards``).
+
+    Attributes:
+        coverage_weight: multiplies the L1 gain of the 18 coverage terms.
+        path_weight: c1 [1/m], multiplies the executed end-effector path length of the step.
+        rotation_weight: c2 [1/rad], multiplies the executed rotation angle of the step.
+        terminal_bonus: c3, paid when the terminal condition is reached.
+        accuracy_weight: c4, multiplies ``min(1, floor / error)`` of the terminal calibration.
+        accuracy_error_floor: [%] errors at or below this earn the whole accuracy reward.
+    """
+
+    coverage_weight: float = 100.0
+    path_weight: float = 5.0
+    rotation_weight: float = 0.0
+    terminal_bonus: float = 100.0
+    accuracy_weight: float = 100.0
+    accuracy_error_floor: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in ("coverage_weight", "path_weight", "rotation_weight", "terminal_bonus", "accuracy_weight"):
+            require_range(f"env.reward.{name}", getattr(self, name), 0.0)
+        require_range("env.reward.accuracy_error_floor", self.accuracy_error_floor, 0.0, low_open=True)
+
+
+@dataclass(frozen=True)
+class MdpConfig:
+    """The MDP's constants (everything in ``conf/env/calibration.yaml`` but the sim/sensor/task groups).
+
+    Attributes:
+        max_steps: episode step limit (truncation).
+        action_scale: (6,) bounds of ``[rho, theta, phi, alpha, beta, gamma]``: each action
+            component lies in ``[-scale, scale]`` ([m], [rad] x 5).
+        workspace: end-effector offset bounds.
+        thresholds: terminal-condition thresholds.
+        view_novelty: a view enters the coverage set when its L1 distance in
+            ``[x, y, area, skew]`` to every stored view exceeds this.
+        reward: reward weights.
+        reset_hold: [s] the arm rests this long at the start pose when an episode begins,
+            recording the first views and still IMU data.
+        settle_time: [s] rest after every step's motion.
+        calibrate_on_truncation: also calibrate (and pay the accuracy reward) when the step
+            limit ends an episode; the paper calibrates only at the terminal condition.
+    """
+
+    max_steps: int = 20
+    action_scale: tuple[float, ...] = (0.3, 1.57, 1.57, 0.4, 0.4, 0.4)
+    workspace: Workspace = field(default_factory=Workspace)
+    thresholds: Thresholds = field(default_factory=Thresholds)
+    view_novelty: float = 0.1
+    reward: RewardWeights = field(default_factory=RewardWeights)
+    reset_hold: float = 0.3
+    settle_time: float = 0.1
+    calibrate_on_truncation: bool = False
+
+    def __post_init__(self) -> None:
+        require(
+            isinstance(self.max_steps, int) and 1 <= self.max_steps <= 1000,
+            "env.max_steps",
+            "an integer in [1, 1000]",
+            self.max_steps,
+        )
+        object.__setattr__(self, "action_scale", _vector("env.action_scale", self.action_scale, 6))
+        require_range("env.view_novelty", self.view_novelty, 0.0, 4.0)
+        require_range("env.reset_hold", self.reset_hold, 0.0, 10.0)
+        require_range("env.settle_time", self.settle_time, 0.0, 10.0)
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any]) -> MdpConfig:
+        return from_mapping(cls, cfg, "env")
