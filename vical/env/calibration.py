@@ -116,7 +116,7 @@ class CalibrationEnv(gym.Env):
         self._steps += 1
         w = self.config.reward
         reward = step_reward(before, self.coverage.vector(), motion.path_length, motion.rotation_length, w)
-        terminated = self.coverage.complete()
+        terminated = self.config.terminate_on_coverage and self.coverage.complete()
         truncated = not terminated and self._steps >= self.config.max_steps
         info = self._coverage_info()
         info["motion/clamped"] = float(motion.clamped)

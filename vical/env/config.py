@@ -110,8 +110,10 @@ class MdpConfig:
         reset_hold: [s] the arm rests this long at the start pose when an episode begins,
             recording the first views and still IMU data.
         settle_time: [s] rest after every step's motion.
-        calibrate_on_truncation: also calibrate (and pay the accuracy reward) when the step
-            limit ends an episode; the paper calibrates only at the terminal condition.
+        calibrate_on_truncation: also calibrate when the step limit ends an episode (reported
+            in ``info``, not paid); the paper calibrates only at the terminal condition.
+        terminate_on_coverage: end the episode (and calibrate) when the coverage is complete;
+            False lets fixed trajectories run all their steps (evaluation of baselines).
     """
 
     max_steps: int = 20
@@ -123,6 +125,7 @@ class MdpConfig:
     reset_hold: float = 0.3
     settle_time: float = 0.1
     calibrate_on_truncation: bool = False
+    terminate_on_coverage: bool = True
 
     def __post_init__(self) -> None:
         require(

@@ -1,0 +1,106 @@
+"""One interface for every way of moving the sensor: learned policies, random policies, fixed trajectories.
+
+A policy drives one ``CalibrationEnv`` episode, one action per step (``vical.env.actions``:
+``[rho, theta, phi, alpha, beta, gamma]`` in the env's units). Fixed trajectories are lists of
+waypoints (pose offsets from the episode's start pose) that ``WaypointPolicy`` reaches through
+actions within the env's bounds, so every policy runs through the same executor, workspace and
+sensors, and is scored the same way.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from vical.env.actions import step_to_action
+from vical.env.calibration import CalibrationEnv
+
+
+class Policy(ABC):
+    """Chooses the actions of a calibration episode.
+
+    Attributes:
+        name: shown in evaluation tables.
+        stop_at_coverage: the episode ends when the coverage is complete (the MDP's terminal
+            condition); False for fixed trajectories, which run all their steps.
+        max_steps: step limit of its episodes (None: the env's ``max_steps``).
+    """
+
+    name: str = "policy"
+    stop_at_coverage: bool = True
+    max_steps: int | None = None
+
+    def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:  # noqa: B027 (optional hook)
+        """Called after ``env.reset``, before the episode's first action; ``rng`` seeds any randomness."""
+
+    @property
+    def finished(self) -> bool:
+        """True when the policy has nothing left to do (a fixed trajectory after its last waypoint)."""
+        return False
+
+    @abstractmethod
+    def act(self, obs: np.ndarray, env: CalibrationEnv) -> np.ndarray:
+        """The next action (6,) in the env's units, for state ``obs`` (24,)."""
+
+
+class WaypointPolicy(Policy):
+    """Visits pose offsets ``[x, y, z, roll, pitch, yaw]`` ([m], [rad], from the start pose) in order.
+
+    Each step heads for the current waypoint; a waypoint farther than one action can move is
+    approached over several steps. A waypoint counts as reached within ``tolerance`` of the arm's
+    executed pose (waypoints are clipped to the workspace), or when a step toward it left the pose
+    unchanged (an unreachable pose); then the next one is the goal. After the last waypoint the
+    policy holds still.
+
+    Args:
+        waypoints: (K, 6) pose offsets.
+        name: shown in evaluation tables.
+        tolerance: (position [m], angle [rad]) within which a waypoint is reached.
+    """
+
+    stop_at_coverage = False
+
+    def __init__(self, waypoints: np.ndarray, name: str = "waypoints", tolerance: tuple[float, float] = (2e-3, 2e-3)):
+        w = np.asarray(waypoints, dtype=float)
+        if w.ndim != 2 or w.shape[1] != 6 or not len(w) or not np.all(np.isfinite(w)):
+            raise ValueError(f"waypoints must be a non-empty (K, 6) array of finite pose offsets, got shape {w.shape}")
+        self.waypoints = w
+        self.name = name
+        self.tolerance = tolerance
+        self._next = 0
+        self._last_offset: np.ndarray | None = None
+
+    def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
+        self._next = 0
+        self._last_offset: np.ndarray | None = None
+
+    def act(self, obs: np.ndarray, env: CalibrationEnv) -> np.ndarray:
+        offset = env.pose_offset
+        stuck = self._last_offset is not None and self._reached(offset - self._last_offset)
+        if stuck and self._next < len(self.waypoints):
+            self._next += 1
+        self._last_offset = offset
+        while self._next < len(self.waypoints) and self._reached(self._goal(env) - offset):
+            self._next += 1
+        if self._next == len(self.waypoints):
+            return np.zeros(6)
+        delta = self._goal(env) - offset
+        scale = np.asarray(env.config.action_scale, dtype=float)
+        # Shrink the whole step uniformly so translation and rotation arrive together.
+        distance = np.r_[np.linalg.norm(delta[:3]), np.abs(delta[3:])]
+        limits = np.r_[scale[0], scale[3:]] / np.maximum(distance, 1e-12)
+        shrink = min(1.0, float(limits.min()))
+        return step_to_action(shrink * delta[:3], shrink * delta[3:])
+
+    @property
+    def finished(self) -> bool:
+        return self._next == len(self.waypoints)
+
+    def _goal(self, env: CalibrationEnv) -> np.ndarray:
+        """The current waypoint clipped to the workspace (what the arm can reach)."""
+        bound = np.r_[env.config.workspace.position, env.config.workspace.orientation]
+        return np.clip(self.waypoints[self._next], -bound, bound)
+
+    def _reached(self, delta: np.ndarray) -> bool:
+        return bool(np.linalg.norm(delta[:3]) <= self.tolerance[0] and np.max(np.abs(delta[3:])) <= self.tolerance[1])
