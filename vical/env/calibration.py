@@ -33,7 +33,7 @@ from vical.env.actions import action_to_step
 from vical.env.config import MdpConfig
 from vical.env.coverage import Coverage, view_features
 from vical.env.plots import episode_figure
-from vical.env.rewards import step_reward, terminal_reward
+from vical.env.rewards import step_reward_terms, terminal_reward_terms
 from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
 from vical.sim import PandaSim, SimConfig
 from vical.sim.motion import MotionResult
@@ -114,20 +114,17 @@ class CalibrationEnv(gym.Env):
         self._offset = self._current_offset()
         self.coverage.add_motion(self._offset - offset_before)
         self._steps += 1
-        w = self.config.reward
-        reward = step_reward(before, self.coverage.vector(), motion.path_length, motion.rotation_length, w)
+        terms = step_reward_terms(before, self.coverage.vector(), motion, self.config.reward)
         terminated = self.config.terminate_on_coverage and self.coverage.complete()
         truncated = not terminated and self._steps >= self.config.max_steps
         info = self._coverage_info()
         info["motion/clamped"] = float(motion.clamped)
         if terminated or (truncated and self.config.calibrate_on_truncation):
-            calib_info = self.calibrate_episode()
-            info.update(calib_info)
-            error = calib_info.get("calib/error_pct")
-            reward += terminal_reward(error, w) if terminated else 0.0
-            if truncated:  # calibrated for the record, but only the terminal condition is paid
-                info["calib/unpaid"] = 1.0
-        return self._observation(), float(reward), terminated, truncated, info
+            info.update(self.calibrate_episode())
+        if terminated:  # a calibration after truncation is reported, not paid (the paper pays the terminal condition)
+            terms.update(terminal_reward_terms(info.get("calib/error_pct"), self.config.reward))
+        info.update({f"reward/{name}": value for name, value in terms.items()})
+        return self._observation(), float(sum(terms.values())), terminated, truncated, info
 
     # ------------------------------------------------------------------ episode data
     def recording(self) -> Recording:

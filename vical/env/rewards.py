@@ -17,14 +17,22 @@ from __future__ import annotations
 import numpy as np
 
 from vical.env.config import RewardWeights
+from vical.sim.motion import MotionResult
 
 
-def step_reward(
-    coverage_before: np.ndarray, coverage_after: np.ndarray, path_length: float, rotation: float, w: RewardWeights
-) -> float:
-    """Coverage gain minus motion cost of one step (coverage vectors (18,))."""
+def step_reward_terms(
+    coverage_before: np.ndarray, coverage_after: np.ndarray, motion: MotionResult, w: RewardWeights
+) -> dict[str, float]:
+    """The step reward's terms by name (their sum is ``R_t``): coverage gain, path and rotation costs.
+
+    Coverage vectors (18,); ``motion`` is the step's executed motion (path length [m], rotation [rad]).
+    """
     gain = float(np.abs(np.asarray(coverage_after) - np.asarray(coverage_before)).sum())
-    return w.coverage_weight * gain - w.path_weight * float(path_length) - w.rotation_weight * float(rotation)
+    return {
+        "coverage": w.coverage_weight * gain,
+        "path": -w.path_weight * float(motion.path_length),
+        "rotation": -w.rotation_weight * float(motion.rotation_length),
+    }
 
 
 def accuracy_reward(error_pct: float | None, w: RewardWeights) -> float:
@@ -34,6 +42,6 @@ def accuracy_reward(error_pct: float | None, w: RewardWeights) -> float:
     return w.accuracy_weight * min(1.0, w.accuracy_error_floor / max(float(error_pct), 1e-12))
 
 
-def terminal_reward(error_pct: float | None, w: RewardWeights) -> float:
-    """``c3`` plus the accuracy reward of the terminal calibration."""
-    return w.terminal_bonus + accuracy_reward(error_pct, w)
+def terminal_reward_terms(error_pct: float | None, w: RewardWeights) -> dict[str, float]:
+    """The terminal reward's terms by name (their sum is ``R_T``): the bonus ``c3`` and the accuracy reward."""
+    return {"terminal": w.terminal_bonus, "accuracy": accuracy_reward(error_pct, w)}

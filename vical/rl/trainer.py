@@ -54,7 +54,7 @@ class TrainConfig:
     plot_every_episodes: int = 10
     checkpoint_every: int = 1_000
     progress: bool = True
-    info_prefixes: list[str] = field(default_factory=lambda: ["calib/", "coverage/"])
+    info_prefixes: list[str] = field(default_factory=lambda: ["calib/", "coverage/", "reward/"])
 
     def __post_init__(self) -> None:
         for name in ("total_steps", "updates_per_step", "buffer_size", "eval_episodes", "eval_max_episode_steps"):
