@@ -1,0 +1,72 @@
+"""Calibration tasks: the solve each runs and the score it reports, on synthetic recordings."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.metrics import extrinsic_relative_error, intrinsic_relative_error
+from vical.calib.synthetic import make_recording
+from vical.calib.tasks import CalibrationTask, calibrate_task, run_task
+from vical.config import ConfigError
+from vical.data import ImuNoise, SensorTruth
+
+
+@pytest.fixture(scope="module")
+def recording():
+    rec = make_recording(duration=8.0, imu_noise=ImuNoise(), pixel_sigma=0.2, seed=1)
+    assert rec.truth is not None
+    return rec
+
+
+def test_intrinsic_task_is_the_intrinsic_solve_scored_by_the_intrinsic_error(recording):
+    task = CalibrationTask(name="intrinsic", calibrate="intrinsic", error_metric="intrinsic_relative")
+    outcome = run_task(task, recording)
+    direct = calibrate_intrinsics(recording.frames, recording.target, "radtan", (640, 480))
+    np.testing.assert_allclose(outcome.result.camera.intrinsics, direct.camera.intrinsics)
+    assert outcome.score == pytest.approx(intrinsic_relative_error(direct.camera, recording.truth.camera))
+    assert 0 < outcome.score < 0.5
+    assert outcome.result.T_cam_imu is None
+
+
+def test_extrinsic_task_uses_the_true_intrinsics_and_scores_the_extrinsic(recording):
+    task = CalibrationTask(name="extrinsic", calibrate="extrinsic")
+    outcome = run_task(task, recording)
+    assert outcome.result.camera == recording.truth.camera
+    expected = extrinsic_relative_error(outcome.result.T_cam_imu, recording.truth.T_cam_imu)
+    assert outcome.score == pytest.approx(expected)
+    assert outcome.score < 1.0
+    assert outcome.errors.time_offset_ms is not None
+
+
+def test_time_offset_follows_the_task(recording):
+    fixed = calibrate_task(CalibrationTask(calibrate="extrinsic", estimate_time_offset=False), recording)
+    estimated = calibrate_task(CalibrationTask(calibrate="extrinsic", estimate_time_offset=True), recording)
+    assert fixed.time_offset == 0.0  # stays at the initial value
+    assert estimated.time_offset != 0.0  # noisy data: the estimate moves off the exact truth 0
+
+
+def test_two_stage_takes_the_intrinsics_from_the_given_frames(recording):
+    other = make_recording(duration=6.0, imu_noise=ImuNoise(), pixel_sigma=0.2, seed=2)
+    task = CalibrationTask(calibrate="two_stage")
+    result = calibrate_task(task, recording, intrinsic_frames=other.frames)
+    first_stage = calibrate_intrinsics(other.frames, other.target, "radtan", (640, 480))
+    np.testing.assert_allclose(result.camera.intrinsics, first_stage.camera.intrinsics)
+
+
+def test_bad_task_settings_are_refused_by_name():
+    with pytest.raises(ConfigError, match=r"task\.calibrate must be one of"):
+        CalibrationTask(calibrate="everything")
+    with pytest.raises(ConfigError, match="needs a camera-IMU solve"):
+        CalibrationTask(calibrate="intrinsic", error_metric="extrinsic_relative")
+    with pytest.raises(ConfigError, match="unknown setting"):
+        CalibrationTask.from_config({"name": "x", "metric": "intrinsic_relative"})
+
+
+def test_scoring_needs_the_truth(recording):
+    with pytest.raises(ConfigError, match="sensor truth"):
+        run_task(
+            CalibrationTask(calibrate="intrinsic", error_metric="intrinsic_relative"), replace(recording, truth=None)
+        )
+    assert isinstance(recording.truth, SensorTruth)
