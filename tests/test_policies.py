@@ -1,0 +1,168 @@
+"""Policies on the real calibration env: random moving, hand-crafted trajectories, waypoints, learned SAC runs."""
+
+from pathlib import Path
+
+import hydra.utils
+import numpy as np
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from vical.config import ConfigError
+from vical.env.config import Workspace
+from vical.policies.base import WaypointPolicy
+from vical.policies.evaluation import run_trajectory
+from vical.policies.handcrafted import LENGTHS, TASKS, handcrafted_fractions, handcrafted_policy, handcrafted_waypoints
+from vical.policies.learned import LearnedPolicy, learned_policy
+from vical.policies.random_policy import RandomMovingPolicy
+from vical.rl.trainer import train
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+
+
+def env_config(task: str = "intrinsic") -> dict:
+    """The resolved calibration env config of vical-evaluate for ``task``."""
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="evaluate", overrides=[f"task={task}"])
+    return OmegaConf.to_container(cfg.env, resolve=True)
+
+
+@pytest.fixture(scope="module")
+def env():
+    """One intrinsic-task env with room for the longest trajectory, never ending at coverage."""
+    env = hydra.utils.instantiate(env_config(), max_steps=200, terminate_on_coverage=False)
+    yield env
+    env.close()
+
+
+def test_random_policy_acts_within_the_action_box_and_is_seeded(env):
+    policy = RandomMovingPolicy()
+    with pytest.raises(RuntimeError, match="before reset"):
+        policy.act(np.zeros(24), env)
+
+    def actions(seed: int) -> np.ndarray:
+        policy.reset(env, np.random.default_rng(seed))
+        return np.array([policy.act(np.zeros(24), env) for _ in range(200)])
+
+    first, again, other = actions(3), actions(3), actions(4)
+    scale = np.asarray(env.config.action_scale)
+    assert first.shape == (200, 6)
+    assert np.all(np.abs(first) <= scale + 1e-6)
+    # Uniform over the whole box: both signs reach beyond half the scale on every component.
+    assert np.all(first.max(axis=0) > 0.5 * scale) and np.all(first.min(axis=0) < -0.5 * scale)
+    np.testing.assert_array_equal(first, again)
+    assert not np.allclose(first, other)
+    assert policy.stop_at_coverage and policy.name == "random moving policy"
+
+
+@pytest.mark.parametrize("task", TASKS)
+@pytest.mark.parametrize("length", LENGTHS)
+def test_handcrafted_waypoints_lie_in_the_workspace_and_use_both_directions_of_every_axis(task, length):
+    workspace = Workspace()
+    bound = np.r_[workspace.position, workspace.orientation]
+    waypoints = handcrafted_waypoints(task, length, workspace)
+    assert np.all(np.abs(waypoints) <= bound + 1e-12)
+    assert np.all(waypoints.max(axis=0) > 0.5 * bound) and np.all(waypoints.min(axis=0) < -0.5 * bound)
+    np.testing.assert_allclose(waypoints, handcrafted_fractions(task, length) * bound)
+
+
+def test_handcrafted_trajectories_refuse_unknown_tasks_and_lengths():
+    with pytest.raises(ValueError, match="tasks"):
+        handcrafted_policy("joint", "long")
+    with pytest.raises(ValueError, match="lengths"):
+        handcrafted_policy("intrinsic", "medium")
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_long_handcrafted_path_is_at_least_twice_the_short_one_on_the_env(env, task):
+    paths = {}
+    for length in LENGTHS:
+        policy = handcrafted_policy(task, length)
+        run = run_trajectory(env, policy, seed=0)
+        assert policy.finished
+        assert run.steps <= policy.max_steps
+        paths[length] = run.recording.path_length
+    assert paths["short"] > 0.3
+    assert paths["long"] >= 2.0 * paths["short"]
+
+
+def test_waypoint_policy_reaches_its_waypoints_and_then_holds_still(env):
+    waypoints = np.array([[0.05, 0.0, 0.0, 0.0, 0.1, 0.0], [0.0, -0.06, 0.04, 0.1, 0.0, -0.08], np.zeros(6)])
+    policy = WaypointPolicy(waypoints, tolerance=(2e-3, 2e-3))
+    obs, _ = env.reset(seed=1)
+    policy.reset(env, np.random.default_rng(1))
+    for waypoint in waypoints:
+        obs, *_ = env.step(policy.act(obs, env))
+        offset = env.pose_offset
+        assert np.linalg.norm(offset[:3] - waypoint[:3]) < 2e-3
+        assert np.max(np.abs(offset[3:] - waypoint[3:])) < 2e-3
+    action = policy.act(obs, env)
+    assert policy.finished
+    np.testing.assert_array_equal(action, np.zeros(6))
+    before = env.pose_offset
+    env.step(action)
+    assert np.max(np.abs(env.pose_offset - before)) < 1e-3
+
+
+def tiny_run(run_dir: Path, env_cfg: dict) -> dict:
+    """A vical-train config of 40 steps (20 of warm-up) with 16-unit networks."""
+    return {
+        "seed": 0,
+        "torch_threads": 1,
+        "run_dir": str(run_dir),
+        "resume": None,
+        "agent": {"hidden_sizes": [16, 16], "batch_size": 8},
+        "env": env_cfg,
+        "train": {
+            "total_steps": 40,
+            "warmup_steps": 20,
+            "eval_every": 0,
+            "log_every": 0,
+            "plot_every_episodes": 0,
+            "checkpoint_every": 0,
+            "progress": False,
+        },
+    }
+
+
+@pytest.fixture(scope="module")
+def calibration_run(tmp_path_factory):
+    run_dir = tmp_path_factory.mktemp("calibration_run")
+    result = train(tiny_run(run_dir, env_config()))
+    return run_dir, result.agent
+
+
+def test_learned_policy_acts_with_the_agents_mean_action_in_env_units(env, calibration_run):
+    run_dir, trained = calibration_run
+    policy = LearnedPolicy.from_run(run_dir)
+    for key, value in trained.state_dict().items():
+        assert torch.equal(policy.agent.state_dict()[key], value), key
+    obs, _ = env.reset(seed=2)
+    policy.reset(env, np.random.default_rng(0))
+    action = policy.act(obs, env)
+    # The trainer's map: [-1, 1] -> [-scale, scale], applied to tanh of the policy's Gaussian mean.
+    with torch.no_grad():
+        mean = trained.policy.distribution(torch.as_tensor(obs)[None])[0][0].numpy()
+    scale = np.asarray(env.config.action_scale)
+    np.testing.assert_allclose(action, -scale + (np.tanh(mean) + 1.0) * scale, rtol=1e-5, atol=1e-6)
+    np.testing.assert_array_equal(action, policy.act(obs, env))  # deterministic
+    assert policy.stop_at_coverage
+
+
+def test_learned_policy_refuses_another_action_scale(env, calibration_run):
+    policy = LearnedPolicy.from_run(calibration_run[0])
+    policy.action_scale = policy.action_scale * 2
+    with pytest.raises(ConfigError, match="action_scale"):
+        policy.reset(env, np.random.default_rng(0))
+
+
+def test_learned_policy_refuses_a_pendulum_run_and_a_missing_run(tmp_path):
+    pendulum = {"_target_": "gymnasium.make", "id": "Pendulum-v1", "max_episode_steps": 50}
+    train(tiny_run(tmp_path / "pendulum", pendulum))
+    with pytest.raises(ConfigError, match=r"agent\.pt was trained on gymnasium\.make Pendulum-v1, not the calibration"):
+        LearnedPolicy.from_run(tmp_path / "pendulum")
+    with pytest.raises(ConfigError, match=r"no trained agent at .*missing/agent\.pt"):
+        LearnedPolicy.from_run(tmp_path / "missing")
+    with pytest.raises(ConfigError, match=r"policy\.run_dir"):
+        learned_policy(None)

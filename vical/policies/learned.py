@@ -1,0 +1,119 @@
+"""The model-free learned policy: the SAC agent that ``vical-train env=calibration`` wrote to ``agent.pt``.
+
+Evaluation uses the deterministic action (the mean ``tanh(mu(s))`` in ``[-1, 1]^6``), mapped onto the
+env's action box exactly as training did (``vical.rl.trainer.BoxActions``). The run must have trained
+on the calibration env (24-D coverage state, 6-D action) with the action scale of the env it drives.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from vical.config import ConfigError
+from vical.env.calibration import OBS_SIZE, CalibrationEnv
+from vical.policies.base import Policy
+from vical.rl.checkpoint import load_checkpoint
+from vical.rl.sac import SAC, SACConfig
+from vical.rl.trainer import AGENT, BoxActions
+
+CALIBRATION_ENV = "vical.env.calibration.CalibrationEnv"
+ACT_SIZE = 6
+TRAIN_HINT = "train one with `vical-train env=calibration task=<task>` and pass its run directory"
+
+
+def _policy_dims(model: dict[str, torch.Tensor], path: Path) -> tuple[int, int]:
+    """(obs_dim, act_dim) of the policy network in a SAC state dict (its first and last layer)."""
+    layers = sorted((int(k.rsplit(".", 1)[1]), v) for k, v in model.items() if k.startswith("policy.mlp.weights."))
+    if not layers:
+        raise ConfigError(f"{path} holds no SAC policy network; {TRAIN_HINT}")
+    first, last = layers[0][1], layers[-1][1]  # (members, fan_out, fan_in)
+    return int(first.shape[-1]), int(last.shape[-2]) // 2  # the policy outputs mean and log-std
+
+
+def _check_run(state: dict[str, Any], path: Path) -> None:
+    """Refuse checkpoints that are not a calibration-env agent, naming the file and what to do."""
+    if not all(k in state for k in ("model", "agent_config", "config")):
+        raise ConfigError(f"{path} is not an agent file written by vical-train (no model/agent_config/config)")
+    env = state["config"].get("env", {})
+    target = env.get("_target_")
+    if target != CALIBRATION_ENV:
+        what = f"{target} {env.get('id', '')}".strip()
+        raise ConfigError(f"{path} was trained on {what}, not the calibration env; {TRAIN_HINT}")
+    obs_dim, act_dim = _policy_dims(state["model"], path)
+    if (obs_dim, act_dim) != (OBS_SIZE, ACT_SIZE):
+        raise ConfigError(
+            f"{path} has a {obs_dim}-D observation / {act_dim}-D action policy; the calibration env needs "
+            f"{OBS_SIZE}-D / {ACT_SIZE}-D; {TRAIN_HINT}"
+        )
+
+
+class LearnedPolicy(Policy):
+    """Acts with a trained SAC agent's mean action, mapped to env units.
+
+    Args:
+        agent: the trained agent (its policy network is used, in eval mode).
+        action_scale: (6,) the action scale it was trained with ([m], [rad] x 5).
+        source: the ``agent.pt`` it came from (named in errors).
+        name: shown in evaluation tables.
+        max_steps: step limit of its episodes (None: the env's ``max_steps``).
+    """
+
+    stop_at_coverage = True
+
+    def __init__(
+        self,
+        agent: SAC,
+        action_scale: np.ndarray,
+        source: Path,
+        name: str = "model-free learned policy",
+        max_steps: int | None = None,
+    ) -> None:
+        self.agent = agent.eval()
+        self.action_scale = np.asarray(action_scale, dtype=float)
+        self.source = source
+        self.name = name
+        self.max_steps = max_steps
+        self._actions: BoxActions | None = None
+
+    @classmethod
+    def from_run(cls, run_dir: str | Path, **kwargs: Any) -> LearnedPolicy:
+        """Load ``<run_dir>/agent.pt`` of a ``vical-train env=calibration`` run; ``ConfigError`` otherwise."""
+        path = Path(run_dir) / AGENT
+        if not path.is_file():
+            raise ConfigError(
+                f"no trained agent at {path}: policy.run_dir must be a finished vical-train run; {TRAIN_HINT}"
+            )
+        state = load_checkpoint(path)
+        _check_run(state, path)
+        agent = SAC(OBS_SIZE, ACT_SIZE, SACConfig(**state["agent_config"]), seed=0)
+        agent.load_state_dict(state["model"])
+        scale = state["config"]["env"].get("action_scale", [np.nan] * ACT_SIZE)
+        return cls(agent, np.asarray(scale, dtype=float), path, **kwargs)
+
+    def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
+        """Check that ``env`` has the trained action scale and build the [-1, 1] -> env-units map."""
+        if not np.allclose(env.config.action_scale, self.action_scale):
+            raise ConfigError(
+                f"{self.source} was trained with env.action_scale={self.action_scale.tolist()}, but the env has "
+                f"{list(env.config.action_scale)}; evaluate with the training's action scale"
+            )
+        self._actions = BoxActions(env.action_space)
+
+    def act(self, obs: np.ndarray, env: CalibrationEnv) -> np.ndarray:
+        """The agent's mean action for ``obs`` (24,), in env units (6,)."""
+        if self._actions is None:
+            raise RuntimeError("LearnedPolicy.act called before reset(env, rng)")
+        return self._actions.to_env(self.agent.act(np.asarray(obs, dtype=np.float32), deterministic=True))
+
+
+def learned_policy(
+    run_dir: str | None = None, name: str = "model-free learned policy", max_steps: int | None = None
+) -> LearnedPolicy:
+    """The factory ``conf/policy/learned.yaml`` names: ``run_dir`` is required (``policy.run_dir=<run>``)."""
+    if not run_dir:
+        raise ConfigError(f"policy=learned needs policy.run_dir=<vical-train run directory holding {AGENT}>")
+    return LearnedPolicy.from_run(run_dir, name=name, max_steps=max_steps)
