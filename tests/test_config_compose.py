@@ -47,3 +47,18 @@ def test_task_files_name_themselves_and_a_metric():
             cfg = compose(overrides=[f"+task={task}"]).task
             assert cfg.name == task
             assert cfg.error_metric in ("intrinsic_relative", "extrinsic_relative")
+
+
+EXPERIMENTS = sorted(f.stem for f in (CONF / "experiment").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("experiment", EXPERIMENTS)
+def test_experiment_composes_with_vical_evaluate(experiment):
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="evaluate", overrides=[f"+experiment={experiment}", "policy.run_dir=runs/x"])
+    assert cfg.task.name in experiment  # table1_intrinsic -> the intrinsic task
+    assert cfg.episodes == 20
+    known = {f.stem for f in (CONF / "policy").glob("*.yaml")}
+    assert cfg.policies and set(cfg.policies) <= known
+    assert cfg.policy.run_dir == "runs/x"  # the learned policy takes the run from the command line
+    OmegaConf.to_container(cfg.env, resolve=True)

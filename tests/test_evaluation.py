@@ -1,0 +1,119 @@
+"""Evaluation library: per-episode rows with real values, the joint task's two trajectories, failed calibrations."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.tasks import run_task
+from vical.config import ConfigError
+from vical.policies.evaluation import (
+    EpisodeRow,
+    PolicyEvaluator,
+    PolicySpec,
+    evaluate_policy,
+    instantiate_policy,
+    run_trajectory,
+    summarize,
+)
+
+CONF = Path(__file__).resolve().parents[1] / "conf"
+SHORT = {"_target_": "vical.policies.handcrafted.handcrafted_policy", "length": "short"}
+HANDCRAFTED_SHORT = PolicySpec(
+    "hand-crafted trajectory (short)", {**SHORT, "task": "intrinsic"}, {**SHORT, "task": "extrinsic"}, None
+)
+STILL = {"_target_": "vical.policies.base.WaypointPolicy", "waypoints": [[0.0] * 6]}  # records only the start pose
+
+
+def env_config(task: str) -> dict:
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="evaluate", overrides=[f"task={task}"])
+    return OmegaConf.to_container(cfg.env, resolve=True)
+
+
+def test_rows_and_summary_hold_the_episodes_real_values():
+    evaluator = PolicyEvaluator(HANDCRAFTED_SHORT, env_config("intrinsic"))
+    try:
+        rows = [evaluator.episode(seed) for seed in (0, 1)]
+        # The same seed replays the same sensor and motion: the row's values are the recording's.
+        (env,), (policy,) = evaluator.envs, evaluator.policies
+        run = run_trajectory(env, policy, seed=1)
+        outcome = run_task(evaluator.task, run.recording)
+    finally:
+        evaluator.close()
+    row = rows[1]
+    assert not row.failed and row.policy == "hand-crafted trajectory (short)" and row.seed == 1
+    assert row.path_length_m == pytest.approx(run.recording.path_length, rel=1e-9)
+    assert row.path_length_m > 0.3
+    assert row.steps == run.steps == len(policy.waypoints)
+    assert row.frames == len(run.recording.frames)
+    assert row.score_pct == pytest.approx(outcome.score, rel=1e-6)
+    assert row.intrinsic_pct == row.score_pct
+    assert row.intrinsic_px == pytest.approx(np.linalg.norm(outcome.errors.intrinsic_abs_px), rel=1e-6)
+    assert row.extrinsic_pct is None and row.rotation_deg is None and row.time_offset_ms is None
+    assert 0.0 < row.calib_time_s < 10.0
+    summary = summarize("x", rows)
+    scores = [r.score_pct for r in rows]
+    assert (summary.episodes, summary.failed) == (2, 0)
+    assert summary.mean_error_pct == pytest.approx(np.mean(scores))
+    assert summary.error_std_pct == pytest.approx(np.std(scores))
+    assert summary.path_length_m == pytest.approx(np.mean([r.path_length_m for r in rows]))
+    assert summary.calib_time_s == pytest.approx(np.mean([r.calib_time_s for r in rows]))
+    assert summary.rotation_deg is None
+
+
+def test_joint_task_runs_both_trajectories_and_calibrates_intrinsics_from_the_first():
+    evaluator = PolicyEvaluator(HANDCRAFTED_SHORT, env_config("joint"))
+    try:
+        assert evaluator.task.calibrate == "two_stage" and evaluator.task.error_metric == "extrinsic_relative"
+        assert [p.task for p in evaluator.policies] == ["intrinsic", "extrinsic"]
+        row = evaluator.episode(0)
+        first, second = (run_trajectory(env, p, 0) for env, p in zip(evaluator.envs, evaluator.policies, strict=True))
+        outcome = run_task(evaluator.task, second.recording, first.recording.frames)
+    finally:
+        evaluator.close()
+    truth = first.recording.truth
+    np.testing.assert_array_equal(truth.camera.intrinsics, second.recording.truth.camera.intrinsics)  # one sensor
+    np.testing.assert_array_equal(truth.T_cam_imu, second.recording.truth.T_cam_imu)
+    assert not row.failed
+    assert row.path_length_m == pytest.approx(first.recording.path_length + second.recording.path_length, rel=1e-9)
+    assert row.steps == first.steps + second.steps
+    intrinsic = calibrate_intrinsics(
+        first.recording.frames, first.recording.target, "radtan", (truth.camera.width, truth.camera.height)
+    )
+    np.testing.assert_allclose(outcome.result.camera.intrinsics, intrinsic.camera.intrinsics, rtol=1e-9)
+    assert row.score_pct == pytest.approx(outcome.score, rel=1e-6)
+    assert row.score_pct == pytest.approx(row.extrinsic_pct)
+    assert row.rotation_deg is not None and row.translation_mm is not None and row.time_offset_ms is not None
+
+
+def test_a_failed_calibration_is_a_counted_row():
+    still = PolicySpec("still", STILL, STILL)
+    evaluation = evaluate_policy(still, env_config("intrinsic"), seeds=[0], progress=False)
+    (failed,) = evaluation.rows
+    assert failed.failed and "frames" in failed.error
+    assert failed.score_pct is None and failed.steps == 0
+    assert evaluation.summary.failed == 1 and np.isnan(evaluation.summary.mean_error_pct)
+    good = EpisodeRow("p", 1, score_pct=2.0, intrinsic_pct=2.0, path_length_m=1.0, calib_time_s=0.5)
+    summary = summarize("p", [good, failed])
+    assert (summary.episodes, summary.failed) == (2, 1)
+    assert summary.mean_error_pct == 2.0 and summary.error_std_pct == 0.0
+    assert summary.path_length_m == pytest.approx((1.0 + failed.path_length_m) / 2)
+
+
+def test_policy_specs_are_checked():
+    with pytest.raises(ConfigError, match=r"policy\.name"):
+        PolicySpec.from_config({"intrinsic": STILL})
+    with pytest.raises(ConfigError, match=r"policy\.extrinsic"):
+        PolicySpec.from_config({"name": "p", "extrinsic": {"length": "long"}})
+    spec = PolicySpec.from_config({"name": "only intrinsic", "intrinsic": STILL, "extrinsic": None, "joint": None})
+    joint_task = type("Task", (), {"calibrate": "joint"})()
+    with pytest.raises(ConfigError, match="no joint spec and no extrinsic spec"):
+        spec.for_task(joint_task)
+    with pytest.raises(ConfigError, match="returned dict, not a Policy"):
+        instantiate_policy({"_target_": "builtins.dict"}, "p")
+    with pytest.raises(ConfigError, match=r"policy 'p': .*handcrafted_policy failed: .*lengths"):
+        instantiate_policy({**SHORT, "task": "intrinsic", "length": "medium"}, "p")

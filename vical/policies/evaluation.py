@@ -1,0 +1,317 @@
+"""Evaluation of a policy on a calibration task: the paper's protocol and table columns.
+
+Each policy runs one episode per sensor seed (``reset(seed=s)`` draws the same sensor for every
+policy, so the policies are compared on the same sensors). Every episode is calibrated at its end
+by ``vical.calib.tasks.run_task``, whatever ended it (coverage, step limit, or the end of a fixed
+trajectory); a ``CalibrationError`` becomes a failed row, counted in the summary.
+
+A policy config (``conf/policy/<name>.yaml``, see :class:`PolicySpec`) holds one policy spec per
+task. In the joint task a policy without a ``joint`` spec runs two trajectories on the same sensor,
+as the paper's trajectory baselines do: its intrinsic trajectory, then its extrinsic trajectory;
+the two-stage solve calibrates the intrinsics from the first recording's frames and the extrinsic
+from the second recording, and the path lengths add up.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import hydra.utils
+import numpy as np
+from hydra.errors import InstantiationException
+from tqdm import tqdm
+
+from vical.calib.errors import CalibrationError
+from vical.calib.tasks import CalibrationTask, TaskOutcome, run_task
+from vical.config import ConfigError, require
+from vical.data import CameraFrames, Recording
+from vical.env.calibration import CalibrationEnv
+from vical.policies.base import Policy
+
+SPEC_KEYS = ("intrinsic", "extrinsic", "joint")
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    """A policy config: its table name and one ``hydra.utils.instantiate`` spec per task.
+
+    Attributes:
+        name: the table row.
+        intrinsic, extrinsic: specs (``_target_`` + arguments) of the policies for those tasks.
+        joint: spec of one policy for the joint task; None runs the intrinsic then the extrinsic
+            policy (two trajectories).
+    """
+
+    name: str
+    intrinsic: Mapping[str, Any] | None
+    extrinsic: Mapping[str, Any] | None
+    joint: Mapping[str, Any] | None = None
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any], key: str = "policy") -> PolicySpec:
+        """Read ``name`` and the per-task specs; other keys are parameters the specs interpolate."""
+        require(isinstance(cfg, Mapping), key, "a mapping with name, intrinsic, extrinsic, joint", cfg)
+        name = cfg.get("name")
+        require(isinstance(name, str) and bool(name), f"{key}.name", "a non-empty string", name)
+        specs = {}
+        for task in SPEC_KEYS:
+            spec = cfg.get(task)
+            ok = spec is None or (isinstance(spec, Mapping) and "_target_" in spec)
+            require(ok, f"{key}.{task}", "null or a mapping with a _target_ (a policy factory)", spec)
+            specs[task] = dict(spec) if spec is not None else None
+        return cls(name, **specs)
+
+    def for_task(self, task: CalibrationTask) -> list[Mapping[str, Any]]:
+        """The specs of the trajectories one episode of ``task`` runs (one, or two in the joint task)."""
+        kind = {"intrinsic": "intrinsic", "extrinsic": "extrinsic"}.get(task.calibrate, "joint")
+        if kind == "joint" and self.joint is None:
+            missing = [k for k in ("intrinsic", "extrinsic") if getattr(self, k) is None]
+            if missing:
+                raise ConfigError(f"policy {self.name!r} has no joint spec and no {' / '.join(missing)} spec to run")
+            return [self.intrinsic, self.extrinsic]
+        spec = getattr(self, kind)
+        if spec is None:
+            raise ConfigError(f"policy {self.name!r} has no spec for the {kind} task (its `{kind}` key is null)")
+        return [spec]
+
+
+def instantiate_policy(spec: Mapping[str, Any], name: str) -> Policy:
+    """Build a policy from its spec; ``ConfigError`` (one line) when the factory fails or returns no Policy."""
+    try:
+        policy = hydra.utils.instantiate(dict(spec))
+    except InstantiationException as err:
+        if isinstance(err.__cause__, ConfigError | FileNotFoundError):
+            raise ConfigError(f"policy {name!r}: {err.__cause__}") from err
+        cause = err.__cause__ if err.__cause__ is not None else err
+        raise ConfigError(f"policy {name!r}: {spec.get('_target_')} failed: {cause}") from err
+    if not isinstance(policy, Policy):
+        raise ConfigError(f"policy {name!r}: {spec.get('_target_')} returned {type(policy).__name__}, not a Policy")
+    return policy
+
+
+@dataclass
+class EpisodeRow:
+    """One evaluated sensor (None where the task estimates no such quantity or the calibration failed).
+
+    Attributes:
+        policy: the table row it belongs to.
+        seed: the env reset seed (the sensor).
+        score_pct: the task's error [%] (the paper's tables).
+        intrinsic_pct, extrinsic_pct: relative errors [%].
+        intrinsic_px: ``||[fx, fy, cx, cy] - gt||`` [px].
+        rotation_deg, translation_mm: extrinsic ``T_cam_imu`` errors [deg], [mm].
+        time_offset_ms: |time offset error| [ms].
+        path_length_m: executed end-effector path [m] (both trajectories in two-trajectory mode).
+        calib_time_s: calibrator wall time [s] (until the failure for a failed calibration).
+        steps: env steps taken (both trajectories).
+        frames: camera frames with detections used by the calibration.
+        coverage_reached: every trajectory of the episode completed the MDP's coverage.
+        failed: the calibration raised ``CalibrationError``; ``error`` holds its message.
+    """
+
+    policy: str
+    seed: int
+    score_pct: float | None = None
+    intrinsic_pct: float | None = None
+    extrinsic_pct: float | None = None
+    intrinsic_px: float | None = None
+    rotation_deg: float | None = None
+    translation_mm: float | None = None
+    time_offset_ms: float | None = None
+    path_length_m: float = 0.0
+    calib_time_s: float = 0.0
+    steps: int = 0
+    frames: int = 0
+    coverage_reached: bool = False
+    failed: bool = False
+    error: str = ""
+
+
+COLUMNS = tuple(f.name for f in dataclasses.fields(EpisodeRow))
+
+
+@dataclass(frozen=True)
+class Summary:
+    """The paper's table columns for one policy, over its successful episodes (errors) or all (path, time).
+
+    Attributes:
+        policy: the table row.
+        episodes: episodes run; failed: calibrations that raised ``CalibrationError``.
+        mean_error_pct, error_std_pct: mean and population std of the task score [%] (NaN if none succeeded).
+        path_length_m: mean path length [m]; calib_time_s: mean calibrator wall time [s].
+        intrinsic_px, rotation_deg, translation_mm, time_offset_ms: mean absolute errors (None if not estimated).
+        coverage_rate: fraction of episodes whose coverage was complete.
+    """
+
+    policy: str
+    episodes: int
+    failed: int
+    mean_error_pct: float
+    error_std_pct: float
+    path_length_m: float
+    calib_time_s: float
+    intrinsic_px: float | None
+    rotation_deg: float | None
+    translation_mm: float | None
+    time_offset_ms: float | None
+    coverage_rate: float
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """Per-episode rows and the summary of one policy on one task."""
+
+    rows: list[EpisodeRow]
+    summary: Summary
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """One executed trajectory: its recording, the steps taken and whether the coverage completed."""
+
+    recording: Recording
+    steps: int
+    coverage_reached: bool
+
+
+def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
+    """The calibration env of ``env_cfg`` with ``policy``'s step limit and coverage termination.
+
+    The env never calibrates on its own at truncation: the evaluation calibrates every episode once.
+    """
+    overrides = {"terminate_on_coverage": policy.stop_at_coverage, "calibrate_on_truncation": False}
+    if policy.max_steps is not None:
+        overrides["max_steps"] = policy.max_steps
+    env = hydra.utils.instantiate({**dict(env_cfg), **overrides})
+    if not isinstance(env, CalibrationEnv):
+        raise ConfigError(f"env must be the calibration env (env=calibration), got {type(env).__name__}")
+    return env
+
+
+def run_trajectory(env: CalibrationEnv, policy: Policy, seed: int) -> Trajectory:
+    """One episode of ``policy`` on the sensor of ``seed``: until termination, truncation or the policy is done."""
+    obs, _ = env.reset(seed=seed)
+    policy.reset(env, np.random.default_rng(seed))
+    for _ in range(env.config.max_steps):
+        action = policy.act(obs, env)
+        if policy.finished:  # a fixed trajectory past its last waypoint: nothing left to record
+            break
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            break
+    return Trajectory(env.recording(), env.steps, env.coverage.complete())
+
+
+def _optional(value: float | None) -> float | None:
+    return None if value is None else float(value)
+
+
+def _fill_outcome(row: EpisodeRow, outcome: TaskOutcome) -> None:
+    e = outcome.errors
+    row.score_pct = float(outcome.score)
+    row.intrinsic_pct = float(e.intrinsic_pct)
+    row.intrinsic_px = float(np.linalg.norm(e.intrinsic_abs_px))
+    row.extrinsic_pct = _optional(e.extrinsic_pct)
+    row.rotation_deg = _optional(e.rotation_deg)
+    row.translation_mm = _optional(e.translation_mm)
+    row.time_offset_ms = _optional(e.time_offset_ms)
+    row.calib_time_s = float(outcome.result.solve_time)
+
+
+def calibrate_row(
+    row: EpisodeRow, task: CalibrationTask, recording: Recording, intrinsic_frames: CameraFrames | None = None
+) -> EpisodeRow:
+    """Calibrate ``recording`` as ``task`` says and fill ``row``'s errors; a ``CalibrationError`` marks it failed."""
+    row.frames = len(recording.frames) + (0 if intrinsic_frames is None else len(intrinsic_frames))
+    start = time.perf_counter()
+    try:
+        outcome = run_task(task, recording, intrinsic_frames)
+    except CalibrationError as err:
+        row.failed, row.error, row.calib_time_s = True, str(err), time.perf_counter() - start
+        return row
+    _fill_outcome(row, outcome)
+    return row
+
+
+class PolicyEvaluator:
+    """Runs one policy spec on one task: builds its policies and envs once, then one episode per seed.
+
+    Args:
+        spec: the policy config.
+        env_cfg: the calibration env config (``_target_``, ``sim``, ``sensor``, ``task`` and the MDP), resolved.
+    """
+
+    def __init__(self, spec: PolicySpec, env_cfg: Mapping[str, Any]) -> None:
+        self.spec = spec
+        self.task = CalibrationTask.from_config(env_cfg["task"])
+        self.policies = [instantiate_policy(s, spec.name) for s in spec.for_task(self.task)]
+        self.envs = [build_env(env_cfg, p) for p in self.policies]
+        if len(self.policies) == 2:  # the paper's baselines: intrinsics from the first trajectory's frames
+            self.task = dataclasses.replace(self.task, calibrate="two_stage")
+
+    def episode(self, seed: int) -> EpisodeRow:
+        """Run the trajectory (or both) on the sensor of ``seed`` and calibrate; one table row."""
+        runs = [run_trajectory(env, p, seed) for env, p in zip(self.envs, self.policies, strict=True)]
+        row = EpisodeRow(
+            policy=self.spec.name,
+            seed=seed,
+            path_length_m=float(sum(r.recording.path_length for r in runs)),
+            steps=sum(r.steps for r in runs),
+            coverage_reached=all(r.coverage_reached for r in runs),
+        )
+        intrinsic_frames = runs[0].recording.frames if len(runs) == 2 else None
+        return calibrate_row(row, self.task, runs[-1].recording, intrinsic_frames)
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
+
+
+def _mean(rows: Sequence[EpisodeRow], key: str) -> float | None:
+    values = [getattr(r, key) for r in rows if getattr(r, key) is not None]
+    return float(np.mean(values)) if values else None
+
+
+def summarize(name: str, rows: Sequence[EpisodeRow]) -> Summary:
+    """The table columns of ``rows``: error statistics over successful rows, path and time over all."""
+    ok = [r for r in rows if not r.failed]
+    scores = np.array([r.score_pct for r in ok], dtype=float)
+    return Summary(
+        policy=name,
+        episodes=len(rows),
+        failed=len(rows) - len(ok),
+        mean_error_pct=float(scores.mean()) if len(scores) else math.nan,
+        error_std_pct=float(scores.std()) if len(scores) else math.nan,
+        path_length_m=float(np.mean([r.path_length_m for r in rows])) if rows else math.nan,
+        calib_time_s=float(np.mean([r.calib_time_s for r in rows])) if rows else math.nan,
+        intrinsic_px=_mean(ok, "intrinsic_px"),
+        rotation_deg=_mean(ok, "rotation_deg"),
+        translation_mm=_mean(ok, "translation_mm"),
+        time_offset_ms=_mean(ok, "time_offset_ms"),
+        coverage_rate=float(np.mean([r.coverage_reached for r in rows])) if rows else math.nan,
+    )
+
+
+def run_evaluator(evaluator: PolicyEvaluator, seeds: Sequence[int], progress: bool = True) -> Evaluation:
+    """One episode per sensor seed with a built evaluator (closed at the end); rows and the table summary."""
+    if not seeds:
+        raise ConfigError("episodes must be at least 1 (no seeds to evaluate)")
+    rows = []
+    try:
+        for seed in tqdm(seeds, desc=evaluator.spec.name, unit="episode", disable=not progress):
+            rows.append(evaluator.episode(int(seed)))
+    finally:
+        evaluator.close()
+    return Evaluation(rows, summarize(evaluator.spec.name, rows))
+
+
+def evaluate_policy(
+    spec: PolicySpec, env_cfg: Mapping[str, Any], seeds: Sequence[int], progress: bool = True
+) -> Evaluation:
+    """Evaluate ``spec`` on the task of ``env_cfg`` for every sensor seed; rows and the table summary."""
+    return run_evaluator(PolicyEvaluator(spec, env_cfg), seeds, progress)
