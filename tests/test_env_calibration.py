@@ -142,6 +142,16 @@ def test_complete_coverage_terminates_and_pays_for_an_accurate_calibration():
     assert all("calib/error_pct" not in t[3] for t in transitions[:-1])  # one calibration per episode
 
 
+def test_termination_without_the_solve_pays_only_the_bonus():
+    env = make_env(thresholds={"skew_range": 0.03}, calibrate_on_termination=False)
+    transitions, terminated, _ = run_sweep(env)
+    env.close()
+    *_, info = transitions[-1]
+    assert terminated
+    assert not any(key.startswith("calib/") for key in info)
+    assert info["reward/terminal"] == 100.0 and info["reward/accuracy"] == 0.0
+
+
 def test_step_limit_truncates_without_calibrating_unless_asked():
     for calibrate in (False, True):
         env = make_env(max_steps=2, calibrate_on_truncation=calibrate)

@@ -119,7 +119,8 @@ class CalibrationEnv(gym.Env):
         truncated = not terminated and self._steps >= self.config.max_steps
         info = self._coverage_info()
         info["motion/clamped"] = float(motion.clamped)
-        if terminated or (truncated and self.config.calibrate_on_truncation):
+        c = self.config
+        if (terminated and c.calibrate_on_termination) or (truncated and c.calibrate_on_truncation):
             info.update(self.calibrate_episode())
         if terminated:  # a calibration after truncation is reported, not paid (the paper pays the terminal condition)
             terms.update(terminal_reward_terms(info.get("calib/error_pct"), self.config.reward))

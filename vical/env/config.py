@@ -110,6 +110,9 @@ class MdpConfig:
         reset_hold: [s] the arm rests this long at the start pose when an episode begins,
             recording the first views and still IMU data.
         settle_time: [s] rest after every step's motion.
+        calibrate_on_termination: calibrate when the coverage completes and pay the accuracy
+            reward (the paper); False skips the solve (an evaluation that calibrates every episode
+            itself; the terminal bonus is still paid).
         calibrate_on_truncation: also calibrate when the step limit ends an episode (reported
             in ``info``, not paid); the paper calibrates only at the terminal condition.
         terminate_on_coverage: end the episode (and calibrate) when the coverage is complete;
@@ -124,6 +127,7 @@ class MdpConfig:
     reward: RewardWeights = field(default_factory=RewardWeights)
     reset_hold: float = 0.3
     settle_time: float = 0.1
+    calibrate_on_termination: bool = True
     calibrate_on_truncation: bool = False
     terminate_on_coverage: bool = True
 

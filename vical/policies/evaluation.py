@@ -182,9 +182,13 @@ class Trajectory:
 def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
     """The calibration env of ``env_cfg`` with ``policy``'s step limit and coverage termination.
 
-    The env never calibrates on its own at truncation: the evaluation calibrates every episode once.
+    The env never calibrates on its own: the evaluation calibrates every episode once.
     """
-    overrides = {"terminate_on_coverage": policy.stop_at_coverage, "calibrate_on_truncation": False}
+    overrides = {
+        "terminate_on_coverage": policy.stop_at_coverage,
+        "calibrate_on_termination": False,
+        "calibrate_on_truncation": False,
+    }
     if policy.max_steps is not None:
         overrides["max_steps"] = policy.max_steps
     env = hydra.utils.instantiate({**dict(env_cfg), **overrides})
