@@ -49,10 +49,22 @@ def test_task_files_name_themselves_and_a_metric():
             assert cfg.error_metric in ("intrinsic_relative", "extrinsic_relative")
 
 
+# train_*.yaml configure vical-train; the others (the paper's tables) vical-evaluate.
 EXPERIMENTS = sorted(f.stem for f in (CONF / "experiment").glob("*.yaml"))
+TRAIN_EXPERIMENTS = [e for e in EXPERIMENTS if e.startswith("train_")]
+TABLE_EXPERIMENTS = [e for e in EXPERIMENTS if not e.startswith("train_")]
 
 
-@pytest.mark.parametrize("experiment", EXPERIMENTS)
+@pytest.mark.parametrize("experiment", TRAIN_EXPERIMENTS)
+def test_training_experiment_composes_with_vical_train(experiment):
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="train", overrides=[f"+experiment={experiment}"])
+    assert cfg.env._target_ == "vical.env.calibration.CalibrationEnv"
+    OmegaConf.to_container(cfg.env, resolve=True)
+    assert cfg.train.total_steps > cfg.train.warmup_steps
+
+
+@pytest.mark.parametrize("experiment", TABLE_EXPERIMENTS)
 def test_experiment_composes_with_vical_evaluate(experiment):
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose(config_name="evaluate", overrides=[f"+experiment={experiment}", "policy.run_dir=runs/x"])
