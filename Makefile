@@ -27,7 +27,7 @@ test-slow: venv
 	$(VENV)/bin/pytest -m slow
 
 train: venv
-	$(VENV)/bin/vical-train
+	$(VENV)/bin/vical-train +experiment=train_paper_policy
 
 demo: venv
 	$(VENV)/bin/vical-sim-demo
