@@ -10,7 +10,7 @@ the task and returns
 
 where a failed calibration counts as ``--failure-error`` percent. The best coefficients, with the
 objective, the training errors, the PSO settings, the seeds and the date, are written atomically
-to ``conf/policy/model_based_params.yaml`` (other tasks' entries are kept), after each task.
+to ``vical/policies/params/model_based.yaml`` (other tasks' entries are kept), after each task.
 
 Usage:
     python experiments/fit_model_based_trajectory.py                     # both tasks, default budget
@@ -37,7 +37,6 @@ from vical.calib.tasks import CalibrationTask, run_task
 from vical.env.calibration import CalibrationEnv
 from vical.io.atomic import write_text_atomic
 from vical.policies.fourier import (
-    CONF_DIR,
     DEFAULT_PARAMS_FILE,
     DEFAULT_WAYPOINTS,
     HARMONICS,
@@ -50,6 +49,8 @@ from vical.policies.fourier import (
     random_trajectory_policy,
 )
 from vical.policies.pso import PsoProgress, PsoSettings, minimize
+
+CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 
 # Default budget, measured on the 2-core development machine (--measure): one objective evaluation
 # (3 sensors x one 21-waypoint episode + calibration) takes ~1.9-2.3 s (intrinsic) and ~1.3-2.7 s

@@ -37,8 +37,8 @@ NUM_COEFFICIENTS = int(np.prod(SHAPE))
 DOF_NAMES = ("x", "y", "z", "roll", "pitch", "yaw")
 TASKS = ("intrinsic", "extrinsic")
 DEFAULT_WAYPOINTS = 21  # 20 segments: the paper's 20-step episodes; >= 8 samples per period of harmonic 4
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
-DEFAULT_PARAMS_FILE = CONF_DIR / "policy" / "model_based_params.yaml"
+# Package data, not a conf/policy option: the fit's artefact that the model_based policy reads.
+DEFAULT_PARAMS_FILE = Path(__file__).resolve().parent / "params" / "model_based.yaml"
 FIT_COMMAND = "python experiments/fit_model_based_trajectory.py"
 
 
@@ -148,7 +148,7 @@ def _fix_hint(path: Path) -> str:
 
 
 def load_model_based_params(task: str, params_file: str | os.PathLike | None = None) -> Mapping[str, Any]:
-    """The fitted entry of ``task`` in the params file (default ``conf/policy/model_based_params.yaml``).
+    """The fitted entry of ``task`` in the params file (default ``vical/policies/params/model_based.yaml``).
 
     Raises:
         ConfigError: the file is missing, unreadable, lacks ``task`` or its coefficients are malformed;
@@ -176,7 +176,7 @@ def model_based_policy(
 
     Args:
         task: ``intrinsic`` or ``extrinsic`` (the joint task runs both, one after the other).
-        params_file: fitted coefficients (default ``conf/policy/model_based_params.yaml``, written by
+        params_file: fitted coefficients (default ``vical/policies/params/model_based.yaml``, written by
             ``experiments/fit_model_based_trajectory.py``).
         num_waypoints: samples of the loop; default the number the fit used.
     """
