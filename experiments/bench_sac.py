@@ -7,8 +7,9 @@ load. Printed per agent: the final deterministic return (mean over ``--eval-epis
 episodes, then mean +- std over seeds) and gradient updates per second of training wall time
 (env interaction included, for both; both timers start after the agent is built and time only SB3's
 ``learn`` and vical's ``Trainer.run``, which also writes its TensorBoard scalars and the final ``agent.pt``,
-a few ms). vical runs twice: float32 throughout, and with its hidden-to-hidden matmuls in bfloat16
-(``agent.hidden_precision=bfloat16``). ``--authors`` adds vical's SAC with the calibration paper's
+a few ms). vical runs three times: float32 throughout, with its hidden-to-hidden matmuls in bfloat16
+(``agent.hidden_precision=bfloat16``), and with only the backward pass's hidden matmuls in bfloat16
+(``agent.hidden_precision=bfloat16_backward``). ``--authors`` adds vical's SAC with the calibration paper's
 authors' settings (``conf/agent/sac_authors.yaml``).
 
     .venv/bin/python experiments/bench_sac.py                      # 6000 steps, seeds 0 1 2
@@ -161,6 +162,7 @@ def main() -> None:
     variants = {
         "vical SAC (agent=sac)": ["agent=sac"],
         "vical SAC (agent=sac, bfloat16 hidden)": ["agent=sac", "agent.hidden_precision=bfloat16"],
+        "vical SAC (agent=sac, bfloat16 gradients)": ["agent=sac", "agent.hidden_precision=bfloat16_backward"],
     }
     if args.authors:
         variants["vical SAC (agent=sac_authors)"] = ["agent=sac_authors"]
@@ -174,7 +176,7 @@ def main() -> None:
         for name, run in runs.items():
             final, rate, trained[name] = run(seed)
             results[name].append((final, rate))
-            print(f"seed {seed}  {name:40s} final return {final:8.1f}  updates/s {rate:6.1f}", flush=True)
+            print(f"seed {seed}  {name:42s} final return {final:8.1f}  updates/s {rate:6.1f}", flush=True)
     sb3_model = trained.pop("stable-baselines3 SAC")
     update_rates = interleaved_update_rates(sb3_model, trained, args.chunks, per_chunk=50)
     print_table(args, results, update_rates, load_start, os.getloadavg())

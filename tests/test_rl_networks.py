@@ -99,3 +99,19 @@ def test_bfloat16_hidden_layers_stay_close_to_float32_and_keep_float32_parameter
     assert (q_fast - q_exact).abs().max() < 0.02 * scale and (q_fast - q_exact).abs().max() > 0
     q_fast.sum().backward()
     assert all(p.dtype == torch.float32 and p.grad.dtype == torch.float32 for p in fast.parameters())
+
+
+def test_bfloat16_backward_keeps_the_float32_forward_pass_and_rounds_only_the_gradients():
+    make = lambda grad_dtype: QNetworks(3, 2, [64, 64], 2, torch.Generator().manual_seed(0), grad_dtype=grad_dtype)  # noqa: E731
+    exact, fast = make(None), make(torch.bfloat16)
+    obs = torch.randn(128, 3, generator=torch.Generator().manual_seed(1))
+    actions = torch.rand(128, 2, generator=torch.Generator().manual_seed(2)) * 2 - 1
+    q_exact, q_fast = exact(obs, actions), fast(obs, actions)
+    assert torch.equal(q_exact, q_fast)
+    q_exact.square().sum().backward()
+    q_fast.square().sum().backward()
+    for p_exact, p_fast in zip(exact.parameters(), fast.parameters(), strict=True):
+        assert p_fast.grad.dtype == torch.float32
+        scale = p_exact.grad.abs().max()
+        assert (p_fast.grad - p_exact.grad).abs().max() < 0.03 * scale
+    assert any(not torch.equal(p.grad, q.grad) for p, q in zip(exact.parameters(), fast.parameters(), strict=True))

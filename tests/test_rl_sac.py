@@ -190,7 +190,10 @@ def test_target_value_network_is_never_trained():
         ({"batch_size": 0}, r"agent\.batch_size must be an integer >= 1"),
         ({"log_std_min": 3.0}, r"agent\.log_std_max must be a number in \(3\.0, inf\)"),
         ({"gama": 0.9}, r"agent: unknown setting\(s\) \['gama'\]"),
-        ({"hidden_precision": "float16"}, r"agent\.hidden_precision must be one of \['bfloat16', 'float32'\]"),
+        (
+            {"hidden_precision": "float16"},
+            r"agent\.hidden_precision must be one of \['bfloat16', 'bfloat16_backward', 'float32'\]",
+        ),
     ],
 )
 def test_bad_settings_fail_naming_the_key(setting, message):

@@ -29,10 +29,12 @@ class EnsembleMLP(nn.Module):
     Output shape ``(E, B, out_dim)``. ``frozen=True`` evaluates with detached weights: gradients flow
     to the input (e.g. the policy's action) but never into this network's parameters.
 
-    ``hidden_dtype``: the dtype of the hidden-to-hidden matmuls (forward and backward), where nearly all the
-    FLOPs are. ``torch.bfloat16`` runs them ~4x faster on CPUs with AVX512-BF16 (oneDNN accumulates in
-    float32); parameters, the input layer (raw observations) and the output layer (Q/V values, policy
-    mean and log-std) stay float32.
+    ``hidden_dtype``: the dtype of the hidden-to-hidden matmuls of the forward pass, ``grad_dtype`` (default
+    ``hidden_dtype``) that of the backward pass; nearly all the FLOPs are there. ``torch.bfloat16`` runs them
+    ~4x faster on CPUs with AVX512-BF16 (oneDNN accumulates in float32); parameters, the input layer (raw
+    observations) and the output layer (Q/V values, policy mean and log-std) stay float32. With only
+    ``grad_dtype=torch.bfloat16`` the outputs (and so every loss and target) are exactly the float32 ones
+    and only the gradients are rounded.
     """
 
     def __init__(
@@ -43,11 +45,13 @@ class EnsembleMLP(nn.Module):
         out_dim: int,
         generator: torch.Generator,
         hidden_dtype: torch.dtype = torch.float32,
+        grad_dtype: torch.dtype | None = None,
     ) -> None:
         super().__init__()
         sizes = [in_dim, *hidden_sizes, out_dim]
         self.n_members = n_members
         self.hidden_dtype = hidden_dtype
+        self.grad_dtype = hidden_dtype if grad_dtype is None else grad_dtype
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
         for fan_in, fan_out in itertools.pairwise(sizes):
@@ -59,16 +63,97 @@ class EnsembleMLP(nn.Module):
         x = x.transpose(-1, -2)  # feature-major (.., in, B)
         if x.dim() == 2:
             x = x.expand(self.n_members, *x.shape)
-        last = len(self.weights) - 1
-        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            if frozen:
-                w, b = w.detach(), b.detach()
-            if 0 < i < last:  # hidden-to-hidden layer
-                w, b = w.to(self.hidden_dtype), b.to(self.hidden_dtype)
-            x = torch.baddbmm(b, w, x.to(w.dtype))
-            if i < last:
-                x = x.relu_()  # in place: baddbmm's backward does not need its output
-        return x.transpose(1, 2)
+        params = [*self.weights, *self.biases]
+        if frozen:
+            params = [p.detach() for p in params]
+        if torch.is_grad_enabled() and (x.requires_grad or any(p.requires_grad for p in params)):
+            out = _EnsembleMLPFunction.apply(x, self.hidden_dtype, self.grad_dtype, *params)
+        else:  # no graph to record (targets, acting): the same forward pass, saving nothing
+            out = _mlp_forward(x, params, self.hidden_dtype, None)
+        return out.transpose(1, 2)
+
+
+def _mlp_forward(x: Tensor, params: Sequence[Tensor], hidden_dtype: torch.dtype, saved: list | None) -> Tensor:
+    """``(E, in, B) -> (E, out, B)``; appends each layer's ``(input, weight)`` to ``saved`` unless it is None."""
+    n = len(params) // 2
+    last = n - 1
+    for i in range(n):
+        w, b = params[i], params[n + i]
+        hidden = 0 < i < last  # a hidden-to-hidden layer
+        if hidden:
+            w, b = w.to(hidden_dtype), b.to(hidden_dtype)
+        x = x.to(w.dtype)
+        if saved is not None:
+            saved.append((x, w, hidden))
+        x = torch.baddbmm(b, w, x)
+        if i < last:
+            x = x.relu_()  # in place: the backward pass needs the layer inputs only
+    return x
+
+
+class _EnsembleMLPFunction(torch.autograd.Function):
+    """The ensemble MLP with a hand-written backward pass (no double backward).
+
+    ``apply(x, hidden_dtype, grad_dtype, *weights, *biases)``, ``x`` feature-major ``(E, in, B)``, returns
+    ``(E, out, B)``. The backward pass computes the gradients autograd computes for :func:`_mlp_forward`
+    (bit-identical in float32 on the tested CPUs), only those that are needed (``needs_input_grad``:
+    none for detached weights, none for an input that needs none), with the hidden layers' matmuls in
+    ``grad_dtype``, which may differ from the forward pass's ``hidden_dtype`` (autograd cannot do that).
+    """
+
+    @staticmethod
+    def forward(ctx, x: Tensor, hidden_dtype: torch.dtype, grad_dtype: torch.dtype, *params: Tensor) -> Tensor:  # type: ignore[override]
+        saved: list[tuple[Tensor, Tensor, bool]] = []
+        out = _mlp_forward(x, params, hidden_dtype, saved)
+        # the backward pass's operands: hidden layers' inputs and weights in grad_dtype
+        inputs = [a.to(grad_dtype) if hidden else a for a, _, hidden in saved]
+        weights = [w.to(grad_dtype) if hidden else w for _, w, hidden in saved]
+        ctx.n_layers = len(saved)
+        ctx.save_for_backward(*inputs, *weights)
+        return out
+
+    @staticmethod
+    def backward(ctx, grad: Tensor) -> tuple[Tensor | None, ...]:  # type: ignore[override]
+        n = ctx.n_layers
+        saved = ctx.saved_tensors
+        inputs, weights = saved[:n], saved[n:]
+        needs = ctx.needs_input_grad  # (x, hidden_dtype, grad_dtype, *weights, *biases)
+        grad_w: list[Tensor | None] = [None] * n
+        grad_b: list[Tensor | None] = [None] * n
+        grad_x = None
+        for i in reversed(range(n)):
+            w, a = weights[i], inputs[i]
+            g = grad.to(w.dtype)
+            if needs[3 + i]:
+                grad_w[i] = _outer_sum(g, a).float()
+            if needs[3 + n + i]:
+                grad_b[i] = g.sum(-1, keepdim=True).float()
+            if i == 0 and not needs[0]:
+                break
+            grad = _transposed_product(w, g)
+            if i > 0:  # through the ReLU that produced this layer's input (a >= 0, zero where clipped)
+                grad = torch.ops.aten.threshold_backward(grad, a, 0)
+            else:
+                grad_x = grad.float()
+        return grad_x, None, None, *grad_w, *grad_b
+
+
+def _outer_sum(g: Tensor, a: Tensor) -> Tensor:
+    """``g @ a^T`` ``(E, out, in)`` from ``g (E, out, B)``, ``a (E, in, B)``: the weight gradient.
+
+    For the output layer's 1-2 units this is the transpose of ``a @ g^T``, which MKL computed several times
+    faster (the narrow side as the result's columns, as autograd's orientation has for the input layer).
+    """
+    if g.shape[1] < a.shape[1]:
+        return torch.bmm(a, g.transpose(1, 2)).transpose(1, 2)
+    return torch.bmm(g, a.transpose(1, 2))
+
+
+def _transposed_product(w: Tensor, g: Tensor) -> Tensor:
+    """``w^T @ g`` ``(E, in, B)``: the gradient with respect to a layer's input (an outer product for one unit)."""
+    if w.shape[1] == 1:
+        return w.transpose(1, 2) * g
+    return torch.bmm(w.transpose(1, 2), g)
 
 
 def _uniform(shape: tuple[int, ...], bound: float, generator: torch.Generator) -> Tensor:
@@ -86,9 +171,10 @@ class QNetworks(nn.Module):
         n_q: int,
         generator: torch.Generator,
         hidden_dtype: torch.dtype = torch.float32,
+        grad_dtype: torch.dtype | None = None,
     ) -> None:
         super().__init__()
-        self.mlp = EnsembleMLP(n_q, obs_dim + act_dim, hidden_sizes, 1, generator, hidden_dtype)
+        self.mlp = EnsembleMLP(n_q, obs_dim + act_dim, hidden_sizes, 1, generator, hidden_dtype, grad_dtype)
 
     def forward(self, obs: Tensor, action: Tensor, frozen: bool = False) -> Tensor:
         return self.mlp(torch.cat([obs, action], dim=-1), frozen=frozen).squeeze(-1)
@@ -103,9 +189,10 @@ class ValueNetwork(nn.Module):
         hidden_sizes: Sequence[int],
         generator: torch.Generator,
         hidden_dtype: torch.dtype = torch.float32,
+        grad_dtype: torch.dtype | None = None,
     ) -> None:
         super().__init__()
-        self.mlp = EnsembleMLP(1, obs_dim, hidden_sizes, 1, generator, hidden_dtype)
+        self.mlp = EnsembleMLP(1, obs_dim, hidden_sizes, 1, generator, hidden_dtype, grad_dtype)
 
     def forward(self, obs: Tensor) -> Tensor:
         return self.mlp(obs)[0, :, 0]
@@ -127,9 +214,10 @@ class TanhGaussianPolicy(nn.Module):
         log_std_max: float,
         generator: torch.Generator,
         hidden_dtype: torch.dtype = torch.float32,
+        grad_dtype: torch.dtype | None = None,
     ) -> None:
         super().__init__()
-        self.mlp = EnsembleMLP(1, obs_dim, hidden_sizes, 2 * act_dim, generator, hidden_dtype)
+        self.mlp = EnsembleMLP(1, obs_dim, hidden_sizes, 2 * act_dim, generator, hidden_dtype, grad_dtype)
         self.act_dim = act_dim
         self.log_std_min = log_std_min
         self.log_std_max = log_std_max

@@ -31,7 +31,12 @@ from vical.config import ConfigError, require, require_range
 from vical.rl.buffer import Batch
 from vical.rl.networks import QNetworks, TanhGaussianPolicy, ValueNetwork
 
-HIDDEN_DTYPES = {"float32": torch.float32, "bfloat16": torch.bfloat16}
+# hidden_precision -> dtypes of the hidden-to-hidden matmuls (forward pass, backward pass)
+HIDDEN_PRECISIONS = {
+    "float32": (torch.float32, torch.float32),
+    "bfloat16": (torch.bfloat16, torch.bfloat16),
+    "bfloat16_backward": (torch.float32, torch.bfloat16),
+}
 
 
 @dataclass
@@ -40,8 +45,10 @@ class SACConfig:
 
     alpha: entropy temperature, a non-negative number (fixed; 0 = no entropy term) or ``"auto"`` (tuned
     toward ``target_entropy``, default ``-act_dim``, starting from ``init_alpha``).
-    hidden_precision: dtype of the hidden-to-hidden matmuls (see ``EnsembleMLP``): ``float32`` or
-    ``bfloat16`` (about 4x faster matmuls on CPUs with AVX512-BF16, much slower on CPUs without it).
+    hidden_precision: dtype of the hidden-to-hidden matmuls (see ``EnsembleMLP``): ``float32``, ``bfloat16``
+    (forward and backward passes; about 4x faster matmuls on CPUs with AVX512-BF16, much slower on CPUs
+    without it) or ``bfloat16_backward`` (float32 forward pass, so exact losses and targets, and bfloat16
+    gradient matmuls: two thirds of the FLOPs).
     """
 
     hidden_sizes: list[int] = field(default_factory=lambda: [256, 256])
@@ -78,9 +85,9 @@ class SACConfig:
             require_range("agent.target_entropy", self.target_entropy)
         require_range("agent.log_std_max", self.log_std_max, self.log_std_min, None, low_open=True)
         require(
-            self.hidden_precision in HIDDEN_DTYPES,
+            self.hidden_precision in HIDDEN_PRECISIONS,
             "agent.hidden_precision",
-            f"one of {sorted(HIDDEN_DTYPES)}",
+            f"one of {sorted(HIDDEN_PRECISIONS)}",
             self.hidden_precision,
         )
 
@@ -110,12 +117,12 @@ class SAC(nn.Module):
             raise ConfigError(f"SAC needs obs_dim >= 1 and act_dim >= 1, got obs_dim={obs_dim}, act_dim={act_dim}")
         self.config = config
         self.generator = torch.Generator().manual_seed(seed)
-        hidden, dtype = config.hidden_sizes, HIDDEN_DTYPES[config.hidden_precision]
+        hidden, dtypes = config.hidden_sizes, HIDDEN_PRECISIONS[config.hidden_precision]
         self.policy = TanhGaussianPolicy(
-            obs_dim, act_dim, hidden, config.log_std_min, config.log_std_max, self.generator, dtype
+            obs_dim, act_dim, hidden, config.log_std_min, config.log_std_max, self.generator, *dtypes
         )
-        self.q = QNetworks(obs_dim, act_dim, hidden, config.n_q, self.generator, dtype)
-        self.v = ValueNetwork(obs_dim, hidden, self.generator, dtype)
+        self.q = QNetworks(obs_dim, act_dim, hidden, config.n_q, self.generator, *dtypes)
+        self.v = ValueNetwork(obs_dim, hidden, self.generator, *dtypes)
         self.v_target = copy.deepcopy(self.v).requires_grad_(False)
         if config.auto_alpha:
             self.log_alpha = nn.Parameter(torch.tensor(math.log(config.init_alpha)))
