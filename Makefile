@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.vical-installed
 export MUJOCO_GL ?= egl
 
-.PHONY: venv test test-slow lint train demo bench clean
+.PHONY: venv test test-slow lint train tables demo bench clean
 
 venv: $(STAMP)
 
@@ -28,6 +28,13 @@ test-slow: venv
 
 train: venv
 	$(VENV)/bin/vical-train +experiment=train_paper_policy
+
+# The paper's Tables I-III with the shipped learned policy (RUN=<vical-train run> evaluates another one).
+RUN ?=
+tables: venv
+	for t in table1_intrinsic table2_extrinsic table3_joint; do \
+		$(VENV)/bin/vical-evaluate +experiment=$$t $(if $(RUN),policy.run_dir=$(RUN)) out=evaluations/$$t overwrite=true || exit 1; \
+	done
 
 demo: venv
 	$(VENV)/bin/vical-sim-demo

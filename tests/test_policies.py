@@ -14,7 +14,7 @@ from vical.env.config import Workspace
 from vical.policies.base import WaypointPolicy
 from vical.policies.evaluation import run_trajectory
 from vical.policies.handcrafted import LENGTHS, TASKS, handcrafted_fractions, handcrafted_policy, handcrafted_waypoints
-from vical.policies.learned import LearnedPolicy, learned_policy
+from vical.policies.learned import PAPER_POLICY_DIR, LearnedPolicy, learned_policy
 from vical.policies.random_policy import RandomMovingPolicy
 from vical.rl.trainer import train
 
@@ -164,5 +164,13 @@ def test_learned_policy_refuses_a_pendulum_run_and_a_missing_run(tmp_path):
         LearnedPolicy.from_run(tmp_path / "pendulum")
     with pytest.raises(ConfigError, match=r"no trained agent at .*missing/agent\.pt"):
         LearnedPolicy.from_run(tmp_path / "missing")
-    with pytest.raises(ConfigError, match=r"policy\.run_dir"):
-        learned_policy(None)
+
+
+def test_without_a_run_the_learned_policy_is_the_shipped_paper_policy(env):
+    policy = learned_policy(None)
+    assert policy.source == PAPER_POLICY_DIR / "agent.pt"
+    obs, _ = env.reset(seed=0)
+    policy.reset(env, np.random.default_rng(0))  # refuses an env with another action scale
+    action = policy.act(obs, env)
+    assert env.action_space.contains(action.astype(np.float32))
+    assert np.abs(action).max() > 0.01  # a trained policy moves

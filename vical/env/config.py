@@ -82,7 +82,7 @@ class RewardWeights:
     """
 
     coverage_weight: float = 100.0
-    path_weight: float = 5.0
+    path_weight: float = 20.0
     rotation_weight: float = 0.0
     terminal_bonus: float = 100.0
     accuracy_weight: float = 100.0

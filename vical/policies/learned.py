@@ -22,6 +22,9 @@ from vical.rl.trainer import AGENT, BoxActions
 
 CALIBRATION_ENV = "vical.env.calibration.CalibrationEnv"
 ACT_SIZE = 6
+# The agent that `vical-train +experiment=train_paper_policy` trained for the tables of docs/results.md
+# (its agent.pt and config.yaml), package data so that the paper's experiments run without training first.
+PAPER_POLICY_DIR = Path(__file__).resolve().parent / "params" / "paper_policy"
 TRAIN_HINT = "train one with `vical-train env=calibration task=<task>` and pass its run directory"
 
 
@@ -113,7 +116,6 @@ class LearnedPolicy(Policy):
 def learned_policy(
     run_dir: str | None = None, name: str = "model-free learned policy", max_steps: int | None = None
 ) -> LearnedPolicy:
-    """The factory ``conf/policy/learned.yaml`` names: ``run_dir`` is required (``policy.run_dir=<run>``)."""
-    if not run_dir:
-        raise ConfigError(f"policy=learned needs policy.run_dir=<vical-train run directory holding {AGENT}>")
-    return LearnedPolicy.from_run(run_dir, name=name, max_steps=max_steps)
+    """The factory ``conf/policy/learned.yaml`` names: the agent of ``run_dir`` (``policy.run_dir=<run>``),
+    or the shipped policy of the paper's experiment (``PAPER_POLICY_DIR``) when ``run_dir`` is None."""
+    return LearnedPolicy.from_run(run_dir or PAPER_POLICY_DIR, name=name, max_steps=max_steps)
