@@ -1,8 +1,8 @@
 """vical's SAC vs stable-baselines3's SAC on Pendulum-v1, measured side by side in one process.
 
 Both agents get the same settings (2 x 256 MLPs, batch 256, lr 3e-4, gamma 0.99, tau 0.005, automatic
-temperature, clipped double-Q, 100 random warm-up steps, one update per env step, 2 torch threads),
-the same number of env steps and the same seeds; runs alternate per seed so both see the same machine
+temperature, clipped double-Q, 100 random warm-up steps, one update per env step, 2 torch threads unless
+``--threads``), the same number of env steps and the same seeds; runs alternate per seed so both see the same machine
 load. Printed per agent: the final deterministic return (mean over ``--eval-episodes`` fixed-seed
 episodes, then mean +- std over seeds) and gradient updates per second of training wall time
 (env interaction included, for both; both timers start after the agent is built and time only SB3's
@@ -14,6 +14,11 @@ authors' settings (``conf/agent/sac_authors.yaml``).
 
     .venv/bin/python experiments/bench_sac.py                      # 6000 steps, seeds 0 1 2
     .venv/bin/python experiments/bench_sac.py --steps 2000 --seeds 0
+    .venv/bin/python experiments/bench_sac.py --threads 1          # both agents at 1 torch thread
+
+On a 2-core machine shared with other busy processes, 2 threads can collapse (OpenMP threads waiting for a
+descheduled peer, docs/rl.md): use ``--threads 1`` there (vical's returns on seeds 0-2 were the same at
+1 and 2 threads).
 """
 
 from __future__ import annotations
@@ -157,7 +162,12 @@ def main() -> None:
     parser.add_argument("--eval-episodes", type=int, default=10)
     parser.add_argument("--authors", action="store_true", help="also run agent=sac_authors")
     parser.add_argument("--chunks", type=int, default=10, help="rounds of the interleaved update-only measurement")
+    parser.add_argument(
+        "--threads", type=int, default=2, help="torch threads of both agents (1 on a machine shared with busy jobs)"
+    )
     args = parser.parse_args()
+    global THREADS
+    THREADS = args.threads
 
     variants = {
         "vical SAC (agent=sac)": ["agent=sac"],
@@ -187,7 +197,8 @@ def print_table(
 ) -> None:
     print(
         f"\nPendulum-v1, {args.steps} env steps, seeds {args.seeds}, {args.eval_episodes} deterministic eval episodes"
-        f" per seed; load average (1 min) {load_start[0]:.2f} at start, {load_end[0]:.2f} at end; {os.cpu_count()} CPUs"
+        f" per seed; load average (1 min) {load_start[0]:.2f} at start, {load_end[0]:.2f} at end;"
+        f" {os.cpu_count()} CPUs, {THREADS} torch thread(s)"
     )
     print(
         "| agent | final return (mean +- std over seeds) | updates/s, whole runs (mean +- std) | ratio to SB3 "
