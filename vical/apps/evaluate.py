@@ -16,15 +16,14 @@ import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
-from hydra.core.override_parser.overrides_parser import OverridesParser
-from hydra.errors import HydraException
 from omegaconf import DictConfig, OmegaConf
 from omegaconf.errors import OmegaConfBaseException
 
+from vical.apps.cli import fail, override_value
 from vical.config import ConfigError, require
 from vical.io.atomic import write_text_atomic
 from vical.policies.evaluation import COLUMNS, Evaluation, PolicyEvaluator, PolicySpec, Summary, run_evaluator
@@ -33,7 +32,7 @@ from vical.policies.evaluation import COLUMNS, Evaluation, PolicyEvaluator, Poli
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 POLICY_DIR = CONF_DIR / "policy"
 USER_ERRORS = (ConfigError, FileNotFoundError, FileExistsError, OmegaConfBaseException)
-EXIT_USER_ERROR = 2
+APP = "vical-evaluate"
 RESULTS, SUMMARY = "results.csv", "summary.md"
 
 # The table: header, Summary attribute, format. Absolute errors read by users follow the paper's columns.
@@ -158,39 +157,19 @@ def hydra_main(cfg: DictConfig) -> None:
     try:
         out, summaries = evaluate(cfg, HydraConfig.get().runtime.choices.get("policy"))
     except USER_ERRORS as err:
-        fail(err)
+        fail(APP, err)
     print(summary_table(summaries))
     print(f"results written to {out / RESULTS} and {out / SUMMARY}")
 
 
-def fail(err: BaseException) -> NoReturn:
-    """Print ``vical-evaluate: error: <message>`` on one line to stderr and exit with status 2."""
-    message = " ".join(str(err).split())
-    print(f"vical-evaluate: error: {message}", file=sys.stderr)
-    raise SystemExit(EXIT_USER_ERROR)
-
-
-def _policy_argument(argv: list[str]) -> str | None:
-    """The value of a ``policy=<name>`` group selection on the command line (None when absent)."""
-    for arg in argv:
-        if arg.lstrip("+").startswith("policy="):
-            try:
-                (override,) = OverridesParser.create().parse_overrides([arg])
-            except HydraException:
-                return None  # Hydra reports the syntax error itself
-            value = override.value()
-            return value if isinstance(value, str) else None
-    return None
-
-
 def main() -> None:
     """Console entry point: refuse an unknown ``policy=`` choice in one line before Hydra composes."""
-    name = _policy_argument(sys.argv[1:])
+    name = override_value(sys.argv[1:], "policy")
     if name is not None:
         try:
             check_policy_name(name)
         except ConfigError as err:
-            fail(err)
+            fail(APP, err)
     hydra_main()
 
 

@@ -14,15 +14,15 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import NoReturn
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.core.override_parser.types import Override, OverrideType
-from hydra.errors import HydraException, InstantiationException
+from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf
 
+from vical.apps.cli import fail, override_value
 from vical.config import ConfigError
 from vical.rl.checkpoint import IncompatibleCheckpointError
 from vical.rl.trainer import TrainingDivergedError, train
@@ -39,7 +39,7 @@ USER_ERRORS = (
     TrainingDivergedError,
     InstantiationException,  # the env's _target_ could not be built (bad id, bad arguments)
 )
-EXIT_USER_ERROR = 2
+APP = "vical-train"
 
 _ABSENT = object()
 
@@ -114,37 +114,18 @@ def hydra_main(cfg: DictConfig) -> None:
             cfg = resumed_config(str(cfg.resume), list(HydraConfig.get().overrides.task))
         result = train(cfg)
     except USER_ERRORS as err:
-        fail(err)
+        fail(APP, err)
     print(f"trained {result.steps} steps, {result.episodes} episodes; run directory: {result.run_dir}")
-
-
-def fail(err: BaseException) -> NoReturn:
-    """Print ``vical-train: error: <message>`` to stderr and exit with status 2."""
-    print(f"vical-train: error: {err}", file=sys.stderr)
-    raise SystemExit(EXIT_USER_ERROR)
-
-
-def _resume_argument(argv: list[str]) -> str | None:
-    """The value of a ``resume=`` command-line override (None when absent, null or not a single value)."""
-    for arg in argv:
-        if arg.lstrip("+").startswith("resume="):
-            try:
-                (override,) = OverridesParser.create().parse_overrides([arg])
-            except HydraException:
-                return None  # Hydra reports the syntax error itself
-            value = None if override.is_sweep_override() else override.value()
-            return value if isinstance(value, str) and value else None
-    return None
 
 
 def main() -> None:
     """Console entry point: check a ``resume=`` path before Hydra creates its run directory, then run."""
-    resume = _resume_argument(sys.argv[1:])
+    resume = override_value(sys.argv[1:], "resume")
     if resume is not None:
         try:
             check_resume_dir(resume)
         except ConfigError as err:
-            fail(err)
+            fail(APP, err)
     hydra_main()
 
 
