@@ -88,6 +88,22 @@ def test_same_seed_same_sensor_and_same_episode(env):
     assert truth_c.camera.fx != truth_a.camera.fx
 
 
+def test_another_noise_stream_records_the_same_sensor_with_other_noise(env):
+    def imu(stream):
+        env.reset(seed=9, options={"noise_stream": stream})
+        env.step(np.array([0.1, 0.3, 1.0, 0.1, 0.0, 0.0]))
+        return env.truth, env.recording().imu
+
+    truth_a, imu_a = imu(0)
+    truth_b, imu_b = imu(1)
+    _, imu_c = imu(0)
+    assert truth_a.camera == truth_b.camera
+    np.testing.assert_allclose(truth_a.T_cam_imu, truth_b.T_cam_imu)
+    np.testing.assert_array_equal(imu_a.gyro, imu_c.gyro)
+    difference = imu_a.gyro - imu_b.gyro  # same motion, independent white noise
+    assert 0 < np.std(difference) < 0.01
+
+
 def test_step_reward_is_the_sum_of_its_terms_and_the_terms_are_measured(env):
     prev, _ = env.reset(seed=1)
     before_path = env.recording().path_length

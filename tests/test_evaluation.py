@@ -71,7 +71,8 @@ def test_joint_task_runs_both_trajectories_and_calibrates_intrinsics_from_the_fi
         assert evaluator.task.calibrate == "two_stage" and evaluator.task.error_metric == "extrinsic_relative"
         assert [p.task for p in evaluator.policies] == ["intrinsic", "extrinsic"]
         row = evaluator.episode(0)
-        first, second = (run_trajectory(env, p, 0) for env, p in zip(evaluator.envs, evaluator.policies, strict=True))
+        pairs = enumerate(zip(evaluator.envs, evaluator.policies, strict=True))
+        first, second = (run_trajectory(env, p, 0, noise_stream=k) for k, (env, p) in pairs)
         outcome = run_task(evaluator.task, second.recording, first.recording.frames)
     finally:
         evaluator.close()

@@ -81,14 +81,21 @@ class CalibrationEnv(gym.Env):
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
-        """Draw a sensor, rest at the start pose for ``reset_hold`` and return the first state."""
+        """Draw a sensor, rest at the start pose for ``reset_hold`` and return the first state.
+
+        ``options={"noise_stream": k}`` (an integer >= 0, default 0) keeps the sensor of ``seed`` but
+        draws the IMU and pixel noise from another stream: a second recording of the same sensor.
+        """
         super().reset(seed=seed)
+        stream = int((options or {}).get("noise_stream", 0))
+        if stream < 0:
+            raise ValueError(f"options['noise_stream'] must be an integer >= 0, got {stream}")
         sim_seed, sensor_seed, noise_seed = self.np_random.integers(2**63 - 1, size=3)
         self.sim.reset(seed=int(sim_seed))
         self.truth = sample_sensor(
             self.sampling, np.random.default_rng(sensor_seed), asymmetric=self.task.asymmetric_distortion
         )
-        self.recorder.start(self.truth, np.random.default_rng(noise_seed))
+        self.recorder.start(self.truth, np.random.default_rng([int(noise_seed), stream]))
         self.coverage.reset()
         self._T_start = self.sim.ee_pose()
         self._euler_start = matrix_to_euler(self._T_start[:3, :3])

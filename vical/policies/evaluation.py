@@ -197,9 +197,13 @@ def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
     return env
 
 
-def run_trajectory(env: CalibrationEnv, policy: Policy, seed: int) -> Trajectory:
-    """One episode of ``policy`` on the sensor of ``seed``: until termination, truncation or the policy is done."""
-    obs, _ = env.reset(seed=seed)
+def run_trajectory(env: CalibrationEnv, policy: Policy, seed: int, noise_stream: int = 0) -> Trajectory:
+    """One episode of ``policy`` on the sensor of ``seed``: until termination, truncation or the policy is done.
+
+    ``noise_stream`` selects the sensor noise of the recording (another trajectory of the same sensor
+    records other noise).
+    """
+    obs, _ = env.reset(seed=seed, options={"noise_stream": noise_stream})
     policy.reset(env, np.random.default_rng(seed))
     for _ in range(env.config.max_steps):
         action = policy.act(obs, env)
@@ -260,7 +264,8 @@ class PolicyEvaluator:
 
     def episode(self, seed: int) -> EpisodeRow:
         """Run the trajectory (or both) on the sensor of ``seed`` and calibrate; one table row."""
-        runs = [run_trajectory(env, p, seed) for env, p in zip(self.envs, self.policies, strict=True)]
+        pairs = zip(self.envs, self.policies, strict=True)
+        runs = [run_trajectory(env, p, seed, noise_stream=k) for k, (env, p) in enumerate(pairs)]
         row = EpisodeRow(
             policy=self.spec.name,
             seed=seed,
