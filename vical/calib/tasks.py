@@ -61,10 +61,6 @@ class CalibrationTask:
     def from_config(cls, cfg: Mapping[str, Any]) -> CalibrationTask:
         return from_mapping(cls, cfg, "task")
 
-    @property
-    def needs_imu(self) -> bool:
-        return self.calibrate != "intrinsic"
-
 
 @dataclass(frozen=True)
 class TaskOutcome:
