@@ -9,7 +9,7 @@ calibrate the same way.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
@@ -98,8 +98,7 @@ def calibrate_task(
         CalibrationError: the data cannot be calibrated (too few views, degenerate motion, ...).
         ConfigError: the solve needs the truth or IMU data that the recording lacks.
     """
-    base = options or ViOptions()
-    opts = ViOptions(**{**base.__dict__, "estimate_time_offset": task.estimate_time_offset})
+    opts = replace(options or ViOptions(), estimate_time_offset=task.estimate_time_offset)
     size = (recording.truth.camera.width, recording.truth.camera.height) if recording.truth else None
     if task.calibrate == "intrinsic":
         return calibrate_intrinsics(recording.frames, recording.target, task.camera_model, size)
