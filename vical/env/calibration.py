@@ -74,8 +74,7 @@ class CalibrationEnv(gym.Env):
         scale = np.asarray(self.config.action_scale, dtype=np.float32)
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
         self.observation_space = gym.spaces.Box(0.0, 1.0, (OBS_SIZE,), dtype=np.float32)
-        bounds = self.config.workspace
-        self._bound = np.r_[bounds.position, bounds.orientation]
+        self._bound = self.config.workspace.bound
         self.truth: SensorTruth | None = None
         self._steps = 0
 

@@ -42,6 +42,11 @@ class Workspace:
         object.__setattr__(self, "orientation", _vector("env.workspace.orientation", self.orientation, 3))
         require(max(self.orientation) < np.pi / 2, "env.workspace.orientation", "bounds < pi/2 rad", self.orientation)
 
+    @property
+    def bound(self) -> np.ndarray:
+        """(6,) +- bounds ``[x, y, z [m], roll, pitch, yaw [rad]]`` of the pose offset."""
+        return np.array([*self.position, *self.orientation])
+
 
 @dataclass(frozen=True)
 class Thresholds:

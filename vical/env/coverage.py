@@ -104,7 +104,7 @@ class Coverage:
     def __init__(self, workspace: Workspace, thresholds: Thresholds, novelty: float) -> None:
         self.thresholds = thresholds
         self.novelty = float(novelty)
-        self._pose_width = 2.0 * np.r_[workspace.position, workspace.orientation]
+        self._pose_width = 2.0 * workspace.bound
         self.reset()
 
     def reset(self) -> None:

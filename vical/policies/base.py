@@ -99,7 +99,7 @@ class WaypointPolicy(Policy):
 
     def _goal(self, env: CalibrationEnv) -> np.ndarray:
         """The current waypoint clipped to the workspace (what the arm can reach)."""
-        bound = np.r_[env.config.workspace.position, env.config.workspace.orientation]
+        bound = env.config.workspace.bound
         return np.clip(self.waypoints[self._next], -bound, bound)
 
     def _reached(self, delta: np.ndarray) -> bool:

@@ -44,8 +44,7 @@ FIT_COMMAND = "python experiments/fit_model_based_trajectory.py"
 
 def workspace_bound(workspace: Workspace | None = None) -> np.ndarray:
     """(6,) +- bounds [m, m, m, rad, rad, rad] of the pose offset (the paper's workspace by default)."""
-    w = workspace or Workspace()
-    return np.r_[w.position, w.orientation].astype(float)
+    return (workspace or Workspace()).bound
 
 
 class FourierTrajectory:

@@ -118,8 +118,7 @@ def handcrafted_fractions(task: str, length: str) -> np.ndarray:
 
 def handcrafted_waypoints(task: str, length: str, workspace: Workspace) -> np.ndarray:
     """(K, 6) waypoints ``[x, y, z [m], roll, pitch, yaw [rad]]`` inside ``workspace``."""
-    bound = np.r_[workspace.position, workspace.orientation]
-    return handcrafted_fractions(task, length) * bound
+    return handcrafted_fractions(task, length) * workspace.bound
 
 
 class HandcraftedPolicy(WaypointPolicy):
