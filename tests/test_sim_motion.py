@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from vical.geometry import euler_to_matrix, make_transform, rotation_angle, so3_exp, transform_error
-from vical.sim import PANDA_LIMITS, PandaSim, SimConfig
+from vical.sim import PANDA_LIMITS, IKConfig, PandaSim, SimConfig
 from vical.sim.motion import QUINTIC_PEAK_ACCELERATION, QUINTIC_PEAK_VELOCITY, motion_steps, quintic, quintic_plan
 
 
@@ -48,7 +48,8 @@ def test_planned_durations_respect_scaled_velocity_and_acceleration_limits():
         assert over_v or over_a or (steps - 1) * dt < 0.2
 
 
-def test_ik_reaches_50_random_reachable_targets(sim):
+def test_ik_reaches_50_random_reachable_targets():
+    sim = PandaSim(SimConfig(ik=IKConfig(restart_spread=0.0)))  # restarts anywhere: a global search
     rng = np.random.default_rng(7)
     lo, hi = PANDA_LIMITS.inner(0.1)
     sim.reset()
@@ -62,6 +63,17 @@ def test_ik_reaches_50_random_reachable_targets(sim):
         assert np.linalg.norm(p_ik - p) < 1e-3
         assert np.degrees(rotation_angle(R_ik.T @ R)) < 0.1
         assert np.all(result.q >= PANDA_LIMITS.q_min) and np.all(result.q <= PANDA_LIMITS.q_max)
+
+
+def test_ik_restarts_stay_near_the_start_unless_their_spread_is_zero(sim):
+    q0 = np.array([0.0, -1.0, 0.0, -2.0, 0.0, 1.9, 0.79])  # every joint >= 1 rad inside its range
+    rng = np.random.default_rng(3)
+    near = np.array([sim.ik._restart(q0, rng) for _ in range(2000)])
+    np.testing.assert_allclose(near.std(axis=0), 0.3, rtol=0.1)  # N(q0, 0.3) per joint (restart_spread)
+    np.testing.assert_allclose(near.mean(axis=0), q0, atol=0.03)
+    anywhere = PandaSim(SimConfig(ik=IKConfig(restart_spread=0.0))).ik
+    spread = np.array([anywhere._restart(q0, rng) for _ in range(2000)]).std(axis=0)
+    np.testing.assert_allclose(spread, (anywhere.q_hi - anywhere.q_lo) / np.sqrt(12.0), rtol=0.1)  # uniform
 
 
 def test_pose_steps_track_the_plan_within_limits(sim):

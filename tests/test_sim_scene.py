@@ -33,7 +33,7 @@ def test_omegaconf_node_builds_the_same_config():
     from omegaconf import OmegaConf
 
     node = OmegaConf.load(CONF)
-    node.board.distance = 1.2
+    node.board = {"distance": 1.2}  # the board comes from the workspace group (conf/workspace/)
     cfg = SimConfig.from_mapping(node)
     assert cfg.board.distance == 1.2 and cfg.motion.kp == SimConfig().motion.kp
 

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import fields, is_dataclass
-from typing import Any, get_type_hints
+from types import UnionType
+from typing import Any, get_args, get_type_hints
 
 
 class ConfigError(ValueError):
@@ -54,9 +55,23 @@ def from_mapping(cls: type, cfg: Mapping[str, Any], key: str) -> Any:
     hints = get_type_hints(cls)
     kwargs = {}
     for name, value in cfg.items():
-        target = hints.get(name)
-        if isinstance(target, type) and is_dataclass(target):
+        target = _nested_dataclass(hints.get(name))
+        if target is not None and not (value is None and _is_optional(hints.get(name))):
             kwargs[name] = from_mapping(target, value, f"{key}.{name}")
         else:
             kwargs[name] = value
     return cls(**kwargs)
+
+
+def _nested_dataclass(hint: Any) -> type | None:
+    """The dataclass of a field typed ``X`` or ``X | None``, else None."""
+    if isinstance(hint, type) and is_dataclass(hint):
+        return hint
+    if isinstance(hint, UnionType):
+        classes = [a for a in get_args(hint) if isinstance(a, type) and is_dataclass(a)]
+        return classes[0] if len(classes) == 1 else None
+    return None
+
+
+def _is_optional(hint: Any) -> bool:
+    return isinstance(hint, UnionType) and type(None) in get_args(hint)

@@ -7,7 +7,7 @@ Frames follow ``docs/conventions.md``: ``T_a_b`` maps frame-b points into frame 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -246,6 +246,40 @@ class Trajectory:
 
 
 @dataclass(frozen=True)
+class PathProfile:
+    """How far the end effector had travelled at each instant of a recording.
+
+    Attributes:
+        t: (K,) int64 [ns] timestamps (IMU clock), strictly increasing.
+        length: (K,) [m] end-effector path travelled since the recording started, non-decreasing.
+    """
+
+    t: np.ndarray
+    length: np.ndarray
+
+    def __post_init__(self) -> None:
+        t = _as_timestamps(self.t, "PathProfile.t")
+        object.__setattr__(self, "t", t)
+        length = np.asarray(self.length, dtype=np.float64)
+        if length.shape != t.shape or not np.all(np.isfinite(length)) or np.any(np.diff(length) < 0):
+            raise DataError(f"PathProfile.length must be {len(t)} finite, non-decreasing path lengths [m]")
+        object.__setattr__(self, "length", length)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def time_at(self, path: float) -> int:
+        """[ns] the first instant at which the path reaches ``path`` [m] (the last instant if it never does)."""
+        k = int(np.searchsorted(self.length, path, side="left"))
+        return int(self.t[min(k, len(self.t) - 1)])
+
+    def length_at(self, t_ns: int) -> float:
+        """[m] the path travelled by ``t_ns`` (the last profile sample at or before it)."""
+        k = int(np.searchsorted(self.t, t_ns, side="right")) - 1
+        return float(self.length[k]) if k >= 0 else 0.0
+
+
+@dataclass(frozen=True)
 class Recording:
     """Everything one data collection produced.
 
@@ -259,6 +293,8 @@ class Recording:
         path_length: [m] end-effector path length of the motion (0 when unknown).
         duration: [s] duration of the motion (0 when unknown).
         metadata: free-form YAML-serialisable information (seed, config, source).
+        path_profile: the end effector's path over time (None when unknown); needed to cut the
+            recording at a path budget (``until_path``).
     """
 
     imu: ImuSamples
@@ -270,6 +306,7 @@ class Recording:
     path_length: float = 0.0
     duration: float = 0.0
     metadata: dict[str, Any] = field(default_factory=dict)
+    path_profile: PathProfile | None = None
 
     @property
     def t0(self) -> int:
@@ -278,3 +315,55 @@ class Recording:
         if not starts:
             raise DataError("recording holds neither IMU samples nor camera frames")
         return min(starts)
+
+    @property
+    def t_end(self) -> int:
+        """Latest timestamp [ns] of the recording."""
+        ends = [int(x.t[-1]) for x in (self.imu, self.frames) if len(x)]
+        if not ends:
+            raise DataError("recording holds neither IMU samples nor camera frames")
+        return max(ends)
+
+    def until(self, t_end_ns: int) -> Recording:
+        """The recording as it stood at ``t_end_ns``: every sample, frame (by its stamp) and truth state up to it.
+
+        ``path_length`` becomes the path travelled by then (when the profile is known) and
+        ``duration`` the time since the recording's start.
+        """
+        t_end = int(t_end_ns)
+        imu = self.imu.slice_time(np.iinfo(np.int64).min, t_end)
+        frames = self.frames.select(self.frames.t <= t_end)
+        trajectory = self.trajectory
+        if trajectory is not None:
+            keep = trajectory.t <= t_end
+            trajectory = Trajectory(
+                trajectory.t[keep], trajectory.T_world_imu[keep], trajectory.v_world[keep], trajectory.omega_imu[keep]
+            )
+        profile = self.path_profile
+        path = self.path_length
+        if profile is not None:
+            path = profile.length_at(t_end)
+            keep = profile.t <= t_end
+            profile = PathProfile(profile.t[keep], profile.length[keep])
+        duration = min(self.duration, (t_end - self.t0) / NS_PER_S)
+        return replace(
+            self,
+            imu=imu,
+            frames=frames,
+            trajectory=trajectory,
+            path_profile=profile,
+            path_length=path,
+            duration=duration,
+        )
+
+    def until_path(self, budget_m: float) -> Recording:
+        """The recording up to the instant the end effector's path reached ``budget_m`` [m] (``until``).
+
+        The whole recording when its path stays below the budget. Raises ``DataError`` when the
+        recording has no path profile.
+        """
+        if self.path_profile is None or not len(self.path_profile):
+            raise DataError("this recording has no path profile (path over time); it cannot be cut at a path budget")
+        if budget_m >= self.path_profile.length[-1]:
+            return self
+        return self.until(self.path_profile.time_at(budget_m))

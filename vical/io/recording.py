@@ -11,6 +11,8 @@ Layout of a recording directory (format version 1)::
     trajectory.npz    t (K,) int64 [ns], T_world_imu (K, 4, 4), v_world (K, 3) [m/s],
                       omega_imu (K, 3) [rad/s]          (only with a ground-truth trajectory)
     extra.npz         T_world_target (4, 4)             (only when the target pose is known)
+    path.npz          t (K,) int64 [ns], length (K,) [m] end-effector path so far
+                                                        (only when the path profile is known)
 
 Arrays keep their dtype, so timestamps stay exact int64 ns and floats bit-exact. The directory
 is written into a temporary sibling and renamed into place (``vical.io.atomic``), so a partial
@@ -29,7 +31,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from vical.data import CameraFrames, DataError, ImuSamples, Recording, SensorTruth, Target, Trajectory
+from vical.data import CameraFrames, DataError, ImuSamples, PathProfile, Recording, SensorTruth, Target, Trajectory
 from vical.io.atomic import atomic_directory
 from vical.io.errors import RecordingFormatError
 
@@ -109,6 +111,8 @@ def _array_files(rec: Recording) -> dict[str, dict[str, np.ndarray]]:
         }
     if rec.T_world_target is not None:
         files["extra.npz"] = {"T_world_target": np.asarray(rec.T_world_target, dtype=np.float64)}
+    if rec.path_profile is not None:
+        files["path.npz"] = {"t": rec.path_profile.t, "length": rec.path_profile.length}
     return files
 
 
@@ -194,6 +198,7 @@ def _read_npz(path: Path, info: dict[str, Any]) -> dict[str, np.ndarray]:
 def _assemble(manifest: dict[str, Any], arrays: dict[str, dict[str, np.ndarray]]) -> Recording:
     imu = arrays["imu.npz"]
     extra = arrays.get("extra.npz", {})
+    path = arrays.get("path.npz")
     truth = manifest.get("truth")
     return Recording(
         imu=ImuSamples(imu["t"], imu["gyro"], imu["accel"]),
@@ -205,6 +210,7 @@ def _assemble(manifest: dict[str, Any], arrays: dict[str, dict[str, np.ndarray]]
         path_length=float(manifest.get("path_length", 0.0)),
         duration=float(manifest.get("duration", 0.0)),
         metadata=manifest.get("metadata") or {},
+        path_profile=None if path is None else PathProfile(path["t"], path["length"]),
     )
 
 

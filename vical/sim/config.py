@@ -71,7 +71,8 @@ class PhysicsConfig:
 class BoardConfig:
     """The calibration target (checkerboard or Kalibr aprilgrid) and where it stands.
 
-    At the robot's home pose the board centre lies ``distance`` in front of the camera along its
+    At the robot's start pose (``SimConfig.start``, else the ``home`` keyframe) the board centre
+    lies ``distance`` in front of the camera along its
     optical axis (shifted by ``offset``), facing the camera upright as printed (checkerboard: grid
     rows going down the image and columns going right; aprilgrid: tag 0 at the bottom left, board
     x to the right and y up); ``tilt_rpy`` then rotates the board about its centre.
@@ -84,7 +85,7 @@ class BoardConfig:
         tag_spacing: aprilgrid only: gap between tags / tag size (Kalibr's tagSpacing).
         border_squares: checkerboard only: white border width [squares] (an aprilgrid carries
             Kalibr's own margin, see ``Target.aprilgrid_image``).
-        distance: optical-axis distance from the camera at home to the board centre [m].
+        distance: optical-axis distance from the camera at the start pose to the board centre [m].
         offset: (2,) [m] board centre shift along the camera body's y (left) and z (up) axes.
         tilt_rpy: (3,) [rad] rotation of the board about its centre, Euler [roll, pitch, yaw] in
             the board frame.
@@ -197,6 +198,10 @@ class IKConfig:
     Attributes:
         max_iterations: iterations per attempt.
         restarts: extra attempts from seeded random joint configurations when the first fails.
+        restart_spread: [rad] restarts start from the first attempt's configuration perturbed by
+            ``N(0, restart_spread)`` per joint, so solutions stay on the arm's current branch and a
+            small pose step never becomes a swing across the workspace; 0 draws them uniformly over
+            the joint ranges (a global search, as the paper's tables were measured).
         damping: Levenberg damping of the least-squares step [m or rad].
         max_step: largest joint change per iteration [rad].
         position_tolerance: converged below this position error [m].
@@ -205,6 +210,7 @@ class IKConfig:
 
     max_iterations: int = 100
     restarts: int = 10
+    restart_spread: float = 0.3
     damping: float = 1e-3
     max_step: float = 0.4
     position_tolerance: float = 1e-5
@@ -217,10 +223,35 @@ class IKConfig:
                 isinstance(value, int) and 0 <= value <= high, f"sim.ik.{name}", f"an integer in [0, {high}]", value
             )
         require(self.max_iterations >= 1, "sim.ik.max_iterations", "an integer in [1, 10000]", self.max_iterations)
+        require_range("sim.ik.restart_spread", self.restart_spread, 0.0, 3.0)
         require_range("sim.ik.damping", self.damping, 0.0, 1.0)
         require_range("sim.ik.max_step", self.max_step, 0.0, 3.0, low_open=True)
         require_range("sim.ik.position_tolerance", self.position_tolerance, 0.0, 0.01, low_open=True)
         require_range("sim.ik.rotation_tolerance", self.rotation_tolerance, 0.0, 0.01, low_open=True)
+
+
+@dataclass(frozen=True)
+class StartPose:
+    """Where the camera body rests when an episode starts (instead of the ``home`` keyframe).
+
+    The arm reaches it by inverse kinematics from ``home`` when the simulator is built; the board
+    is then placed relative to it (``BoardConfig``).
+
+    Attributes:
+        position: (3,) [m] camera body origin (the ``ee`` site) in the world.
+        rpy: (3,) [rad] its world Euler angles roll, pitch, yaw (``R = Rz(yaw) Ry(pitch) Rx(roll)``);
+            zeros look horizontally along world +x, upright.
+    """
+
+    position: tuple[float, float, float] = (0.347, 0.0, 0.53)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "position", _float_tuple(self.position, 3, "sim.start.position"))
+        object.__setattr__(self, "rpy", _float_tuple(self.rpy, 3, "sim.start.rpy"))
+        for axis, value in zip("xyz", self.position, strict=True):
+            require_range(f"sim.start.position ({axis})", value, -1.5, 1.5)
+        require_range("sim.start.rpy (pitch)", self.rpy[1], -np.pi / 2, np.pi / 2, low_open=True, high_open=True)
 
 
 @dataclass(frozen=True)
@@ -229,6 +260,7 @@ class SimConfig:
 
     Attributes:
         seed: seed of the simulator's numpy Generator (IK restarts).
+        start: the camera's start pose; None starts at the ``home`` keyframe (Franka's ready posture).
     """
 
     seed: int = 0
@@ -236,6 +268,7 @@ class SimConfig:
     board: BoardConfig = field(default_factory=BoardConfig)
     motion: MotionConfig = field(default_factory=MotionConfig)
     ik: IKConfig = field(default_factory=IKConfig)
+    start: StartPose | None = None
 
     def __post_init__(self) -> None:
         require(isinstance(self.seed, int) and self.seed >= 0, "sim.seed", "a non-negative integer", self.seed)

@@ -69,7 +69,8 @@ class PandaIK:
     position difference and rotation vector ``log(R_target R^T)``) and steps ``dq = J^T y``,
     scaled to at most ``max_step`` per joint and clamped into the joint ranges shrunk by
     ``margin``. The first attempt starts from the caller's configuration (so the solution stays
-    close to it: short joint motions); restarts draw uniform configurations from ``rng``.
+    close to it: short joint motions); restarts draw from ``rng`` configurations near it
+    (``cfg.restart_spread``) or, with a spread of 0, uniformly over the joint ranges.
     """
 
     def __init__(self, model: mujoco.MjModel, cfg: IKConfig, limits: JointLimits, margin: float) -> None:
@@ -130,17 +131,23 @@ class PandaIK:
                 return q, err, it
         return q, err, self.cfg.max_iterations
 
+    def _restart(self, q_start: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        spread = self.cfg.restart_spread
+        if spread == 0.0:
+            return rng.uniform(self.q_lo, self.q_hi)
+        return np.clip(q_start + rng.normal(0.0, spread, NUM_JOINTS), self.q_lo, self.q_hi)
+
     def solve(self, T_target: np.ndarray, q_start: np.ndarray, rng: np.random.Generator) -> IKResult:
         """Joint positions reaching ``T_target`` (4, 4) = requested ``T_world_ee``.
 
-        Tries ``q_start`` (7,) first, then up to ``cfg.restarts`` random starts; returns the first
+        Tries ``q_start`` (7,) first, then up to ``cfg.restarts`` random starts (class doc); returns the first
         converged solution, else the attempt with the smallest error (``success=False``). Bounded
         by ``(1 + restarts) * max_iterations`` iterations.
         """
         best: tuple[float, np.ndarray, np.ndarray] | None = None
         total = 0
         for attempt in range(1 + self.cfg.restarts):
-            q0 = q_start if attempt == 0 else rng.uniform(self.q_lo, self.q_hi)
+            q0 = q_start if attempt == 0 else self._restart(q_start, rng)
             q, err, iterations = self._attempt(np.asarray(q0, dtype=float), T_target)
             total += iterations
             # Rank attempts by position + rotation error (1 mm counts as much as 1 mrad), plus 1 cm

@@ -22,7 +22,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from vical.data import CameraFrames, ImuSamples, Recording, SensorTruth, Target, Trajectory
+from vical.data import CameraFrames, ImuSamples, PathProfile, Recording, SensorTruth, Target, Trajectory
 from vical.geometry import make_transform
 from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
 from vical.sim.imu import ImuSimulator, ImuSiteReader, SiteReading
@@ -122,6 +122,9 @@ class SensorRecorder:
         self._log = _TruthLog([], [], [], [])
         self._path_length = 0.0
         self._duration = 0.0
+        self._ee_last: np.ndarray | None = None
+        self._ee_path = 0.0
+        self._path_log: tuple[list[int], list[float]] = ([], [])
 
     def on_step(self, sim: PandaSim, t_ns: int) -> None:
         """``PandaSim`` step callback: ``data``'s derived quantities belong to time ``t_ns``."""
@@ -131,6 +134,7 @@ class SensorRecorder:
             self._imu.add_reading(site.t_ns, site.reading)
             if site.t_ns % (self._imu_steps * self._step_ns) == 0:
                 self._log_truth(site)
+        self._follow_path(sim, t_ns)
         if self._next_stamp is None:
             self._next_stamp = self._first_stamp(t_ns)
         exposure = self._next_stamp + self._offset_ns
@@ -170,6 +174,7 @@ class SensorRecorder:
             path_length=self._path_length,
             duration=self._duration,
             metadata=dict(metadata or {}),
+            path_profile=PathProfile(np.asarray(self._path_log[0], dtype=np.int64), np.asarray(self._path_log[1])),
         )
 
     # ------------------------------------------------------------------ internals
@@ -193,6 +198,16 @@ class SensorRecorder:
         frames["ids"].append(ids)
         if self.keep_images:
             frames["images"].append(image)
+
+    def _follow_path(self, sim: PandaSim, t_ns: int) -> None:
+        """Add the end effector's step to its path; log the path at the IMU sample instants."""
+        p = sim.ee_position()
+        if self._ee_last is not None:
+            self._ee_path += float(np.linalg.norm(p - self._ee_last))
+        self._ee_last = p
+        if t_ns % (self._imu_steps * self._step_ns) == 0:
+            self._path_log[0].append(t_ns)
+            self._path_log[1].append(self._ee_path)
 
     def _log_truth(self, site: SiteReading) -> None:
         log = self._log

@@ -20,8 +20,9 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
+from vical.config import ConfigError
 from vical.data import NS_PER_S
-from vical.geometry import make_transform
+from vical.geometry import euler_to_matrix, make_transform
 from vical.sim.config import NUM_JOINTS, SimConfig
 from vical.sim.kinematics import PANDA_LIMITS, IKResult, PandaIK
 from vical.sim.motion import JointPlan, MotionResult, feedforward_torques, motion_steps, quintic_plan, rest_torque
@@ -74,6 +75,7 @@ class PandaSim:
         self._scratch = mujoco.MjData(self.model)
         self._ee = self.model.site("ee").id
         self._home = self.model.key("home").id
+        self.q_start = self._start_configuration()
         self.rng = np.random.default_rng(self.cfg.seed)
         self._step = 0
         self.reset()
@@ -85,12 +87,56 @@ class PandaSim:
         self.model.actuator_biasprm[:NUM_JOINTS, 2] = -kd
         self.model.actuator_forcerange[:NUM_JOINTS] = np.stack([-self.limits.tau_max, self.limits.tau_max], axis=1)
 
+    def _start_configuration(self) -> np.ndarray:
+        """(7,) joint positions of the start pose (``sim.start`` by IK from ``home``), checked for contacts.
+
+        Raises ``ConfigError`` naming the key to change when the arm cannot reach the start pose or
+        touches the board, its stand or itself there.
+        """
+        mujoco.mj_resetDataKeyframe(self.model, self.data, self._home)
+        q = self.q
+        start = self.cfg.start
+        if start is not None:
+            # A fixed generator: the start configuration must not depend on the episode's seed.
+            ik = self.ik.solve(make_transform(euler_to_matrix(start.rpy), start.position), q, np.random.default_rng(0))
+            if not ik.success:
+                raise ConfigError(
+                    f"sim.start: the arm cannot reach the start pose (position {list(start.position)} m, rpy "
+                    f"{list(start.rpy)} rad); its closest pose is {1e3 * ik.position_error:.0f} mm / "
+                    f"{np.degrees(ik.rotation_error):.1f} deg away; choose a pose within the Panda's reach "
+                    "(about 0.85 m from its shoulder at 0.33 m height)"
+                )
+            q = ik.q
+        touching = self.contact_at(q)
+        if touching:
+            key = "sim.start" if "board" not in touching and "stand" not in touching else "sim.board"
+            raise ConfigError(
+                f"{key}: at the start pose {touching} touch; move the board away from the arm "
+                "(sim.board.distance, sim.board.offset) or choose another sim.start"
+            )
+        return q
+
+    def contact_at(self, q: np.ndarray, ignore: frozenset[str] = frozenset()) -> str:
+        """Names of the first pair of geoms in contact at joint positions ``q`` (7,), or '' when free.
+
+        Pairs named in ``ignore`` (as returned here) do not count.
+        """
+        return next(iter(self._contact_pairs(q) - ignore), "")
+
+    def _contact_pairs(self, q: np.ndarray) -> set[str]:
+        m, d = self.model, self._scratch
+        d.qpos[:NUM_JOINTS] = q
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_collision(m, d)
+        return {f"{_geom_label(m, c.geom1)} and {_geom_label(m, c.geom2)}" for c in d.contact[: d.ncon]}
+
     # ------------------------------------------------------------------ state
     def reset(self, seed: int | None = None) -> None:
-        """Rest at the ``home`` keyframe at time 0 (reseeds ``rng`` when ``seed`` is given)."""
+        """Rest at the start pose at time 0 (reseeds ``rng`` when ``seed`` is given)."""
         if seed is not None:
             self.rng = np.random.default_rng(seed)
         mujoco.mj_resetDataKeyframe(self.model, self.data, self._home)
+        self.data.qpos[:NUM_JOINTS] = self.q_start
         self._step = 0
         self.data.ctrl[:] = self._hold_ctrl(self.q)
         mujoco.mj_forward(self.model, self.data)
@@ -122,6 +168,10 @@ class PandaSim:
         """``T_world_ee`` (4, 4) from ``data`` (the current state outside motions; see module doc)."""
         return site_pose(self.model, self.data, "ee")
 
+    def ee_position(self) -> np.ndarray:
+        """(3,) [m] the ``ee`` site's position in ``data`` (during a motion: at the step callback's time)."""
+        return self.data.site_xpos[self._ee].copy()
+
     # ------------------------------------------------------------------ planning
     def solve_ik(self, T_world_ee: np.ndarray, q_start: np.ndarray | None = None) -> IKResult:
         """Joint positions for the end-effector pose ``T_world_ee`` (4, 4), starting near ``q_start``."""
@@ -141,16 +191,14 @@ class PandaSim:
         """Fraction along the joint line ``q0 -> q1`` of the first sampled configuration in contact.
 
         Returns ``(1.0, "")`` when all ``sim.motion.collision_samples`` samples are free, else
-        the first colliding fraction and the names of the touching bodies.
+        the first colliding fraction and the names of the touching bodies. Contacts already present
+        at ``q0`` do not count, so an arm that came to rest touching something can move away.
         """
-        m, d = self.model, self._scratch
-        for s in np.linspace(0.0, 1.0, self.cfg.motion.collision_samples):
-            d.qpos[:NUM_JOINTS] = q0 + s * (q1 - q0)
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_collision(m, d)
-            if d.ncon:
-                c = d.contact[0]
-                return float(s), f"{_geom_label(m, c.geom1)} and {_geom_label(m, c.geom2)}"
+        present = frozenset(self._contact_pairs(q0))
+        for s in np.linspace(0.0, 1.0, self.cfg.motion.collision_samples)[1:]:
+            touching = self.contact_at(q0 + s * (q1 - q0), ignore=present)
+            if touching:
+                return float(s), touching
         return 1.0, ""
 
     def _safe_goal(self, q0: np.ndarray, q_goal: np.ndarray) -> tuple[np.ndarray, str]:

@@ -30,6 +30,8 @@ _R_BODY_BOARD_FACING = np.array([[0.0, 0.0, -1.0], [0.0, -1.0, 0.0], [-1.0, 0.0,
 # An aprilgrid upright as printed: board x goes right (-body y), y up (+body z), z points back (-body x).
 _R_BODY_APRILGRID_FACING = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 APRILGRID_BITS_PER_TAG = 10  # tag36h11: 6 data bits + 2 black border bits on each side
+STAND_CLEARANCE = 0.03  # [m] the stand's post stands this far behind the board's printed side
+STAND_POST_HALF_WIDTH = 0.02  # [m]
 
 
 class SceneError(RuntimeError):
@@ -96,8 +98,28 @@ def _home_camera_body_pose(spec: mujoco.MjSpec) -> np.ndarray:
     return make_transform(data.xmat[body].reshape(3, 3), data.xpos[body])
 
 
+def start_camera_body_pose(spec: mujoco.MjSpec, cfg: SimConfig) -> np.ndarray:
+    """``T_world_body`` (4, 4) of ``cam_body`` at the episode start: ``cfg.start``, else the ``home`` keyframe."""
+    if cfg.start is None:
+        return _home_camera_body_pose(spec)
+    return make_transform(euler_to_matrix(cfg.start.rpy), cfg.start.position)
+
+
+def _place_stand(spec: mujoco.MjSpec, T_world_board: np.ndarray, target: Target) -> None:
+    """Stand the post on the floor behind the board centre, up to the centre's height, with its foot plate."""
+    normal = T_world_board[:3, 2]  # out of the printed side
+    centre = T_world_board[:3, :3] @ target.center + T_world_board[:3, 3]
+    foot = centre - STAND_CLEARANCE * normal
+    height = max(float(centre[2]), 2 * STAND_POST_HALF_WIDTH)
+    body = spec.body("board_stand")
+    body.pos = [foot[0], foot[1], 0.0]
+    post = spec.geom("stand_post")
+    post.size = [STAND_POST_HALF_WIDTH, STAND_POST_HALF_WIDTH, 0.5 * height]
+    post.pos = [0.0, 0.0, 0.5 * height]
+
+
 def build_model(cfg: SimConfig) -> tuple[mujoco.MjModel, np.ndarray]:
-    """Compile the scene for ``cfg``: physics step, board texture, size and pose.
+    """Compile the scene for ``cfg``: physics step, board texture, size and pose, and its stand.
 
     Returns:
         model: the compiled ``MjModel``.
@@ -110,7 +132,7 @@ def build_model(cfg: SimConfig) -> tuple[mujoco.MjModel, np.ndarray]:
     assets = {BOARD_TEXTURE: board_texture_png(target, board.border_squares, board.px_per_square)}
     spec = mujoco.MjSpec.from_file(str(SCENE_XML), assets=assets)
     spec.option.timestep = cfg.physics.timestep
-    T_world_board = board_pose_from_camera(_home_camera_body_pose(spec), board)
+    T_world_board = board_pose_from_camera(start_camera_body_pose(spec, cfg), board)
     body = spec.body("board")
     body.pos = T_world_board[:3, 3]
     body.quat = matrix_to_quat(T_world_board[:3, :3])
@@ -119,6 +141,7 @@ def build_model(cfg: SimConfig) -> tuple[mujoco.MjModel, np.ndarray]:
         geom = spec.geom(name)
         geom.pos = [target.center[0], target.center[1], geom.pos[2]]
         geom.size = [half[0], half[1], thickness]
+    _place_stand(spec, T_world_board, target)
     model = spec.compile()
     return model, T_world_board
 
