@@ -10,12 +10,17 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 GROUPS = sorted(p.name for p in CONF.iterdir() if p.is_dir() and p.name != "experiment")
 OPTIONS = [(g, f.stem) for g in GROUPS for f in sorted((CONF / g).glob("*.yaml"))]
 ROOTS = sorted(f.stem for f in CONF.glob("*.yaml"))
-# Groups whose options interpolate other groups of the root config (env=calibration reads sim, sensor, task).
-NEEDS = {"env": ["+sim=default", "+sensor=paper", "+task=joint"]}
+# Groups whose options interpolate other groups of the root config (env=calibration reads sim, sensor, task and
+# workspace; model_based reads the workspace's name; a workspace writes into sim).
+NEEDS = {
+    "env": ["+sim=default", "+sensor=paper", "+task=joint", "+workspace=practitioner"],
+    "policy": ["+workspace=practitioner"],
+    "workspace": ["+sim=default"],
+}
 
 
 def test_every_group_has_options():
-    assert {"sim", "sensor", "task", "env", "agent"} <= set(GROUPS)
+    assert {"sim", "sensor", "task", "env", "agent", "workspace"} <= set(GROUPS)
     for group in ("task", "env"):
         assert any(g == group for g, _ in OPTIONS), f"conf/{group}/ has no options"
 

@@ -1,10 +1,8 @@
 """The calibration MDP on the real simulator and calibrator: state, rewards, termination, calibration."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-from omegaconf import OmegaConf
+from configs import env_parts
 
 from vical.config import ConfigError
 from vical.env.calibration import CalibrationEnv
@@ -13,8 +11,8 @@ from vical.env.coverage import Coverage, view_features
 from vical.env.rewards import accuracy_reward
 from vical.policies.base import WaypointPolicy
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
-# Waypoints (pose offsets) that sweep the board over the four quadrants, change its distance and tilt it.
+# Waypoints (pose offsets in the authors' box) that sweep the board over the four quadrants, change its distance
+# and tilt it.
 SWEEP = np.array(
     [
         [0.08, 0.05, 0.04, 0.17, 0.15, 0.12],
@@ -26,19 +24,10 @@ SWEEP = np.array(
 )
 
 
-def group(name: str, option: str) -> dict:
-    return OmegaConf.to_container(OmegaConf.load(CONF / name / f"{option}.yaml"))
-
-
-def mdp(**overrides) -> dict:
-    cfg = group("env", "calibration")
-    for key in ("_target_", "sim", "sensor", "task"):
-        cfg.pop(key)
-    return {**cfg, **overrides}
-
-
 def make_env(task: str = "intrinsic", **overrides) -> CalibrationEnv:
-    return CalibrationEnv(group("sim", "default"), group("sensor", "paper"), group("task", task), **mdp(**overrides))
+    """The paper's MDP in the authors' box (the workspace its thresholds were set for)."""
+    sim, sensor, task_cfg, mdp = env_parts(task, "paper")
+    return CalibrationEnv(sim, sensor, task_cfg, **{**mdp, **overrides})
 
 
 @pytest.fixture(scope="module")
@@ -187,8 +176,9 @@ def test_bad_config_is_refused_by_name():
         MdpConfig.from_config({"thresholds": {"area_range": -0.1}})
     with pytest.raises(ConfigError, match=r"env\.action_scale must be 6 finite numbers > 0"):
         MdpConfig.from_config({"action_scale": [0.3, 1.0]})
+    sim, sensor, _, mdp = env_parts("intrinsic", "paper")
     with pytest.raises(ConfigError, match=r"task\.calibrate"):
-        CalibrationEnv(group("sim", "default"), group("sensor", "paper"), {"calibrate": "everything"}, **mdp())
+        CalibrationEnv(sim, sensor, {"calibrate": "everything"}, **mdp)
 
 
 def test_step_before_reset_is_refused():

@@ -34,18 +34,13 @@ from vical.env.config import MdpConfig
 from vical.env.coverage import Coverage, view_features
 from vical.env.plots import episode_figure
 from vical.env.rewards import step_reward_terms, terminal_reward_terms
-from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
+from vical.env.workspace import check_workspace, pose_frame
 from vical.sim import PandaSim, SimConfig
 from vical.sim.motion import MotionResult
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, sample_sensor
 
 OBS_SIZE = 24
-
-
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Angles wrapped into [-pi, pi)."""
-    return (np.asarray(a, dtype=float) + np.pi) % (2 * np.pi) - np.pi
 
 
 class CalibrationEnv(gym.Env):
@@ -75,6 +70,8 @@ class CalibrationEnv(gym.Env):
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
         self.observation_space = gym.spaces.Box(0.0, 1.0, (OBS_SIZE,), dtype=np.float32)
         self._bound = self.config.workspace.bound
+        self.frame = pose_frame(self.sim, self.config.workspace)
+        check_workspace(self.sim, self.frame, self.config.workspace)
         self.truth: SensorTruth | None = None
         self._steps = 0
 
@@ -96,8 +93,6 @@ class CalibrationEnv(gym.Env):
         )
         self.recorder.start(self.truth, np.random.default_rng([int(noise_seed), stream]))
         self.coverage.reset()
-        self._T_start = self.sim.ee_pose()
-        self._euler_start = matrix_to_euler(self._T_start[:3, :3])
         self._offset = np.zeros(6)
         self._steps = 0
         self._path_length = 0.0
@@ -175,14 +170,10 @@ class CalibrationEnv(gym.Env):
     def _goal_pose(self, action: np.ndarray) -> np.ndarray:
         """World pose of the action's target, clipped to the workspace around the start pose."""
         translation, euler_increment = action_to_step(action)
-        target = np.clip(self._offset + np.r_[translation, euler_increment], -self._bound, self._bound)
-        R = euler_to_matrix(self._euler_start + target[3:])
-        return make_transform(R, self._T_start[:3, 3] + target[:3])
+        return self.frame.pose(np.clip(self._offset + np.r_[translation, euler_increment], -self._bound, self._bound))
 
     def _current_offset(self) -> np.ndarray:
-        T = self.sim.ee_pose()
-        euler = wrap_angle(matrix_to_euler(T[:3, :3]) - self._euler_start)
-        return np.r_[T[:3, 3] - self._T_start[:3, 3], euler]
+        return self.frame.offset(self.sim.ee_pose())
 
     def _record(self, motion: MotionResult) -> None:
         """Account the motion and feed the frames it produced to the coverage."""

@@ -25,22 +25,44 @@ def _vector(key: str, value: Sequence[float], size: int, positive: bool = True) 
     return tuple(float(v) for v in array)
 
 
+FRAMES = ("start", "board")
+
+
 @dataclass(frozen=True)
 class Workspace:
-    """Bounds of the end-effector offset from the episode's start pose.
+    """Bounds of the end-effector (camera body) offset from the episode's start pose.
+
+    An offset ``[x, y, z, roll, pitch, yaw]`` is a position change along world x, y, z from the
+    start position and Euler angles (``R = Rz(yaw) Ry(pitch) Rx(roll)``, roll about the camera's
+    optical axis) relative to a reference orientation that ``frame`` names:
+
+    - ``start``: the start orientation (the authors' workspace: the camera turns with the offsets
+      and loses the board beyond a few degrees);
+    - ``board``: the orientation looking from the camera's current position at the board centre,
+      upright (``vical.env.workspace``): the zero offset keeps the board centred from anywhere,
+      pitch and yaw move it across the image, roll turns it about the optical axis.
 
     Attributes:
+        name: the workspace's name (``conf/workspace/<name>.yaml``), recorded with trained policies.
+        frame: ``start`` or ``board``, see above.
         position: (3,) [m] +- bound of the position offset along world x, y, z.
-        orientation: (3,) [rad] +- bound of the offset of the world Euler angles roll, pitch, yaw.
+        orientation: (3,) [rad] +- bound of roll, pitch, yaw (pitch < pi/2, where Euler angles are
+            singular; roll and yaw <= pi).
     """
 
+    name: str = "paper"
+    frame: str = "start"
     position: tuple[float, ...] = (0.08, 0.10, 0.08)
     orientation: tuple[float, ...] = (0.17, 0.15, 0.12)
 
     def __post_init__(self) -> None:
+        require(isinstance(self.name, str) and bool(self.name), "env.workspace.name", "a non-empty string", self.name)
+        require(self.frame in FRAMES, "env.workspace.frame", f"one of {FRAMES}", self.frame)
         object.__setattr__(self, "position", _vector("env.workspace.position", self.position, 3))
         object.__setattr__(self, "orientation", _vector("env.workspace.orientation", self.orientation, 3))
-        require(max(self.orientation) < np.pi / 2, "env.workspace.orientation", "bounds < pi/2 rad", self.orientation)
+        roll, pitch, yaw = self.orientation
+        require(pitch < np.pi / 2, "env.workspace.orientation (pitch)", "a bound < pi/2 rad", pitch)
+        require(max(roll, yaw) <= np.pi, "env.workspace.orientation (roll, yaw)", "bounds <= pi rad", [roll, yaw])
 
     @property
     def bound(self) -> np.ndarray:

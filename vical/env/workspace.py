@@ -1,0 +1,182 @@
+"""Where the camera may go: workspace offsets <-> world poses, and what the Panda reaches of them.
+
+A workspace offset ``[x, y, z [m], roll, pitch, yaw [rad]]`` (``vical.env.config.Workspace``)
+becomes the camera body pose (the ``ee`` site: x along the optical axis, y left, z up) as
+
+    p = p_start + [x, y, z],    R = R_ref(p) Rz(yaw0 + yaw) Ry(pitch0 + pitch) Rx(roll0 + roll)
+
+where ``R_ref`` is the identity for ``frame=start`` (world Euler angles, the authors' workspace)
+and, for ``frame=board``, the upright orientation looking from ``p`` at the board centre (its
+x toward the centre, its y horizontal); ``[roll0, pitch0, yaw0]`` are the start pose's angles in
+that reference, so the zero offset is the start pose. With ``frame=board`` the zero orientation
+offset keeps the board centred wherever the camera goes; yaw and pitch move the board across
+the image and roll turns it about the optical axis.
+
+A pose is *reachable* when the damped-least-squares IK finds joint positions within the joint
+ranges (less the planning margin) and MuJoCo reports no contact there: neither between the arm's
+links nor with the board, its stand or the floor.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+
+from vical.config import ConfigError
+from vical.env.config import Workspace
+from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
+from vical.sim import PandaSim
+
+AXES = ("x", "y", "z", "roll", "pitch", "yaw")
+UNITS = ("m", "m", "m", "rad", "rad", "rad")
+_UP = np.array([0.0, 0.0, 1.0])
+# Bisection steps that locate the reachable end of an axis (2^-10 of its bound: 0.5 mm on 0.5 m).
+_BISECTIONS = 10
+
+
+def wrap_angle(a: np.ndarray) -> np.ndarray:
+    """Angles wrapped into [-pi, pi)."""
+    return (np.asarray(a, dtype=float) + np.pi) % (2 * np.pi) - np.pi
+
+
+def look_at_rotation(position: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """(3, 3) camera-body orientation at ``position`` (3,) [m] looking at ``point`` (3,) [m], upright.
+
+    Body x points at ``point``, body y is horizontal (to the left of the line of sight), body z up.
+    Undefined when the line of sight is vertical.
+    """
+    x = np.asarray(point, dtype=float) - np.asarray(position, dtype=float)
+    x /= np.linalg.norm(x)
+    y = np.cross(_UP, x)
+    norm = np.linalg.norm(y)
+    if norm < 1e-9:
+        raise ValueError("look_at_rotation: the line of sight is vertical, the upright orientation is undefined")
+    y /= norm
+    return np.c_[x, y, np.cross(x, y)]
+
+
+class PoseFrame:
+    """Maps workspace offsets to camera body poses in the world and back (module doc).
+
+    Args:
+        T_start: (4, 4) camera body pose at the episode start (``T_world_ee``).
+        frame: ``start`` or ``board``.
+        look_at: (3,) [m] the board centre in the world (read for ``frame=board``).
+    """
+
+    def __init__(self, T_start: np.ndarray, frame: str, look_at: np.ndarray) -> None:
+        if frame not in ("start", "board"):
+            raise ValueError(f"frame must be 'start' or 'board', got {frame!r}")
+        self.frame = frame
+        self.look_at = np.asarray(look_at, dtype=float)
+        self.p_start = np.asarray(T_start, dtype=float)[:3, 3].copy()
+        self.euler_start = matrix_to_euler(self.reference(self.p_start).T @ T_start[:3, :3])
+
+    def reference(self, position: np.ndarray) -> np.ndarray:
+        """(3, 3) the orientation that zero angle offsets mean at ``position`` (3,) [m]."""
+        return np.eye(3) if self.frame == "start" else look_at_rotation(position, self.look_at)
+
+    def pose(self, offset: np.ndarray) -> np.ndarray:
+        """(4, 4) ``T_world_ee`` of the workspace ``offset`` (6,)."""
+        offset = np.asarray(offset, dtype=float)
+        p = self.p_start + offset[:3]
+        return make_transform(self.reference(p) @ euler_to_matrix(self.euler_start + offset[3:]), p)
+
+    def offset(self, T_world_ee: np.ndarray) -> np.ndarray:
+        """(6,) the workspace offset of the pose ``T_world_ee`` (4, 4) (inverse of ``pose``)."""
+        p = T_world_ee[:3, 3]
+        euler = matrix_to_euler(self.reference(p).T @ T_world_ee[:3, :3])
+        return np.r_[p - self.p_start, wrap_angle(euler - self.euler_start)]
+
+
+def board_centre(sim: PandaSim) -> np.ndarray:
+    """(3,) [m] the board centre in the world."""
+    T = sim.T_world_board
+    return T[:3, :3] @ sim.cfg.board.target.center + T[:3, 3]
+
+
+def pose_frame(sim: PandaSim, workspace: Workspace) -> PoseFrame:
+    """The pose frame of ``workspace`` around the simulator's start pose."""
+    sim.reset()
+    return PoseFrame(sim.ee_pose(), workspace.frame, board_centre(sim))
+
+
+def unreachable_reason(sim: PandaSim, T_world_ee: np.ndarray) -> str:
+    """Why the Panda cannot hold the camera body at ``T_world_ee`` (4, 4) ('' when it can; module doc)."""
+    ik = sim.ik.solve(T_world_ee, sim.q_start, np.random.default_rng(0))
+    if not ik.success:
+        return f"beyond reach ({1e3 * ik.position_error:.0f} mm / {np.degrees(ik.rotation_error):.1f} deg short)"
+    touching = sim.contact_at(ik.q)
+    return f"contact: {touching}" if touching else ""
+
+
+def _axis_offset(axis: int, value: float) -> np.ndarray:
+    offset = np.zeros(6)
+    offset[axis] = value
+    return offset
+
+
+def reachable_extent(sim: PandaSim, frame: PoseFrame, axis: int, end: float) -> float:
+    """How far along ``axis`` toward ``end`` (the other offsets zero) the poses stay reachable.
+
+    Bisects between the start pose (reachable) and ``end``; returns ``end`` when it is reachable.
+    """
+    if not unreachable_reason(sim, frame.pose(_axis_offset(axis, end))):
+        return end
+    good, bad = 0.0, end
+    for _ in range(_BISECTIONS):
+        middle = 0.5 * (good + bad)
+        if unreachable_reason(sim, frame.pose(_axis_offset(axis, middle))):
+            bad = middle
+        else:
+            good = middle
+    return good
+
+
+def check_workspace(sim: PandaSim, frame: PoseFrame, workspace: Workspace) -> None:
+    """Refuse a workspace whose bound on some axis the arm cannot reach (one line naming key and range).
+
+    Every axis end (one offset at its bound, the others zero) must be reachable; corners of the box
+    may not be (``reachable_fraction`` measures how much of it is).
+    """
+    for axis, bound in enumerate(workspace.bound):
+        for end in (-bound, bound):
+            reason = unreachable_reason(sim, frame.pose(_axis_offset(axis, end)))
+            if not reason:
+                continue
+            low = reachable_extent(sim, frame, axis, -bound)
+            high = reachable_extent(sim, frame, axis, bound)
+            key = "env.workspace." + ("position" if axis < 3 else "orientation")
+            raise ConfigError(
+                f"{key} ({AXES[axis]}) = {bound:g} {UNITS[axis]}: the arm cannot reach {end:+g} {UNITS[axis]} "
+                f"from the start pose ({reason}); reachable along {AXES[axis]}: [{low:+.3f}, {high:+.3f}] "
+                f"{UNITS[axis]}; reduce the bound or move the start pose (sim.start) and the board"
+            )
+
+
+@dataclass(frozen=True)
+class Reachability:
+    """How much of a workspace box the arm reaches, from uniform samples.
+
+    Attributes:
+        samples: poses tried.
+        reachable: fraction reachable.
+        reasons: counts of the failure kinds (``beyond reach``, ``contact: <geoms>``).
+    """
+
+    samples: int
+    reachable: float
+    reasons: dict[str, int]
+
+
+def reachable_fraction(sim: PandaSim, frame: PoseFrame, bound: np.ndarray, samples: int, seed: int = 0) -> Reachability:
+    """Fraction of ``samples`` offsets drawn uniformly in ``[-bound, bound]`` (6,) that are reachable."""
+    rng = np.random.default_rng(seed)
+    reasons: Counter[str] = Counter()
+    for offset in rng.uniform(-bound, bound, size=(samples, 6)):
+        reason = unreachable_reason(sim, frame.pose(offset))
+        if reason:
+            reasons["beyond reach" if reason.startswith("beyond") else reason] += 1
+    return Reachability(samples, 1.0 - sum(reasons.values()) / samples, dict(reasons))
