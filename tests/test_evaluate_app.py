@@ -5,6 +5,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from vical.policies.evaluation import COLUMNS
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -16,29 +18,51 @@ def evaluate(*overrides: str) -> subprocess.CompletedProcess:
     )
 
 
-def test_two_random_moving_episodes_write_the_results_and_the_table(tmp_path):
+def test_two_random_moving_episodes_write_the_results_the_tables_and_the_figure(tmp_path):
     out = tmp_path / "eval"
-    done = evaluate("episodes=2", "seed=5", f"out={out}", "progress=false")
+    done = evaluate("episodes=2", "seed=5", f"out={out}", "progress=false", "budgets=[0.5,1]")
     assert done.returncode == 0, done.stderr
     with open(out / "results.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert tuple(rows[0]) == COLUMNS
-    assert [r["seed"] for r in rows] == ["5", "6"]
     assert {r["policy"] for r in rows} == {"random moving policy"}
-    for row in rows:
-        assert row["failed"] == "False"
-        assert 0.0 < float(row["score_pct"]) < 100.0 and row["score_pct"] == row["intrinsic_pct"]
-        assert float(row["path_length_m"]) > 0.0 and 1 <= int(row["steps"]) <= 20
-        assert row["extrinsic_pct"] == ""  # the intrinsic task estimates no extrinsic
+    for seed in ("5", "6"):
+        episode = [r for r in rows if r["seed"] == seed]
+        end = episode[-1]
+        assert end["budget_m"] == "end" and float(end["path_length_m"]) > 1.0
+        # One row per budget below the episode's path, cut where the path reached the budget.
+        assert [r["budget_m"] for r in episode[:-1]] == ["0.5", "1.0"]
+        for row in episode[:-1]:
+            assert float(row["path_length_m"]) == pytest.approx(float(row["budget_m"]), abs=0.01)
+            assert float(row["recording_time_s"]) < float(end["recording_time_s"])
+        for row in episode:
+            assert row["failed"] == "False"
+            assert 0.0 < float(row["score_pct"]) < 100.0 and row["score_pct"] == row["intrinsic_pct"]
+            assert float(row["prior_score_pct"]) > float(end["score_pct"])
+            assert row["extrinsic_pct"] == ""  # the intrinsic task estimates no extrinsic
+        assert 1 <= int(end["steps"]) <= 20
     summary = (out / "summary.md").read_text()
     header = "| policy | mean error [%] | error std [%] | path length [m] | calibration time [s] |"
-    assert "intrinsic task" in summary and header in summary
-    (line,) = [l for l in summary.splitlines() if l.startswith("| random moving policy |")]
-    mean = sum(float(r["score_pct"]) for r in rows) / 2
+    assert "intrinsic task, workspace practitioner" in summary and header in summary
+    line = next(l for l in summary.splitlines() if l.startswith("| random moving policy |"))  # the first table
+    ends = [r for r in rows if r["budget_m"] == "end"]
+    mean = sum(float(r["score_pct"]) for r in ends) / 2
     assert line.split("|")[2].strip() == f"{mean:.2f}"
+    at_half = [l for l in summary.splitlines() if l.startswith("| random moving policy | 0.5 m |")]
+    assert len(at_half) == 1 and "100%" in at_half[0]  # both episodes travelled 0.5 m
+    assert (out / "error_vs_effort.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert header in done.stdout
     again = evaluate("episodes=1", f"out={out}", "progress=false")  # results are never overwritten silently
     assert again.returncode == 2 and "overwrite=true" in again.stderr
+
+
+def test_budgets_that_do_not_increase_exit_2_before_any_episode(tmp_path):
+    for budgets in ("[1,0.5]", "[0,1]", "[1,inf]"):
+        done = evaluate(f"budgets={budgets}", f"out={tmp_path / 'x'}", "progress=false")
+        assert done.returncode == 2
+        (line,) = done.stderr.strip().splitlines()
+        assert line.startswith("vical-evaluate: error: budgets must be strictly increasing path lengths > 0 [m]")
+    assert not (tmp_path / "x").exists()
 
 
 def test_an_unknown_policy_exits_2_with_one_line(tmp_path):

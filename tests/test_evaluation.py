@@ -1,11 +1,8 @@
 """Evaluation library: per-episode rows with real values, the joint task's two trajectories, failed calibrations."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-from hydra import compose, initialize_config_dir
-from omegaconf import OmegaConf
+from configs import env_config
 
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.tasks import run_task
@@ -20,32 +17,27 @@ from vical.policies.evaluation import (
     summarize,
 )
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
 SHORT = {"_target_": "vical.policies.handcrafted.handcrafted_policy", "length": "short"}
 HANDCRAFTED_SHORT = PolicySpec(
-    "hand-crafted trajectory (short)", {**SHORT, "task": "intrinsic"}, {**SHORT, "task": "extrinsic"}, None
+    "hand-crafted trajectory (short)", {**SHORT, "task": "intrinsic"}, {**SHORT, "task": "extrinsic"}, None, True
 )
 STILL = {"_target_": "vical.policies.base.WaypointPolicy", "waypoints": [[0.0] * 6]}  # records only the start pose
 
 
-def env_config(task: str) -> dict:
-    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose(config_name="evaluate", overrides=[f"task={task}"])
-    return OmegaConf.to_container(cfg.env, resolve=True)
-
-
 def test_rows_and_summary_hold_the_episodes_real_values():
-    evaluator = PolicyEvaluator(HANDCRAFTED_SHORT, env_config("intrinsic"))
+    evaluator = PolicyEvaluator(HANDCRAFTED_SHORT, env_config("intrinsic", "paper"))
     try:
-        rows = [evaluator.episode(seed) for seed in (0, 1)]
+        rows = [row for seed in (0, 1) for row in evaluator.episode(seed)]
         # The same seed replays the same sensor and motion: the row's values are the recording's.
         (env,), (policy,) = evaluator.envs, evaluator.policies
         run = run_trajectory(env, policy, seed=1)
         outcome = run_task(evaluator.task, run.recording)
     finally:
         evaluator.close()
+    assert len(rows) == 2  # no budgets: the whole episode only
     row = rows[1]
     assert not row.failed and row.policy == "hand-crafted trajectory (short)" and row.seed == 1
+    assert row.budget_m == np.inf
     assert row.path_length_m == pytest.approx(run.recording.path_length, rel=1e-9)
     assert row.path_length_m > 0.3
     assert row.steps == run.steps == len(policy.waypoints)
@@ -66,11 +58,11 @@ def test_rows_and_summary_hold_the_episodes_real_values():
 
 
 def test_joint_task_runs_both_trajectories_and_calibrates_intrinsics_from_the_first():
-    evaluator = PolicyEvaluator(HANDCRAFTED_SHORT, env_config("joint"))
+    evaluator = PolicyEvaluator(HANDCRAFTED_SHORT, env_config("joint", "paper"), paper_protocol=True)
     try:
         assert evaluator.task.calibrate == "two_stage" and evaluator.task.error_metric == "extrinsic_relative"
         assert [p.task for p in evaluator.policies] == ["intrinsic", "extrinsic"]
-        row = evaluator.episode(0)
+        (row,) = evaluator.episode(0)
         pairs = enumerate(zip(evaluator.envs, evaluator.policies, strict=True))
         first, second = (run_trajectory(env, p, 0, noise_stream=k) for k, (env, p) in pairs)
         outcome = run_task(evaluator.task, second.recording, first.recording.frames)
@@ -93,10 +85,12 @@ def test_joint_task_runs_both_trajectories_and_calibrates_intrinsics_from_the_fi
 
 def test_a_failed_calibration_is_a_counted_row():
     still = PolicySpec("still", STILL, STILL)
-    evaluation = evaluate_policy(still, env_config("intrinsic"), seeds=[0], progress=False)
+    evaluation = evaluate_policy(still, env_config("intrinsic", "paper"), seeds=[0], progress=False)
     (failed,) = evaluation.rows
     assert failed.failed and "frames" in failed.error
     assert failed.score_pct is None and failed.steps == 0
+    # Paired comparisons count it at the nominal parameters' error: the mean camera against this sensor.
+    assert failed.effective_score_pct == failed.prior_score_pct > 0.5
     assert evaluation.summary.failed == 1 and np.isnan(evaluation.summary.mean_error_pct)
     good = EpisodeRow("p", 1, score_pct=2.0, intrinsic_pct=2.0, path_length_m=1.0, calib_time_s=0.5)
     summary = summarize("p", [good, failed])
@@ -112,8 +106,15 @@ def test_policy_specs_are_checked():
         PolicySpec.from_config({"name": "p", "extrinsic": {"length": "long"}})
     spec = PolicySpec.from_config({"name": "only intrinsic", "intrinsic": STILL, "extrinsic": None, "joint": None})
     joint_task = type("Task", (), {"calibrate": "joint"})()
-    with pytest.raises(ConfigError, match="no joint spec and no extrinsic spec"):
+    with pytest.raises(ConfigError, match="no spec for the joint task"):
         spec.for_task(joint_task)
+    two = PolicySpec.from_config({"name": "two", "intrinsic": STILL, "extrinsic": None, "paper_two_trajectories": True})
+    with pytest.raises(ConfigError, match="runs two trajectories but has no extrinsic spec"):
+        two.for_task(joint_task, paper_protocol=True)
+    with pytest.raises(ConfigError, match=r"no spec for the joint task .*under the paper's protocol"):
+        two.for_task(joint_task)
+    with pytest.raises(ConfigError, match="paper_two_trajectories must be true or false"):
+        PolicySpec.from_config({"name": "p", "intrinsic": STILL, "paper_two_trajectories": "yes"})
     with pytest.raises(ConfigError, match="returned dict, not a Policy"):
         instantiate_policy({"_target_": "builtins.dict"}, "p")
     with pytest.raises(ConfigError, match=r"policy 'p': .*handcrafted_policy failed: .*lengths"):

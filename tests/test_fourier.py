@@ -1,13 +1,13 @@
 """Fourier-loop baselines: the loop's shape and bounds, the policies' configs and a real episode each."""
 
-from pathlib import Path
 from types import SimpleNamespace
 
 import hydra.utils
 import numpy as np
 import pytest
 import yaml
-from omegaconf import OmegaConf
+from configs import CONF, env_parts
+from hydra import compose, initialize_config_dir
 
 from vical.config import ConfigError
 from vical.env.calibration import CalibrationEnv
@@ -24,7 +24,6 @@ from vical.policies.fourier import (
     workspace_bound,
 )
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
 BOUND = np.array([0.08, 0.10, 0.08, 0.17, 0.15, 0.12])
 
 
@@ -118,8 +117,8 @@ def test_too_few_waypoints_are_refused():
 
 @pytest.mark.parametrize("task", ["intrinsic", "extrinsic"])
 def test_model_based_policy_loads_the_committed_params(task):
-    entry = yaml.safe_load(DEFAULT_PARAMS_FILE.read_text())[task]
-    policy = model_based_policy(task)
+    entry = yaml.safe_load(DEFAULT_PARAMS_FILE.read_text())["paper"][task]
+    policy = model_based_policy(task, "paper")
     assert policy.name == f"model-based learned trajectory ({task})"
     # The file stores 6 decimals: a DoF rounded just past an amplitude sum of 1 is rescaled by < 1e-5.
     np.testing.assert_allclose(policy.trajectory.coefficients, np.array(entry["coefficients"]), atol=1e-5)
@@ -137,9 +136,13 @@ def test_missing_params_file_names_the_file_and_the_fix(tmp_path):
 @pytest.mark.parametrize(
     "text, match",
     [
-        ("intrinsic: {coefficients: [1, 2, 3]}\n", "coefficients is malformed"),
-        ("extrinsic: {coefficients: []}\n", "no 'intrinsic"),
-        ("intrinsic: [unclosed\n", "cannot read"),
+        ("paper: {intrinsic: {coefficients: [1, 2, 3]}}\n", "paper.intrinsic.coefficients is malformed"),
+        (
+            "paper: {extrinsic: {coefficients: []}}\n",
+            "no model-based trajectory fitted for the intrinsic task in workspace 'paper'",
+        ),
+        ("practitioner: {intrinsic: {coefficients: []}}\n", "no model-based trajectory fitted for the intrinsic"),
+        ("paper: [unclosed\n", "cannot read"),
     ],
 )
 def test_malformed_params_file_names_the_file_and_the_fix(tmp_path, text, match):
@@ -152,38 +155,43 @@ def test_malformed_params_file_names_the_file_and_the_fix(tmp_path, text, match)
 
 def test_unknown_task_is_refused():
     with pytest.raises(ConfigError, match="task must be one of"):
-        model_based_policy("joint")
+        model_based_policy("calibrate-everything")
+
+
+def test_paper_workspace_has_no_joint_fit_and_says_how_to_make_one():
+    with pytest.raises(
+        ConfigError,
+        match=r"no model-based trajectory fitted for the joint task in workspace 'paper'.*--workspace paper --tasks joint",  # noqa: E501
+    ):
+        model_based_policy("joint", "paper")
 
 
 @pytest.mark.parametrize("option", ["random_trajectory", "model_based"])
 def test_policy_configs_instantiate_from_any_directory(option, tmp_path, monkeypatch):
-    cfg = OmegaConf.load(CONF / "policy" / f"{option}.yaml")
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="evaluate", overrides=[f"policy={option}", "workspace=paper"]).policy
     monkeypatch.chdir(tmp_path)  # the params file resolves from the package, not the working directory
-    assert cfg.joint is None and cfg.name
+    assert cfg.paper_two_trajectories and cfg.name
     for task in ("intrinsic", "extrinsic"):
         policy = hydra.utils.instantiate(cfg[task])
         assert isinstance(policy, Policy) and isinstance(policy, FourierTrajectoryPolicy)
         assert not policy.stop_at_coverage
 
 
-def group(name: str, option: str) -> dict:
-    return OmegaConf.to_container(OmegaConf.load(CONF / name / f"{option}.yaml"))
-
-
 @pytest.fixture(scope="module")
 def env():
-    mdp = group("env", "calibration")
-    for key in ("_target_", "sim", "sensor", "task"):
-        mdp.pop(key)
-    mdp.update(max_steps=20, terminate_on_coverage=False)
-    e = CalibrationEnv(group("sim", "default"), group("sensor", "paper"), group("task", "intrinsic"), **mdp)
+    sim, sensor, task, mdp = env_parts("intrinsic", "paper")
+    e = CalibrationEnv(sim, sensor, task, **{**mdp, "max_steps": 20, "terminate_on_coverage": False})
     yield e
     e.close()
 
 
 @pytest.mark.parametrize(
     "make_policy",
-    [lambda: random_trajectory_policy(num_waypoints=8), lambda: model_based_policy("intrinsic", num_waypoints=8)],
+    [
+        lambda: random_trajectory_policy(num_waypoints=8),
+        lambda: model_based_policy("intrinsic", "paper", num_waypoints=8),
+    ],
     ids=["random", "model_based"],
 )
 def test_an_episode_visits_every_waypoint(env, make_policy):

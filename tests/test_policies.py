@@ -22,15 +22,15 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
 def env_config(task: str = "intrinsic") -> dict:
-    """The resolved calibration env config of vical-evaluate for ``task``."""
+    """The resolved calibration env config of vical-evaluate for ``task`` in the authors' box."""
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        cfg = compose(config_name="evaluate", overrides=[f"task={task}"])
+        cfg = compose(config_name="evaluate", overrides=[f"task={task}", "workspace=paper"])
     return OmegaConf.to_container(cfg.env, resolve=True)
 
 
 @pytest.fixture(scope="module")
 def env():
-    """One intrinsic-task env with room for the longest trajectory, never ending at coverage."""
+    """One intrinsic-task env in the authors' box with room for the longest trajectory, never ending at coverage."""
     env = hydra.utils.instantiate(env_config(), max_steps=200, terminate_on_coverage=False)
     yield env
     env.close()

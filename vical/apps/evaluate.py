@@ -1,8 +1,9 @@
-"""``vical-evaluate``: run policies on sampled sensors, calibrate every episode, print the paper's table.
+"""``vical-evaluate``: run policies on sampled sensors, calibrate every episode, print the tables.
 
-Config: ``conf/evaluate.yaml`` (groups ``sim``, ``sensor``, ``task``, ``env``, ``policy``; ``policies`` for
-a table of several; ``+experiment=table1_intrinsic`` etc. for the paper's tables). Writes
-``<out>/results.csv`` (one row per episode) and ``<out>/summary.md`` (the table), both atomically.
+Config: ``conf/evaluate.yaml`` (groups ``sim``, ``sensor``, ``task``, ``env``, ``workspace``, ``policy``;
+``policies`` for a table of several; ``budgets`` for error versus path; ``+experiment=table1_intrinsic``
+etc. for the paper's tables). Writes ``<out>/results.csv`` (one row per episode and budget),
+``<out>/summary.md`` (the tables) and, with budgets, ``<out>/error_vs_effort.png``, all atomically.
 
 User-facing errors (an unknown policy, a missing run directory of the learned policy, a bad config
 value) print one line ``vical-evaluate: error: ...`` and exit with status 2, as ``vical-train`` does.
@@ -13,6 +14,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -20,20 +22,29 @@ from typing import Any
 
 import hydra
 from hydra.core.hydra_config import HydraConfig
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
 from vical.apps.cli import fail, override_value
 from vical.config import ConfigError, require
 from vical.io.atomic import write_text_atomic
-from vical.policies.evaluation import COLUMNS, Evaluation, PolicyEvaluator, PolicySpec, Summary, run_evaluator
+from vical.policies.effort import BudgetSummary, budget_label, significance_lines, summarize_effort, write_effort_figure
+from vical.policies.evaluation import (
+    COLUMNS,
+    Evaluation,
+    PolicyEvaluator,
+    PolicySpec,
+    Summary,
+    check_budgets,
+    run_evaluator,
+)
 
 # An absolute path: the console script imports this module from anywhere.
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 POLICY_DIR = CONF_DIR / "policy"
 USER_ERRORS = (ConfigError, FileNotFoundError, FileExistsError, OmegaConfBaseException)
 APP = "vical-evaluate"
-RESULTS, SUMMARY = "results.csv", "summary.md"
+RESULTS, SUMMARY, FIGURE = "results.csv", "summary.md", "error_vs_effort.png"
 
 # The table: header, Summary attribute, format. Absolute errors read by users follow the paper's columns.
 TABLE = (
@@ -67,17 +78,33 @@ def policy_configs(cfg: DictConfig, chosen: str | None) -> list[dict]:
     """The resolved configs of the policies to evaluate, in table order.
 
     ``policies`` lists names; the one equal to the ``policy`` group's choice is ``cfg.policy`` (with its
-    command-line overrides), the others are read from ``conf/policy/<name>.yaml``.
+    command-line overrides), the others are read from ``conf/policy/<name>.yaml`` and resolved in the
+    root config (so they may interpolate it, as ``model_based`` does ``${workspace.name}``).
     """
     names = list(cfg.get("policies") or [])
     if not names:
         return [OmegaConf.to_container(cfg.policy, resolve=True)]
     require(len(set(names)) == len(names), "policies", "a list of distinct policy names", names)
-    configs = []
-    for name in names:
-        node = cfg.policy if name == chosen else OmegaConf.load(POLICY_DIR / f"{check_policy_name(name)}.yaml")
-        configs.append(OmegaConf.to_container(node, resolve=True))
-    return configs
+    return [OmegaConf.to_container(_policy_node(cfg, name, chosen), resolve=True) for name in names]
+
+
+def _policy_node(cfg: DictConfig, name: str, chosen: str | None) -> DictConfig:
+    if name == chosen:
+        return cfg.policy
+    root = cfg.copy()
+    with open_dict(root):
+        root.policy = OmegaConf.load(POLICY_DIR / f"{check_policy_name(name)}.yaml")
+    return root.policy
+
+
+def reference_policy(cfg: DictConfig, specs: Sequence[PolicySpec], configs: Sequence[dict]) -> str | None:
+    """The table name of ``reference`` (a conf/policy name) when it is evaluated; None for a single policy."""
+    if len(specs) < 2:
+        return None
+    names = list(cfg.get("policies") or [])
+    ref = cfg.get("reference")
+    require(ref in names, "reference", f"one of the evaluated policies {names}", ref)
+    return specs[names.index(ref)].name
 
 
 def seeds_of(cfg: DictConfig) -> list[int]:
@@ -90,12 +117,18 @@ def seeds_of(cfg: DictConfig) -> list[int]:
 
 
 def output_dir(cfg: DictConfig) -> Path:
-    """``out``, refused when it already holds results and ``overwrite`` is false."""
+    """``out``, refused when it already holds results and ``overwrite`` is false, or cannot be written.
+
+    Checked before the first episode, so that hours of episodes are never lost to an unwritable ``out``.
+    """
     out = Path(str(cfg.out))
     if out.exists() and not out.is_dir():
         raise FileExistsError(f"out={out} exists and is not a directory; choose another directory")
-    if not cfg.overwrite and any((out / f).exists() for f in (RESULTS, SUMMARY)):
+    if not cfg.overwrite and any((out / f).exists() for f in (RESULTS, SUMMARY, FIGURE)):
         raise FileExistsError(f"out={out} already holds results; choose another directory or pass overwrite=true")
+    existing = next((d for d in (out, *out.parents) if d.exists()), Path("."))
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise FileExistsError(f"out={out}: {existing} is not writable; choose another directory")
     return out
 
 
@@ -114,51 +147,119 @@ def summary_table(summaries: Sequence[Summary]) -> str:
 
 
 def results_csv(evaluations: Sequence[Evaluation]) -> str:
-    """Every episode of every policy as CSV (``vical.policies.evaluation.EpisodeRow`` columns; empty = n/a)."""
+    """Every row of every policy as CSV (``vical.policies.evaluation.EpisodeRow`` columns; empty = n/a).
+
+    ``budget_m`` is ``end`` for the whole episode.
+    """
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=COLUMNS, lineterminator="\n")
     writer.writeheader()
     for evaluation in evaluations:
         for row in evaluation.rows:
-            writer.writerow({k: "" if v is None else v for k, v in vars(row).items()})
+            cells = {k: "" if v is None else v for k, v in vars(row).items()}
+            cells["budget_m"] = "end" if math.isinf(row.budget_m) else row.budget_m
+            writer.writerow(cells)
     return buffer.getvalue()
 
 
-def summary_markdown(cfg: DictConfig, summaries: Sequence[Summary], seeds: Sequence[int]) -> str:
+# The error-versus-effort table: header, BudgetSummary attribute, format.
+EFFORT_TABLE = (
+    ("policy", "policy", "{}"),
+    ("budget", "budget_m", None),
+    ("reached", "reached", "{:.0%}"),
+    ("path [m]", "path_m", "{:.2f}"),
+    ("time [s]", "time_s", "{:.1f}"),
+    ("mean error [%]", "mean_error_pct", "{:.3f}"),
+    ("median error [%]", "median_error_pct", "{:.3f}"),
+    ("intrinsics [px]", "intrinsic_px", "{:.2f}"),
+    ("rotation [deg]", "rotation_deg", "{:.3f}"),
+    ("translation [mm]", "translation_mm", "{:.2f}"),
+    ("time offset [ms]", "time_offset_ms", "{:.3f}"),
+    ("failed", "failed", "{:.0%}"),
+    ("vs reference [%] (95 % CI)", "versus", None),
+)
+
+
+def _effort_cell(summary: BudgetSummary, key: str, fmt: str | None) -> str:
+    if key == "budget_m":
+        return budget_label(summary.budget_m)
+    if key == "versus":
+        v = summary.versus
+        return "-" if v is None else f"{v.estimate:+.3f} [{v.low:+.3f}, {v.high:+.3f}]"
+    return _cell(getattr(summary, key), fmt)
+
+
+def effort_table(summaries: Sequence[BudgetSummary]) -> str:
+    """Markdown table: every policy at every path budget (medians of the absolute errors)."""
+    lines = ["| " + " | ".join(h for h, _, _ in EFFORT_TABLE) + " |", "|" + "---|" * len(EFFORT_TABLE)]
+    for s in summaries:
+        lines.append("| " + " | ".join(_effort_cell(s, key, fmt) for _, key, fmt in EFFORT_TABLE) + " |")
+    return "\n".join(lines)
+
+
+def summary_markdown(
+    cfg: DictConfig,
+    summaries: Sequence[Summary],
+    seeds: Sequence[int],
+    effort: Sequence[BudgetSummary],
+    reference: str | None,
+) -> str:
     task = cfg.task.name
     header = (
-        f"# vical-evaluate: {task} task\n\n"
+        f"# vical-evaluate: {task} task, workspace {cfg.env.workspace.name}\n\n"
         f"{len(seeds)} sensors per policy (reset seeds {seeds[0]}..{seeds[-1]}); error = the task's "
-        f"{cfg.task.error_metric} metric; errors over successful calibrations, path length and calibration "
-        "time over all episodes; absolute errors are means (intrinsics: ||[fx, fy, cx, cy] - truth||).\n\n"
+        f"{cfg.task.error_metric} metric.\n\n## Whole episodes\n\n"
+        "Errors over successful calibrations, path length and calibration time over all episodes; absolute "
+        "errors are means (intrinsics: ||[fx, fy, cx, cy] - truth||).\n\n"
     )
     failures = [f"- {s.policy}: {s.failed} of {s.episodes} calibrations failed" for s in summaries if s.failed]
     notes = "\n\nFailed calibrations (see results.csv, column error):\n" + "\n".join(failures) if failures else ""
-    return header + summary_table(summaries) + notes + "\n"
+    text = header + summary_table(summaries) + notes + "\n"
+    if len(effort) > len(summaries):  # budgets were evaluated
+        text += (
+            "\n## Error versus effort\n\n"
+            "Each episode calibrated on its recording cut where the path reached the budget (episodes that "
+            "ended earlier count with their whole recording: `reached` says how many got that far). Errors "
+            "count a failed calibration at the nominal parameters' error; absolute errors are medians over "
+            "successful calibrations; the last column is the mean paired difference to the reference over "
+            f"the same sensors with its 95 % bootstrap interval. Figure: {FIGURE}.\n\n" + effort_table(effort) + "\n"
+        )
+        if reference is not None:
+            text += "\n" + "\n".join(significance_lines(effort, reference)) + "\n"
+    return text
 
 
-def evaluate(cfg: DictConfig, chosen: str | None) -> tuple[Path, list[Summary]]:
+def evaluate(cfg: DictConfig, chosen: str | None) -> tuple[Path, list[Summary], list[BudgetSummary]]:
     """Evaluate every configured policy and write the results; the output directory and the summaries."""
     seeds = seeds_of(cfg)
     out = output_dir(cfg)
+    budgets = check_budgets(cfg.get("budgets") or [])
     env_cfg = OmegaConf.to_container(cfg.env, resolve=True)
-    specs = [PolicySpec.from_config(c, "policy") for c in policy_configs(cfg, chosen)]
+    configs = policy_configs(cfg, chosen)
+    specs = [PolicySpec.from_config(c, "policy") for c in configs]
+    reference = reference_policy(cfg, specs, configs)
+    paper = bool(cfg.get("paper_protocol", False))
     # Build every policy before the first episode, so a bad spec (a missing run) fails in seconds.
-    evaluators = [PolicyEvaluator(spec, env_cfg) for spec in specs]
+    evaluators = [PolicyEvaluator(spec, env_cfg, budgets, paper) for spec in specs]
     evaluations = [run_evaluator(e, seeds, bool(cfg.progress)) for e in evaluators]
     summaries = [e.summary for e in evaluations]
+    effort = summarize_effort({e.summary.policy: e.rows for e in evaluations}, budgets, reference)
     write_text_atomic(out / RESULTS, results_csv(evaluations))
-    write_text_atomic(out / SUMMARY, summary_markdown(cfg, summaries, seeds))
-    return out, summaries
+    write_text_atomic(out / SUMMARY, summary_markdown(cfg, summaries, seeds, effort, reference))
+    if budgets:
+        write_effort_figure(out / FIGURE, effort, cfg.task.name)
+    return out, summaries, effort
 
 
 @hydra.main(config_path=str(CONF_DIR), config_name="evaluate", version_base="1.3")
 def hydra_main(cfg: DictConfig) -> None:
     try:
-        out, summaries = evaluate(cfg, HydraConfig.get().runtime.choices.get("policy"))
+        out, summaries, effort = evaluate(cfg, HydraConfig.get().runtime.choices.get("policy"))
     except USER_ERRORS as err:
         fail(APP, err)
     print(summary_table(summaries))
+    if len(effort) > len(summaries):
+        print(effort_table(effort))
     print(f"results written to {out / RESULTS} and {out / SUMMARY}")
 
 

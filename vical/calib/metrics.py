@@ -59,16 +59,30 @@ class CalibrationErrors:
 
 def calibration_errors(result: CalibrationResult, truth: SensorTruth) -> CalibrationErrors:
     """Relative and absolute errors of ``result`` against ``truth``."""
-    intrinsic_pct = intrinsic_relative_error(result.camera, truth.camera)
-    intrinsic_abs = np.abs(result.camera.intrinsics - truth.camera.intrinsics)
-    if result.T_cam_imu is None:
+    return parameter_errors(result.camera, result.T_cam_imu, result.time_offset, truth)
+
+
+def parameter_errors(
+    camera: CameraModel, T_cam_imu: np.ndarray | None, time_offset: float | None, truth: SensorTruth
+) -> CalibrationErrors:
+    """Relative and absolute errors of estimated parameters against ``truth``.
+
+    Args:
+        camera: estimated camera.
+        T_cam_imu: (4, 4) estimated extrinsic, or None when not estimated (then no extrinsic errors).
+        time_offset: estimated time offset [s], or None when not estimated.
+        truth: the sensor's true parameters.
+    """
+    intrinsic_pct = intrinsic_relative_error(camera, truth.camera)
+    intrinsic_abs = np.abs(camera.intrinsics - truth.camera.intrinsics)
+    if T_cam_imu is None:
         return CalibrationErrors(intrinsic_pct, intrinsic_abs)
-    rot, trans = transform_error(result.T_cam_imu, truth.T_cam_imu)
-    dt = None if result.time_offset is None else abs(result.time_offset - truth.time_offset) * 1e3
+    rot, trans = transform_error(T_cam_imu, truth.T_cam_imu)
+    dt = None if time_offset is None else abs(time_offset - truth.time_offset) * 1e3
     return CalibrationErrors(
         intrinsic_pct,
         intrinsic_abs,
-        extrinsic_relative_error(result.T_cam_imu, truth.T_cam_imu),
+        extrinsic_relative_error(T_cam_imu, truth.T_cam_imu),
         float(np.rad2deg(rot)),
         float(trans * 1e3),
         dt,

@@ -31,6 +31,13 @@ class Policy(ABC):
     stop_at_coverage: bool = True
     max_steps: int | None = None
 
+    def check(self, env: CalibrationEnv) -> None:  # noqa: B027 (optional hook)
+        """Raise ``ConfigError`` (one line: what and what to do) when the policy cannot run in ``env``.
+
+        Called once before the first episode, so that a mismatch (a workspace the policy was not
+        made for, another action scale) fails in seconds rather than after episodes have run.
+        """
+
     def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:  # noqa: B027 (optional hook)
         """Called after ``env.reset``, before the episode's first action; ``rng`` seeds any randomness."""
 

@@ -1,20 +1,26 @@
-"""Evaluation of a policy on a calibration task: the paper's protocol and table columns.
+"""Evaluation of a policy on a calibration task: episodes, calibrations at path budgets, table rows.
 
 Each policy runs one episode per sensor seed (``reset(seed=s)`` draws the same sensor for every
 policy, so the policies are compared on the same sensors). Every episode is calibrated at its end
 by ``vical.calib.tasks.run_task``, whatever ended it (coverage, step limit, or the end of a fixed
-trajectory); a ``CalibrationError`` becomes a failed row, counted in the summary.
+trajectory), and at every **path budget** below its path: the recording as it stood when the end
+effector had travelled that far (``Recording.until_path``), so policies are compared at equal
+effort. A ``CalibrationError`` becomes a failed row; its ``prior_score_pct`` is the error of the
+nominal parameters (the sensor distribution's means), what a user is left with when the
+calibration fails, which the paired comparisons use in its place (``vical.policies.effort``).
 
 A policy config (``conf/policy/<name>.yaml``, see :class:`PolicySpec`) holds one policy spec per
-task. In the joint task a policy without a ``joint`` spec runs two trajectories on the same sensor,
-as the paper's trajectory baselines do: its intrinsic trajectory, then its extrinsic trajectory;
-the two-stage solve calibrates the intrinsics from the first recording's frames and the extrinsic
-from the second recording, and the path lengths add up.
+task. Under the paper's protocol (``paper_protocol``, the paper's Tables I-III) a baseline marked
+``paper_two_trajectories`` runs two trajectories in the joint task, as the paper's trajectory
+baselines do: its intrinsic trajectory, then its extrinsic trajectory; the two-stage solve
+calibrates the intrinsics from the first recording's frames and the extrinsic from the second
+recording, and the path lengths add up. Everywhere else every policy runs one trajectory.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -27,13 +33,16 @@ from hydra.errors import InstantiationException
 from tqdm import tqdm
 
 from vical.calib.errors import CalibrationError
-from vical.calib.tasks import CalibrationTask, TaskOutcome, run_task
+from vical.calib.metrics import parameter_errors
+from vical.calib.tasks import CalibrationTask, TaskOutcome, run_task, task_score
 from vical.config import ConfigError, require
-from vical.data import CameraFrames, Recording
+from vical.data import CameraFrames, Recording, SensorTruth
 from vical.env.calibration import CalibrationEnv
 from vical.policies.base import Policy
+from vical.sim.sampling import mean_sensor
 
 SPEC_KEYS = ("intrinsic", "extrinsic", "joint")
+END = math.inf  # the budget of a row that calibrates the whole episode
 
 
 @dataclass(frozen=True)
@@ -42,19 +51,21 @@ class PolicySpec:
 
     Attributes:
         name: the table row.
-        intrinsic, extrinsic: specs (``_target_`` + arguments) of the policies for those tasks.
-        joint: spec of one policy for the joint task; None runs the intrinsic then the extrinsic
-            policy (two trajectories).
+        intrinsic, extrinsic, joint: specs (``_target_`` + arguments) of the policies for those tasks
+            (None: the policy has none for that task).
+        paper_two_trajectories: under the paper's protocol the joint task runs the intrinsic then
+            the extrinsic policy (two trajectories), as the paper's trajectory baselines did.
     """
 
     name: str
     intrinsic: Mapping[str, Any] | None
     extrinsic: Mapping[str, Any] | None
     joint: Mapping[str, Any] | None = None
+    paper_two_trajectories: bool = False
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any], key: str = "policy") -> PolicySpec:
-        """Read ``name`` and the per-task specs; other keys are parameters the specs interpolate."""
+        """Read ``name``, the per-task specs and the protocol flag; other keys are parameters the specs interpolate."""
         require(isinstance(cfg, Mapping), key, "a mapping with name, intrinsic, extrinsic, joint", cfg)
         name = cfg.get("name")
         require(isinstance(name, str) and bool(name), f"{key}.name", "a non-empty string", name)
@@ -64,19 +75,25 @@ class PolicySpec:
             ok = spec is None or (isinstance(spec, Mapping) and "_target_" in spec)
             require(ok, f"{key}.{task}", "null or a mapping with a _target_ (a policy factory)", spec)
             specs[task] = dict(spec) if spec is not None else None
-        return cls(name, **specs)
+        two = cfg.get("paper_two_trajectories", False)
+        require(isinstance(two, bool), f"{key}.paper_two_trajectories", "true or false", two)
+        return cls(name, **specs, paper_two_trajectories=two)
 
-    def for_task(self, task: CalibrationTask) -> list[Mapping[str, Any]]:
-        """The specs of the trajectories one episode of ``task`` runs (one, or two in the joint task)."""
+    def for_task(self, task: CalibrationTask, paper_protocol: bool = False) -> list[Mapping[str, Any]]:
+        """The specs of the trajectories one episode of ``task`` runs (one, or two in the paper's joint task)."""
         kind = {"intrinsic": "intrinsic", "extrinsic": "extrinsic"}.get(task.calibrate, "joint")
-        if kind == "joint" and self.joint is None:
+        if kind == "joint" and paper_protocol and self.paper_two_trajectories:
             missing = [k for k in ("intrinsic", "extrinsic") if getattr(self, k) is None]
             if missing:
-                raise ConfigError(f"policy {self.name!r} has no joint spec and no {' / '.join(missing)} spec to run")
+                raise ConfigError(f"policy {self.name!r} runs two trajectories but has no {' / '.join(missing)} spec")
             return [self.intrinsic, self.extrinsic]
         spec = getattr(self, kind)
         if spec is None:
-            raise ConfigError(f"policy {self.name!r} has no spec for the {kind} task (its `{kind}` key is null)")
+            only_paper = " (it runs two trajectories under the paper's protocol: paper_protocol=true)"
+            raise ConfigError(
+                f"policy {self.name!r} has no spec for the {kind} task (its `{kind}` key is null)"
+                + (only_paper if kind == "joint" and self.paper_two_trajectories else "")
+            )
         return [spec]
 
 
@@ -96,26 +113,32 @@ def instantiate_policy(spec: Mapping[str, Any], name: str) -> Policy:
 
 @dataclass
 class EpisodeRow:
-    """One evaluated sensor (None where the task estimates no such quantity or the calibration failed).
+    """One evaluated sensor at one path budget (None where the task estimates no such quantity or it failed).
 
     Attributes:
         policy: the table row it belongs to.
         seed: the env reset seed (the sensor).
+        budget_m: the path budget [m] the recording was cut at; ``inf`` for the whole episode.
         score_pct: the task's error [%] (the paper's tables).
         intrinsic_pct, extrinsic_pct: relative errors [%].
         intrinsic_px: ``||[fx, fy, cx, cy] - gt||`` [px].
         rotation_deg, translation_mm: extrinsic ``T_cam_imu`` errors [deg], [mm].
         time_offset_ms: |time offset error| [ms].
-        path_length_m: executed end-effector path [m] (both trajectories in two-trajectory mode).
+        prior_score_pct: the task's error [%] of the nominal parameters (the distributions' means):
+            what a failed calibration leaves.
+        path_length_m: executed end-effector path [m] of the calibrated data (both trajectories in
+            two-trajectory mode).
+        recording_time_s: time [s] from the recording's start to its (cut) end.
         calib_time_s: calibrator wall time [s] (until the failure for a failed calibration).
-        steps: env steps taken (both trajectories).
-        frames: camera frames with detections used by the calibration.
+        steps: env steps of the episode (both trajectories).
+        frames: camera frames the calibration was given.
         coverage_reached: every trajectory of the episode completed the MDP's coverage.
         failed: the calibration raised ``CalibrationError``; ``error`` holds its message.
     """
 
     policy: str
     seed: int
+    budget_m: float = END
     score_pct: float | None = None
     intrinsic_pct: float | None = None
     extrinsic_pct: float | None = None
@@ -123,13 +146,22 @@ class EpisodeRow:
     rotation_deg: float | None = None
     translation_mm: float | None = None
     time_offset_ms: float | None = None
+    prior_score_pct: float | None = None
     path_length_m: float = 0.0
+    recording_time_s: float = 0.0
     calib_time_s: float = 0.0
     steps: int = 0
     frames: int = 0
     coverage_reached: bool = False
     failed: bool = False
     error: str = ""
+
+    @property
+    def effective_score_pct(self) -> float:
+        """The score, or the nominal parameters' score for a failed calibration (paired comparisons)."""
+        if not self.failed and self.score_pct is not None:
+            return float(self.score_pct)
+        return math.nan if self.prior_score_pct is None else float(self.prior_score_pct)
 
 
 COLUMNS = tuple(f.name for f in dataclasses.fields(EpisodeRow))
@@ -164,7 +196,7 @@ class Summary:
 
 @dataclass(frozen=True)
 class Evaluation:
-    """Per-episode rows and the summary of one policy on one task."""
+    """Per-episode rows (every budget) and the paper-table summary (whole episodes) of one policy on one task."""
 
     rows: list[EpisodeRow]
     summary: Summary
@@ -182,7 +214,7 @@ class Trajectory:
 def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
     """The calibration env of ``env_cfg`` with ``policy``'s step limit and coverage termination.
 
-    The env never calibrates on its own: the evaluation calibrates every episode once.
+    The env never calibrates on its own: the evaluation calibrates every episode once per budget.
     """
     overrides = {
         "terminate_on_coverage": policy.stop_at_coverage,
@@ -246,35 +278,90 @@ def calibrate_row(
     return row
 
 
+def prior_score(task: CalibrationTask, nominal: SensorTruth, truth: SensorTruth) -> float:
+    """The task's score [%] of the nominal parameters ``nominal`` against ``truth`` (no calibration at all)."""
+    needs_extrinsic = task.error_metric == "extrinsic_relative"
+    T = nominal.T_cam_imu if needs_extrinsic else None
+    return task_score(task, parameter_errors(nominal.camera, T, nominal.time_offset, truth))
+
+
+def check_budgets(budgets: Sequence[float]) -> tuple[float, ...]:
+    """Path budgets [m]: finite, positive and strictly increasing; ``ConfigError`` naming ``budgets`` otherwise."""
+    try:
+        values = tuple(float(b) for b in budgets)
+    except (TypeError, ValueError):
+        raise ConfigError(f"budgets must be a list of path lengths [m], got {budgets!r}") from None
+    ok = all(math.isfinite(b) and b > 0 for b in values) and all(b < c for b, c in itertools.pairwise(values))
+    require(
+        ok, "budgets", "strictly increasing path lengths > 0 [m] (the whole episode is always added)", list(budgets)
+    )
+    return values
+
+
 class PolicyEvaluator:
     """Runs one policy spec on one task: builds its policies and envs once, then one episode per seed.
 
     Args:
         spec: the policy config.
         env_cfg: the calibration env config (``_target_``, ``sim``, ``sensor``, ``task`` and the MDP), resolved.
+        budgets: path budgets [m] at which every episode is also calibrated (``check_budgets``).
+        paper_protocol: the paper's protocol (two trajectories for the marked baselines in the joint task).
+
+    Raises:
+        ConfigError: a policy cannot run in this env (``Policy.check``), or budgets were asked for a
+            two-trajectory episode (a path budget has no meaning across two recordings).
     """
 
-    def __init__(self, spec: PolicySpec, env_cfg: Mapping[str, Any]) -> None:
+    def __init__(
+        self,
+        spec: PolicySpec,
+        env_cfg: Mapping[str, Any],
+        budgets: Sequence[float] = (),
+        paper_protocol: bool = False,
+    ) -> None:
         self.spec = spec
         self.task = CalibrationTask.from_config(env_cfg["task"])
-        self.policies = [instantiate_policy(s, spec.name) for s in spec.for_task(self.task)]
+        self.budgets = check_budgets(budgets)
+        self.policies = [instantiate_policy(s, spec.name) for s in spec.for_task(self.task, paper_protocol)]
         self.envs = [build_env(env_cfg, p) for p in self.policies]
+        for policy, env in zip(self.policies, self.envs, strict=True):
+            policy.check(env)
+        self.nominal = mean_sensor(self.envs[0].sampling)
         if len(self.policies) == 2:  # the paper's baselines: intrinsics from the first trajectory's frames
+            if self.budgets:
+                raise ConfigError(
+                    f"policy {spec.name!r} runs two trajectories (paper_protocol=true): path budgets apply to one "
+                    "recording; pass budgets=[]"
+                )
             self.task = dataclasses.replace(self.task, calibrate="two_stage")
 
-    def episode(self, seed: int) -> EpisodeRow:
-        """Run the trajectory (or both) on the sensor of ``seed`` and calibrate; one table row."""
+    def episode(self, seed: int) -> list[EpisodeRow]:
+        """Run the trajectory (or both) on the sensor of ``seed`` and calibrate it at every budget and whole.
+
+        Returns one row per budget below the episode's path, then the whole episode's row (``budget_m = inf``).
+        """
         pairs = zip(self.envs, self.policies, strict=True)
         runs = [run_trajectory(env, p, seed, noise_stream=k) for k, (env, p) in enumerate(pairs)]
-        row = EpisodeRow(
-            policy=self.spec.name,
-            seed=seed,
-            path_length_m=float(sum(r.recording.path_length for r in runs)),
-            steps=sum(r.steps for r in runs),
-            coverage_reached=all(r.coverage_reached for r in runs),
-        )
-        intrinsic_frames = runs[0].recording.frames if len(runs) == 2 else None
-        return calibrate_row(row, self.task, runs[-1].recording, intrinsic_frames)
+        recording = runs[-1].recording
+        common = {
+            "policy": self.spec.name,
+            "seed": seed,
+            "steps": sum(r.steps for r in runs),
+            "coverage_reached": all(r.coverage_reached for r in runs),
+            "prior_score_pct": prior_score(self.task, self.nominal, recording.truth),
+        }
+        if len(runs) == 2:
+            row = EpisodeRow(**common, path_length_m=float(sum(r.recording.path_length for r in runs)))
+            row.recording_time_s = float(sum(r.recording.duration for r in runs))
+            return [calibrate_row(row, self.task, recording, runs[0].recording.frames)]
+        total = recording.path_length
+        cuts = [(b, recording.until_path(b)) for b in self.budgets if b < total] + [(END, recording)]
+        return [self._budget_row(common, budget, cut) for budget, cut in cuts]
+
+    def _budget_row(self, common: dict[str, Any], budget: float, recording: Recording) -> EpisodeRow:
+        row = EpisodeRow(**common, budget_m=budget, path_length_m=float(recording.path_length))
+        row.recording_time_s = (recording.t_end - recording.t0) / 1e9
+        return calibrate_row(row, self.task, recording)
 
     def close(self) -> None:
         for env in self.envs:
@@ -287,7 +374,8 @@ def _mean(rows: Sequence[EpisodeRow], key: str) -> float | None:
 
 
 def summarize(name: str, rows: Sequence[EpisodeRow]) -> Summary:
-    """The table columns of ``rows``: error statistics over successful rows, path and time over all."""
+    """The paper's table columns of whole-episode ``rows``: errors over successful rows, path and time over all."""
+    rows = [r for r in rows if r.budget_m == END]
     ok = [r for r in rows if not r.failed]
     scores = np.array([r.score_pct for r in ok], dtype=float)
     return Summary(
@@ -310,17 +398,22 @@ def run_evaluator(evaluator: PolicyEvaluator, seeds: Sequence[int], progress: bo
     """One episode per sensor seed with a built evaluator (closed at the end); rows and the table summary."""
     if not seeds:
         raise ConfigError("episodes must be at least 1 (no seeds to evaluate)")
-    rows = []
+    rows: list[EpisodeRow] = []
     try:
         for seed in tqdm(seeds, desc=evaluator.spec.name, unit="episode", disable=not progress):
-            rows.append(evaluator.episode(int(seed)))
+            rows.extend(evaluator.episode(int(seed)))
     finally:
         evaluator.close()
     return Evaluation(rows, summarize(evaluator.spec.name, rows))
 
 
 def evaluate_policy(
-    spec: PolicySpec, env_cfg: Mapping[str, Any], seeds: Sequence[int], progress: bool = True
+    spec: PolicySpec,
+    env_cfg: Mapping[str, Any],
+    seeds: Sequence[int],
+    progress: bool = True,
+    budgets: Sequence[float] = (),
+    paper_protocol: bool = False,
 ) -> Evaluation:
     """Evaluate ``spec`` on the task of ``env_cfg`` for every sensor seed; rows and the table summary."""
-    return run_evaluator(PolicyEvaluator(spec, env_cfg), seeds, progress)
+    return run_evaluator(PolicyEvaluator(spec, env_cfg, budgets, paper_protocol), seeds, progress)

@@ -35,7 +35,7 @@ HARMONICS = (1, 2, 4)
 SHAPE = (6, 2, len(HARMONICS))  # DoF x (cos, sin) x harmonic
 NUM_COEFFICIENTS = int(np.prod(SHAPE))
 DOF_NAMES = ("x", "y", "z", "roll", "pitch", "yaw")
-TASKS = ("intrinsic", "extrinsic")
+TASKS = ("intrinsic", "extrinsic", "joint")
 DEFAULT_WAYPOINTS = 21  # 20 segments: the paper's 20-step episodes; >= 8 samples per period of harmonic 4
 # Package data, not a conf/policy option: the fit's artefact that the model_based policy reads.
 DEFAULT_PARAMS_FILE = Path(__file__).resolve().parent / "params" / "model_based.yaml"
@@ -142,48 +142,84 @@ def random_trajectory_policy(
     return FourierTrajectoryPolicy(trajectory, num_waypoints, name="random trajectory", redraw=redraw)
 
 
-def _fix_hint(path: Path) -> str:
-    return f"run `{FIT_COMMAND}` to (re)create {path}, or pass params_file= a valid file"
+def _fix_hint(path: Path, workspace: str, task: str) -> str:
+    return (
+        f"run `{FIT_COMMAND} --workspace {workspace} --tasks {task}` to (re)create it in {path}, "
+        "or pass params_file= a valid file"
+    )
 
 
-def load_model_based_params(task: str, params_file: str | os.PathLike | None = None) -> Mapping[str, Any]:
-    """The fitted entry of ``task`` in the params file (default ``vical/policies/params/model_based.yaml``).
+def load_model_based_params(
+    task: str, workspace: str = "paper", params_file: str | os.PathLike | None = None
+) -> Mapping[str, Any]:
+    """The fitted entry of ``workspace`` / ``task`` in the params file (default ``params/model_based.yaml``).
 
     Raises:
-        ConfigError: the file is missing, unreadable, lacks ``task`` or its coefficients are malformed;
+        ConfigError: the file is missing, unreadable, lacks the entry or its coefficients are malformed;
             the message names the file and how to recreate it.
     """
     if task not in TASKS:
         raise ConfigError(f"model-based trajectory: task must be one of {TASKS}, got {task!r}")
     path = Path(params_file) if params_file is not None else DEFAULT_PARAMS_FILE
     if not path.is_file():
-        raise ConfigError(f"model-based trajectory parameters {path} not found; {_fix_hint(path)}")
+        raise ConfigError(f"model-based trajectory parameters {path} not found; {_fix_hint(path, workspace, task)}")
     try:
         data = yaml.safe_load(path.read_text(encoding="utf-8"))
     except (OSError, yaml.YAMLError) as e:
-        raise ConfigError(f"cannot read model-based trajectory parameters {path}: {e}; {_fix_hint(path)}") from e
-    entry = data.get(task) if isinstance(data, Mapping) else None
+        hint = _fix_hint(path, workspace, task)
+        raise ConfigError(f"cannot read model-based trajectory parameters {path}: {e}; {hint}") from e
+    fits = data.get(workspace) if isinstance(data, Mapping) else None
+    entry = fits.get(task) if isinstance(fits, Mapping) else None
     if not isinstance(entry, Mapping) or "coefficients" not in entry:
-        raise ConfigError(f"{path} has no '{task}: {{coefficients: ...}}' entry; {_fix_hint(path)}")
+        raise ConfigError(
+            f"{path} has no model-based trajectory fitted for the {task} task in workspace {workspace!r}; "
+            f"{_fix_hint(path, workspace, task)}"
+        )
     return entry
 
 
-def model_based_policy(
-    task: str, params_file: str | os.PathLike | None = None, num_waypoints: int | None = None
-) -> FourierTrajectoryPolicy:
-    """The "model-based learned trajectory" baseline: the PSO-fitted Fourier loop of ``task``.
+class ModelBasedPolicy(FourierTrajectoryPolicy):
+    """The PSO-fitted loop of one workspace and task; refuses to run in another workspace (``check``).
 
     Args:
-        task: ``intrinsic`` or ``extrinsic`` (the joint task runs both, one after the other).
+        trajectory: the fitted loop.
+        num_waypoints: samples of the loop.
+        workspace: the workspace the loop was fitted in.
+        task: the task it was fitted for.
+    """
+
+    def __init__(self, trajectory: FourierTrajectory, num_waypoints: int, workspace: str, task: str):
+        super().__init__(trajectory, num_waypoints, name=f"model-based learned trajectory ({task})")
+        self.workspace, self.task = workspace, task
+
+    def check(self, env: CalibrationEnv) -> None:
+        here = env.config.workspace.name
+        if here != self.workspace:
+            raise ConfigError(
+                f"the model-based trajectory was fitted in workspace {self.workspace!r}, the env has workspace "
+                f"{here!r}; use the fit of {here!r} (policy=model_based with workspace={here})"
+            )
+
+
+def model_based_policy(
+    task: str, workspace: str = "paper", params_file: str | os.PathLike | None = None, num_waypoints: int | None = None
+) -> ModelBasedPolicy:
+    """The "model-based learned trajectory" baseline: the PSO-fitted Fourier loop of ``workspace`` and ``task``.
+
+    Args:
+        task: ``intrinsic``, ``extrinsic`` or ``joint`` (the paper's joint task runs the first two,
+            one after the other).
+        workspace: the workspace whose fit to use (``conf/workspace/<name>.yaml``).
         params_file: fitted coefficients (default ``vical/policies/params/model_based.yaml``, written by
             ``experiments/fit_model_based_trajectory.py``).
         num_waypoints: samples of the loop; default the number the fit used.
     """
-    entry = load_model_based_params(task, params_file)
+    entry = load_model_based_params(task, workspace, params_file)
     path = Path(params_file) if params_file is not None else DEFAULT_PARAMS_FILE
     try:
         trajectory = FourierTrajectory(entry["coefficients"])
     except (TypeError, ValueError) as e:
-        raise ConfigError(f"{path}: {task}.coefficients is malformed ({e}); {_fix_hint(path)}") from e
+        hint = _fix_hint(path, workspace, task)
+        raise ConfigError(f"{path}: {workspace}.{task}.coefficients is malformed ({e}); {hint}") from e
     k = num_waypoints if num_waypoints is not None else int(entry.get("num_waypoints", DEFAULT_WAYPOINTS))
-    return FourierTrajectoryPolicy(trajectory, k, name=f"model-based learned trajectory ({task})")
+    return ModelBasedPolicy(trajectory, k, workspace, task)

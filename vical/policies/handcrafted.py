@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from vical.config import ConfigError
 from vical.env.calibration import CalibrationEnv
 from vical.env.config import Workspace
 from vical.policies.base import WaypointPolicy
@@ -138,6 +139,14 @@ class HandcraftedPolicy(WaypointPolicy):
         # Every waypoint takes one step (actions reach across the workspace); the margin covers
         # waypoints the arm approaches in two steps.
         self.max_steps = 2 * len(self.waypoints)
+
+    def check(self, env: CalibrationEnv) -> None:
+        workspace = env.config.workspace
+        if workspace.frame != "start":
+            raise ConfigError(
+                f"the hand-crafted trajectories are written for the authors' box (frame=start, workspace=paper); "
+                f"workspace {workspace.name!r} has frame={workspace.frame!r}: use the expert trajectories there"
+            )
 
     def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
         self.waypoints = handcrafted_waypoints(self.task, self.length, env.config.workspace)

@@ -13,8 +13,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from vical.config import ConfigError
+from vical.config import ConfigError, from_mapping
 from vical.env.calibration import OBS_SIZE, CalibrationEnv
+from vical.env.config import Workspace
 from vical.policies.base import Policy
 from vical.rl.checkpoint import load_checkpoint
 from vical.rl.sac import SAC, SACConfig
@@ -60,6 +61,7 @@ class LearnedPolicy(Policy):
     Args:
         agent: the trained agent (its policy network is used, in eval mode).
         action_scale: (6,) the action scale it was trained with ([m], [rad] x 5).
+        workspace: the workspace it was trained in.
         source: the ``agent.pt`` it came from (named in errors).
         name: shown in evaluation tables.
         max_steps: step limit of its episodes (None: the env's ``max_steps``).
@@ -71,12 +73,14 @@ class LearnedPolicy(Policy):
         self,
         agent: SAC,
         action_scale: np.ndarray,
+        workspace: Workspace,
         source: Path,
         name: str = "model-free learned policy",
         max_steps: int | None = None,
     ) -> None:
         self.agent = agent.eval()
         self.action_scale = np.asarray(action_scale, dtype=float)
+        self.workspace = workspace
         self.source = source
         self.name = name
         self.max_steps = max_steps
@@ -94,16 +98,30 @@ class LearnedPolicy(Policy):
         _check_run(state, path)
         agent = SAC(OBS_SIZE, ACT_SIZE, SACConfig(**state["agent_config"]), seed=0)
         agent.load_state_dict(state["model"])
-        scale = state["config"]["env"].get("action_scale", [np.nan] * ACT_SIZE)
-        return cls(agent, np.asarray(scale, dtype=float), path, **kwargs)
+        env = state["config"]["env"]
+        scale = env.get("action_scale", [np.nan] * ACT_SIZE)
+        # Runs from before workspaces were named trained in the authors' box (Workspace's defaults).
+        workspace = from_mapping(Workspace, env.get("workspace", {}), f"{path}: env.workspace")
+        return cls(agent, np.asarray(scale, dtype=float), workspace, path, **kwargs)
 
-    def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
-        """Check that ``env`` has the trained action scale and build the [-1, 1] -> env-units map."""
+    def check(self, env: CalibrationEnv) -> None:
+        """Refuse an env whose workspace or action scale differ from the training's (actions mean other motions)."""
+        trained, here = self.workspace, env.config.workspace
+        if trained != here:
+            raise ConfigError(
+                f"{self.source} was trained in workspace {trained.name!r} (frame {trained.frame}, bounds "
+                f"{trained.bound.round(4).tolist()}), but the env has workspace {here.name!r} (frame {here.frame}, "
+                f"bounds {here.bound.round(4).tolist()}); evaluate it with workspace={trained.name}"
+            )
         if not np.allclose(env.config.action_scale, self.action_scale):
             raise ConfigError(
                 f"{self.source} was trained with env.action_scale={self.action_scale.tolist()}, but the env has "
                 f"{list(env.config.action_scale)}; evaluate with the training's action scale"
             )
+
+    def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
+        """Check the env (``check``) and build the [-1, 1] -> env-units map."""
+        self.check(env)
         self._actions = BoxActions(env.action_space)
 
     def act(self, obs: np.ndarray, env: CalibrationEnv) -> np.ndarray:
