@@ -54,10 +54,11 @@ def test_task_files_name_themselves_and_a_metric():
             assert cfg.error_metric in ("intrinsic_relative", "extrinsic_relative")
 
 
-# train_*.yaml configure vical-train; the others (the paper's tables) vical-evaluate.
+# train_*.yaml configure vical-train; the others (the paper's tables, the yardstick) vical-evaluate.
 EXPERIMENTS = sorted(f.stem for f in (CONF / "experiment").glob("*.yaml"))
 TRAIN_EXPERIMENTS = [e for e in EXPERIMENTS if e.startswith("train_")]
 TABLE_EXPERIMENTS = [e for e in EXPERIMENTS if not e.startswith("train_")]
+PAPER_TABLES = [e for e in TABLE_EXPERIMENTS if e.startswith("table")]
 
 
 @pytest.mark.parametrize("experiment", TRAIN_EXPERIMENTS)
@@ -74,7 +75,11 @@ def test_experiment_composes_with_vical_evaluate(experiment):
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose(config_name="evaluate", overrides=[f"+experiment={experiment}", "policy.run_dir=runs/x"])
     assert cfg.task.name in experiment  # table1_intrinsic -> the intrinsic task
-    assert cfg.episodes == 20
+    paper = experiment in PAPER_TABLES  # the paper's tables: 20 sensors in the authors' box, its protocol
+    assert (cfg.episodes, cfg.paper_protocol, cfg.workspace.name) == (
+        (20, True, "paper") if paper else (50, False, "practitioner")
+    )
+    assert not cfg.budgets if paper else list(cfg.budgets) == sorted(cfg.budgets)
     known = {f.stem for f in (CONF / "policy").glob("*.yaml")}
     assert cfg.policies and set(cfg.policies) <= known
     assert cfg.policy.run_dir == "runs/x"  # the learned policy takes the run from the command line

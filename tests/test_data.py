@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from vical.data import CameraFrames, DataError, ImuSamples, SensorTruth, Target, TargetError, seconds_since
+from vical.data import CameraFrames, DataError, ImuSamples, PathProfile, SensorTruth, Target, TargetError, seconds_since
 from vical.data.target import KALIBR_TAG36H11_ID0, kalibr_tag_bits
 from vical.geometry import CameraModel
 
@@ -117,3 +117,32 @@ def test_aprilgrid_image_prints_tags_as_kalibr_does():
         cells = image[top + 25 : top + 80 : 10, left + 25 : left + 80 : 10] < 128  # 6 x 6 data cell centres
         assert np.array_equal(cells, kalibr_tag_bits(code)), k
     assert not np.array_equal(kalibr_tag_bits(kalibr_codes[1]), np.rot90(kalibr_tag_bits(kalibr_codes[1]), 2))
+
+
+def test_path_profile_validates_and_answers_time_and_length():
+    t = np.arange(5, dtype=np.int64) * 10
+    profile = PathProfile(t, [0.0, 0.1, 0.1, 0.4, 1.0])
+    assert profile.time_at(0.1) == 10 and profile.time_at(0.35) == 30 and profile.time_at(5.0) == 40
+    assert profile.length_at(25) == 0.1 and profile.length_at(-1) == 0.0 and profile.length_at(99) == 1.0
+    with pytest.raises(DataError, match="non-decreasing"):
+        PathProfile(t, [0.0, 0.2, 0.1, 0.4, 1.0])
+    with pytest.raises(DataError, match="strictly increasing"):
+        PathProfile(np.array([0, 10, 10, 20, 30]), np.zeros(5))
+
+
+def test_a_recording_until_a_time_or_a_path_keeps_exactly_what_came_before():
+    from test_io_samples import make_recording
+
+    rec = make_recording()
+    profile = rec.path_profile
+    budget = float(profile.length[30])
+    cut = rec.until_path(budget)
+    t_cut = int(profile.t[np.searchsorted(profile.length, budget)])
+    assert cut.imu.t[-1] == t_cut and np.all(cut.frames.t <= t_cut) and np.all(cut.trajectory.t <= t_cut)
+    assert len(cut.imu) == 31 and len(cut.frames) == np.sum(rec.frames.t <= t_cut)
+    assert cut.path_length == budget and cut.path_profile.t[-1] == t_cut
+    assert cut.duration == pytest.approx(min(rec.duration, (t_cut - rec.t0) / 1e9))
+    assert cut.truth is rec.truth and cut.target == rec.target
+    assert rec.until_path(10 * float(profile.length[-1])) is rec  # never that far: the whole recording
+    with pytest.raises(DataError, match="no path profile"):
+        make_recording(with_truth=False).until_path(1.0)

@@ -30,12 +30,15 @@ def test_round_trip_is_bit_exact(tmp_path):
     assert np.array_equal(back.T_world_target, rec.T_world_target)
     assert back.path_length == rec.path_length and back.duration == rec.duration
     assert back.metadata == rec.metadata
+    assert np.array_equal(back.path_profile.t, rec.path_profile.t)
+    assert np.array_equal(back.path_profile.length, rec.path_profile.length)
 
 
 def test_round_trip_without_optional_parts(tmp_path):
     rec = make_recording(images=False, with_truth=False)
     back = load_recording(save_recording(rec, tmp_path / "rec"))
     assert back.truth is None and back.trajectory is None and back.T_world_target is None
+    assert back.path_profile is None
     assert back.frames.images is None
     assert_frames_equal(back.frames, rec.frames, images=False)
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vical.data import CameraFrames, ImuNoise, ImuSamples, Recording, SensorTruth, Target, Trajectory
+from vical.data import CameraFrames, ImuNoise, ImuSamples, PathProfile, Recording, SensorTruth, Target, Trajectory
 from vical.geometry import CameraModel
 from vical.geometry.transforms import euler_to_matrix, make_transform
 
@@ -62,6 +62,7 @@ def make_recording(
         path_length=1.2345678901234567,
         duration=0.3 + 1e-17,
         metadata={"seed": seed, "source": "synthetic", "nested": {"rate_hz": [200, 20]}},
+        path_profile=PathProfile(t_imu, np.cumsum(rng.uniform(0.0, 0.04, n_imu))) if with_truth else None,
     )
 
 

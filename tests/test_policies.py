@@ -174,3 +174,12 @@ def test_without_a_run_the_learned_policy_is_the_shipped_paper_policy(env):
     action = policy.act(obs, env)
     assert env.action_space.contains(action.astype(np.float32))
     assert np.abs(action).max() > 0.01  # a trained policy moves
+
+
+def test_the_paper_policy_refuses_the_practitioners_workspace_by_name():
+    env = hydra.utils.instantiate(env_config("intrinsic") | {"workspace": {"name": "practitioner", "frame": "board"}})
+    try:
+        with pytest.raises(ConfigError, match=r"trained in workspace 'paper' .* evaluate it with workspace=paper"):
+            learned_policy(None).check(env)
+    finally:
+        env.close()

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 import hydra
+from hydra import compose, initialize_config_dir
 from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
@@ -38,6 +39,7 @@ from vical.policies.evaluation import (
     check_budgets,
     run_evaluator,
 )
+from vical.policies.yardstick import PROTOCOL_KEYS, fingerprint
 
 # An absolute path: the console script imports this module from anywhere.
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
@@ -249,6 +251,23 @@ def evaluate(cfg: DictConfig, chosen: str | None) -> tuple[Path, list[Summary], 
     if budgets:
         write_effort_figure(out / FIGURE, effort, cfg.task.name)
     return out, summaries, effort
+
+
+def yardstick_fingerprint(task: str) -> dict[str, str]:
+    """The fingerprint of ``+experiment=yardstick_<task>`` as vical-evaluate composes it (vical.policies.yardstick)."""
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose(config_name="evaluate", overrides=[f"+experiment=yardstick_{task}"])
+    chosen = "learned"  # the experiment's `policy` choice (for a learned policy added on the command line)
+    names = list(cfg.policies)
+    resolved = {
+        "policy_configs": dict(zip(names, policy_configs(cfg, chosen), strict=True)),
+        "env": OmegaConf.to_container(cfg.env, resolve=True),
+        **{
+            key: OmegaConf.to_container(cfg[key]) if OmegaConf.is_config(cfg[key]) else cfg[key]
+            for key in PROTOCOL_KEYS
+        },
+    }
+    return fingerprint(resolved)
 
 
 @hydra.main(config_path=str(CONF_DIR), config_name="evaluate", version_base="1.3")

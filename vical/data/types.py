@@ -244,6 +244,10 @@ class Trajectory:
     def __len__(self) -> int:
         return len(self.t)
 
+    def select(self, mask: np.ndarray) -> Trajectory:
+        """The states where the boolean ``mask`` (K,) is true."""
+        return Trajectory(self.t[mask], self.T_world_imu[mask], self.v_world[mask], self.omega_imu[mask])
+
 
 @dataclass(frozen=True)
 class PathProfile:
@@ -267,6 +271,10 @@ class PathProfile:
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def select(self, mask: np.ndarray) -> PathProfile:
+        """The samples where the boolean ``mask`` (K,) is true."""
+        return PathProfile(self.t[mask], self.length[mask])
 
     def time_at(self, path: float) -> int:
         """[ns] the first instant at which the path reaches ``path`` [m] (the last instant if it never does)."""
@@ -331,29 +339,15 @@ class Recording:
         ``duration`` the time since the recording's start.
         """
         t_end = int(t_end_ns)
-        imu = self.imu.slice_time(np.iinfo(np.int64).min, t_end)
-        frames = self.frames.select(self.frames.t <= t_end)
-        trajectory = self.trajectory
-        if trajectory is not None:
-            keep = trajectory.t <= t_end
-            trajectory = Trajectory(
-                trajectory.t[keep], trajectory.T_world_imu[keep], trajectory.v_world[keep], trajectory.omega_imu[keep]
-            )
-        profile = self.path_profile
-        path = self.path_length
-        if profile is not None:
-            path = profile.length_at(t_end)
-            keep = profile.t <= t_end
-            profile = PathProfile(profile.t[keep], profile.length[keep])
-        duration = min(self.duration, (t_end - self.t0) / NS_PER_S)
+        trajectory, profile = self.trajectory, self.path_profile
         return replace(
             self,
-            imu=imu,
-            frames=frames,
-            trajectory=trajectory,
-            path_profile=profile,
-            path_length=path,
-            duration=duration,
+            imu=self.imu.slice_time(np.iinfo(np.int64).min, t_end),
+            frames=self.frames.select(self.frames.t <= t_end),
+            trajectory=None if trajectory is None else trajectory.select(trajectory.t <= t_end),
+            path_profile=None if profile is None else profile.select(profile.t <= t_end),
+            path_length=self.path_length if profile is None else profile.length_at(t_end),
+            duration=min(self.duration, (t_end - self.t0) / NS_PER_S),
         )
 
     def until_path(self, budget_m: float) -> Recording:

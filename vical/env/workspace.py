@@ -136,24 +136,25 @@ def reachable_extent(sim: PandaSim, frame: PoseFrame, axis: int, end: float) -> 
 
 
 def check_workspace(sim: PandaSim, frame: PoseFrame, workspace: Workspace) -> None:
-    """Refuse a workspace whose bound on some axis the arm cannot reach (one line naming key and range).
+    """Refuse a workspace whose bound on some axis the arm cannot reach (one line naming key, why and range).
 
-    Every axis end (one offset at its bound, the others zero) must be reachable; corners of the box
+    Every axis end (one offset at its bound, the others zero) must be reachable: within the arm's
+    reach and free of contact with itself, the board, its stand and the floor. Corners of the box
     may not be (``reachable_fraction`` measures how much of it is).
     """
     for axis, bound in enumerate(workspace.bound):
-        for end in (-bound, bound):
-            reason = unreachable_reason(sim, frame.pose(_axis_offset(axis, end)))
-            if not reason:
-                continue
-            low = reachable_extent(sim, frame, axis, -bound)
-            high = reachable_extent(sim, frame, axis, bound)
-            key = "env.workspace." + ("position" if axis < 3 else "orientation")
-            raise ConfigError(
-                f"{key} ({AXES[axis]}) = {bound:g} {UNITS[axis]}: the arm cannot reach {end:+g} {UNITS[axis]} "
-                f"from the start pose ({reason}); reachable along {AXES[axis]}: [{low:+.3f}, {high:+.3f}] "
-                f"{UNITS[axis]}; reduce the bound or move the start pose (sim.start) and the board"
-            )
+        reasons = {end: unreachable_reason(sim, frame.pose(_axis_offset(axis, end))) for end in (bound, -bound)}
+        failed = [f"{end:+g} {UNITS[axis]} ({why})" for end, why in reasons.items() if why]
+        if not failed:
+            continue
+        low = reachable_extent(sim, frame, axis, -bound)
+        high = reachable_extent(sim, frame, axis, bound)
+        key = "env.workspace." + ("position" if axis < 3 else "orientation")
+        raise ConfigError(
+            f"{key} ({AXES[axis]}) = {bound:g} {UNITS[axis]}: from the start pose the arm cannot reach "
+            f"{' nor '.join(failed)}; reachable along {AXES[axis]}: [{low:+.3f}, {high:+.3f}] {UNITS[axis]}; "
+            "reduce the bound or move the start pose (sim.start) and the board"
+        )
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,7 @@ from abc import ABC, abstractmethod
 
 import numpy as np
 
+from vical.config import ConfigError
 from vical.env.actions import step_to_action
 from vical.env.calibration import CalibrationEnv
 
@@ -51,6 +52,19 @@ class Policy(ABC):
         """The next action (6,) in the env's units, for state ``obs`` (24,)."""
 
 
+def require_frame(env: CalibrationEnv, frame: str, trajectories: str, instead: str) -> None:
+    """Refuse ``env`` unless its workspace's orientations are relative to ``frame`` (``start`` or ``board``).
+
+    ``trajectories`` names what was written for that frame, ``instead`` what to use in the other.
+    """
+    workspace = env.config.workspace
+    if workspace.frame != frame:
+        raise ConfigError(
+            f"{trajectories} are written for a workspace with frame={frame}; workspace {workspace.name!r} "
+            f"has frame={workspace.frame!r}: {instead}"
+        )
+
+
 class WaypointPolicy(Policy):
     """Visits pose offsets ``[x, y, z, roll, pitch, yaw]`` ([m], [rad], from the start pose) in order.
 
@@ -64,9 +78,13 @@ class WaypointPolicy(Policy):
         waypoints: (K, 6) pose offsets.
         name: shown in evaluation tables.
         tolerance: (position [m], angle [rad]) within which a waypoint is reached.
+
+    ``STEPS_PER_WAYPOINT``: a cap on the steps of an episode per waypoint for trajectories whose
+    segments may take several steps (the episode normally ends after the last waypoint).
     """
 
     stop_at_coverage = False
+    STEPS_PER_WAYPOINT = 4
 
     def __init__(self, waypoints: np.ndarray, name: str = "waypoints", tolerance: tuple[float, float] = (2e-3, 2e-3)):
         w = np.asarray(waypoints, dtype=float)

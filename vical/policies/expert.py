@@ -22,13 +22,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from vical.config import ConfigError
 from vical.env.calibration import CalibrationEnv
-from vical.policies.base import WaypointPolicy
+from vical.policies.base import WaypointPolicy, require_frame
 
 TASKS = ("intrinsic", "extrinsic", "joint")
 LENGTHS = ("long", "short")
-NEAR, MIDDLE, FAR = 1.0, 0.0, -1.0
+# Distances as fractions of the workspace's x bound (toward the board). The far end of the practitioner's
+# box is at the edge of the Panda's reach: an arm that got there through other views may miss it by a few
+# cm, so the expert stays a little inside it (SIDE: also for turning there and for views from the side near
+# the board), as an expert who knows the arm would.
+NEAR, MIDDLE, FAR = 1.0, 0.0, -0.8
+SIDE = 0.8
 # Board-centre placements in the image as (right, down) in [-1, 1]: the four corners, then the
 # midpoints of the four edges.
 CORNERS = ((-1, -1), (1, -1), (1, 1), (-1, 1))
@@ -38,9 +42,6 @@ EDGES = ((0, -1), (1, 0), (0, 1), (-1, 0))
 # views are taken at mid range only, as an expert who knows the arm would.
 SIDES = ((1, 0), (-1, 0), (0, 1), (0, -1))
 SIDES_AT = {NEAR: ((1, 0), (-1, 0), (0, -1)), MIDDLE: SIDES, FAR: ((1, 0), (-1, 0), (0, 1))}
-# A step of an expert trajectory heads for its waypoint; big rolls take several steps, so the cap
-# on steps is generous and the trajectory normally ends by running out of waypoints.
-STEPS_PER_WAYPOINT = 4
 
 
 def view(
@@ -64,9 +65,17 @@ def view(
     return np.clip(np.array([closer, left, up, roll, -down, right], dtype=float), -1.0, 1.0)
 
 
-def image_sweep(distance: float, placements: tuple[tuple[int, int], ...], roll: float) -> list[np.ndarray]:
-    """The board centre at each ``placement`` (right, down) at ``distance``, the roll alternating +-``roll``."""
-    return [view(closer=distance, right=r, down=d, roll=roll * (-1) ** i) for i, (r, d) in enumerate(placements)]
+def image_sweep(
+    distance: float, placements: tuple[tuple[int, int], ...], roll: float, reach: float = 1.0
+) -> list[np.ndarray]:
+    """The board centre toward each ``placement`` (right, down) at ``distance``, the roll alternating +-``roll``.
+
+    ``reach`` scales how far toward the image's corners and edges the camera turns (1: the whole bound).
+    """
+    return [
+        view(closer=distance, right=reach * r, down=reach * d, roll=roll * (-1) ** i)
+        for i, (r, d) in enumerate(placements)
+    ]
 
 
 def tilted_views(distance: float, amount: float = 1.0) -> list[np.ndarray]:
@@ -96,18 +105,18 @@ def camera_views(length: str) -> list[np.ndarray]:
         *tilted_views(NEAR),
         *roll_views(NEAR),
         # Seen from the side and off-centre at once: the strongest perspective, near the image corners.
-        *[view(closer=NEAR, left=-r, right=r, down=d) for r, d in CORNERS],
+        *[view(closer=NEAR, left=-SIDE * r, right=r, down=d) for r, d in CORNERS],
         *image_sweep(MIDDLE, CORNERS, roll=0.25),
         *tilted_views(MIDDLE),
         *roll_views(MIDDLE),
-        *image_sweep(FAR, CORNERS, roll=0.25),
+        *image_sweep(FAR, CORNERS, roll=0.25, reach=SIDE),
         *tilted_views(FAR),
     ]
 
 
 # Swing amplitudes per axis [x, y, z, roll, pitch, yaw] (fractions of the bound): +-45 deg of roll
-# excites the gyro as well as +-90 deg and takes half the time.
-SWING = np.array([1.0, 1.0, 1.0, 0.5, 1.0, 1.0])
+# excites the gyro as well as +-90 deg and takes half the time; along x the far end stays inside reach.
+SWING = np.array([-FAR, 1.0, 1.0, 0.5, 1.0, 1.0])
 
 
 def excitation(length: str) -> list[np.ndarray]:
@@ -146,16 +155,12 @@ class ExpertPolicy(WaypointPolicy):
         self.fractions = expert_fractions(task, length)
         super().__init__(self.fractions, name or f"expert ({length})")
         self.task, self.length = task, length
-        self.max_steps = STEPS_PER_WAYPOINT * len(self.fractions)
+        self.max_steps = self.STEPS_PER_WAYPOINT * len(self.fractions)  # big rolls take a few steps
 
     def check(self, env: CalibrationEnv) -> None:
-        workspace = env.config.workspace
-        if workspace.frame != "board":
-            raise ConfigError(
-                f"the expert trajectories are written for a workspace whose orientations follow the line of sight "
-                f"to the board (frame=board, workspace=practitioner); workspace {workspace.name!r} has "
-                f"frame={workspace.frame!r}: use the hand-crafted trajectories there"
-            )
+        require_frame(
+            env, "board", "the expert trajectories (workspace=practitioner)", "use the hand-crafted trajectories there"
+        )
 
     def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
         self.waypoints = self.fractions * env.config.workspace.bound

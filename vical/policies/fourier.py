@@ -116,9 +116,9 @@ class FourierTrajectoryPolicy(WaypointPolicy):
         self.trajectory = trajectory
         self.num_waypoints = int(num_waypoints)
         self.redraw = redraw
-        # Every segment fits in one action (workspace width < action scale), so one step per waypoint;
-        # the margin covers waypoints the arm cannot reach exactly.
-        self.max_steps = self.num_waypoints + 5
+        # In the authors' box every segment fits in one action; in a larger workspace a segment can take a few
+        # steps. The cap only guards the loop: the episode ends after the last waypoint.
+        self.max_steps = self.STEPS_PER_WAYPOINT * self.num_waypoints
 
     def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
         if self.redraw:

@@ -23,10 +23,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from vical.config import ConfigError
 from vical.env.calibration import CalibrationEnv
 from vical.env.config import Workspace
-from vical.policies.base import WaypointPolicy
+from vical.policies.base import WaypointPolicy, require_frame
 
 TASKS = ("intrinsic", "extrinsic")
 LENGTHS = ("long", "short")
@@ -141,12 +140,9 @@ class HandcraftedPolicy(WaypointPolicy):
         self.max_steps = 2 * len(self.waypoints)
 
     def check(self, env: CalibrationEnv) -> None:
-        workspace = env.config.workspace
-        if workspace.frame != "start":
-            raise ConfigError(
-                f"the hand-crafted trajectories are written for the authors' box (frame=start, workspace=paper); "
-                f"workspace {workspace.name!r} has frame={workspace.frame!r}: use the expert trajectories there"
-            )
+        require_frame(
+            env, "start", "the hand-crafted trajectories (the authors' box, workspace=paper)", "use the expert ones"
+        )
 
     def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
         self.waypoints = handcrafted_waypoints(self.task, self.length, env.config.workspace)

@@ -121,14 +121,17 @@ class PandaSim:
 
         Pairs named in ``ignore`` (as returned here) do not count.
         """
-        return next(iter(self._contact_pairs(q) - ignore), "")
+        return next((pair for pair in self._contact_pairs(q) if pair not in ignore), "")
 
-    def _contact_pairs(self, q: np.ndarray) -> set[str]:
+    def _contact_pairs(self, q: np.ndarray) -> list[str]:
+        """The touching geom pairs at ``q`` in MuJoCo's contact order (deterministic)."""
         m, d = self.model, self._scratch
         d.qpos[:NUM_JOINTS] = q
         mujoco.mj_kinematics(m, d)
         mujoco.mj_collision(m, d)
-        return {f"{_geom_label(m, c.geom1)} and {_geom_label(m, c.geom2)}" for c in d.contact[: d.ncon]}
+        return list(
+            dict.fromkeys(f"{_geom_label(m, c.geom1)} and {_geom_label(m, c.geom2)}" for c in d.contact[: d.ncon])
+        )
 
     # ------------------------------------------------------------------ state
     def reset(self, seed: int | None = None) -> None:
