@@ -253,13 +253,13 @@ def evaluate(cfg: DictConfig, chosen: str | None) -> tuple[Path, list[Summary], 
     return out, summaries, effort
 
 
-def yardstick_fingerprint(task: str) -> dict[str, str]:
-    """The fingerprint of ``+experiment=yardstick_<task>`` as vical-evaluate composes it (vical.policies.yardstick)."""
+def yardstick_config(task: str) -> dict[str, Any]:
+    """What ``fingerprint`` hashes of ``+experiment=yardstick_<task>``, as vical-evaluate composes it."""
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose(config_name="evaluate", overrides=[f"+experiment=yardstick_{task}"])
     chosen = "learned"  # the experiment's `policy` choice (for a learned policy added on the command line)
     names = list(cfg.policies)
-    resolved = {
+    return {
         "policy_configs": dict(zip(names, policy_configs(cfg, chosen), strict=True)),
         "env": OmegaConf.to_container(cfg.env, resolve=True),
         **{
@@ -267,7 +267,11 @@ def yardstick_fingerprint(task: str) -> dict[str, str]:
             for key in PROTOCOL_KEYS
         },
     }
-    return fingerprint(resolved)
+
+
+def yardstick_fingerprint(task: str) -> dict[str, str]:
+    """The fingerprint of ``+experiment=yardstick_<task>`` (vical.policies.yardstick)."""
+    return fingerprint(yardstick_config(task))
 
 
 @hydra.main(config_path=str(CONF_DIR), config_name="evaluate", version_base="1.3")

@@ -4,8 +4,11 @@ The yardstick (``conf/experiment/yardstick_*.yaml``, docs/results.md) is frozen 
 tuned against it: a later change of a baseline must be visible. ``fingerprint`` hashes, from the
 composed evaluation config, (1) every baseline's resolved config and the motion it generates (the
 expert's waypoints, the fitted loop's coefficients, the random loop and random actions drawn from a
-fixed seed), (2) the environment (workspace, board, start pose, sensor distributions, task, MDP) and
-(3) the protocol (sensors, budgets, reference). docs/results.md records the hashes;
+fixed seed), (2) the environment the baselines run in (workspace, board, start pose, simulator,
+sensor distributions, task, step limits, coverage thresholds) and (3) the protocol (sensors,
+budgets, reference). The environment's reward and its own calibration switches are left out: no
+baseline reads the reward, and the evaluation sets the switches itself, so a new reward for a
+learned policy leaves the yardstick as it is. docs/results.md records the hashes;
 ``tests/test_yardstick.py`` recomputes them.
 """
 
@@ -26,6 +29,9 @@ from vical.policies.random_policy import RandomMovingPolicy
 
 PROTOCOL_KEYS = ("episodes", "seed", "budgets", "reference", "paper_protocol", "policies")
 DRAW_SEED = 0  # the seed of the random loop and actions whose values enter the fingerprint
+# Env keys that cannot change a baseline's episode: the reward (no baseline reads it) and the env's own
+# calibration and termination switches (vical.policies.evaluation.build_env sets them per policy).
+NOT_EPISODE_KEYS = ("reward", "calibrate_on_termination", "calibrate_on_truncation", "terminate_on_coverage")
 
 
 def _digest(value: Any) -> str:
@@ -76,7 +82,7 @@ def fingerprint(cfg: Mapping[str, Any]) -> dict[str, str]:
         per_policy[name] = _digest({"config": config, "motion": motions})
     parts = {
         "baselines": _digest(per_policy),
-        "environment": _digest(cfg["env"]),
+        "environment": _digest({k: v for k, v in cfg["env"].items() if k not in NOT_EPISODE_KEYS}),
         "protocol": _digest({key: cfg[key] for key in PROTOCOL_KEYS}),
     }
     return {**parts, **per_policy, "yardstick": _digest(parts)}
