@@ -109,6 +109,46 @@ def test_unproject_inverts_project(points_cam, distortion):
     assert np.abs(rays[:, :2] - points_cam[:, :2] / points_cam[:, 2:]).max() < 1e-11
 
 
+JACOBIAN_CAMERAS = {
+    "radtan": CameraModel.from_hfov(1.0, dist=[0.03, -0.02, 0.001, -0.0008]),
+    "equidistant": CameraModel.from_hfov(1.2, dist=[0.01, -0.005, 0.002, -0.001], distortion="equidistant"),
+}
+
+
+def _numeric_jacobian(f, x0: np.ndarray, step: float) -> np.ndarray:
+    """Central differences of f: (D,) -> (N, 2) at x0, as (N, 2, D)."""
+    columns = []
+    for d in range(len(x0)):
+        dx = np.zeros_like(x0)
+        dx[d] = step
+        columns.append((f(x0 + dx) - f(x0 - dx)) / (2 * step))
+    return np.stack(columns, axis=2)
+
+
+@pytest.mark.parametrize("distortion", ["radtan", "equidistant"])
+def test_projection_jacobians_match_central_differences(points_cam, distortion):
+    cam = JACOBIAN_CAMERAS[distortion]
+    points = np.vstack([points_cam, [[0.0, 0.0, 1.5], [1e-8, -2e-8, 1.2]]])  # on and next to the optical axis
+    uv, d_point, d_params = cam.project_jacobians(points)
+    assert np.abs(uv - cam.project(points)[0]).max() < 1e-9
+    numeric_params = _numeric_jacobian(lambda q: cam.with_parameters(q).project(points)[0], cam.parameters, 1e-7)
+    # Central differences on ~500 px values round off at ~1e-6 px per unit of the parameter.
+    assert np.allclose(d_params, numeric_params, rtol=1e-6, atol=1e-5)
+    for n in (0, 57, len(points) - 2, len(points) - 1):
+        numeric = _numeric_jacobian(lambda p, n=n: cam.project(p[None])[0], points[n], 1e-7)[0]
+        assert np.abs(d_point[n] - numeric).max() < 1e-5 * np.abs(numeric).max()
+
+
+def test_projection_jacobians_match_opencv(points_cam):
+    # cv2.projectPoints' Jacobian columns: rvec (3), tvec (3), fx, fy, cx, cy, k1, k2, p1, p2, k3.
+    cam = JACOBIAN_CAMERAS["radtan"]
+    _, d_point, d_params = cam.project_jacobians(points_cam)
+    _, J = cv2.projectPoints(points_cam, np.zeros(3), np.zeros(3), cam.K, np.r_[cam.dist, 0.0])
+    J = J.reshape(-1, 2, J.shape[1])
+    assert np.abs(d_params - J[:, :, 6:14]).max() < 1e-8 * np.abs(J[:, :, 6:14]).max()
+    assert np.abs(d_point - J[:, :, 3:6]).max() < 1e-8 * np.abs(J[:, :, 3:6]).max()  # d/d tvec = d/d point
+
+
 def test_from_hfov_focal_and_centre():
     cam = CameraModel.from_hfov(1.0, 640, 480)
     assert cam.fx == pytest.approx(320.0 / np.tan(0.5))

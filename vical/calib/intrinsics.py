@@ -1,9 +1,10 @@
 """Intrinsic calibration (pinhole + radtan or equidistant) from target observations.
 
-Graph: one ``Pose3`` per frame (the camera pose in the target frame, ``T_target_cam``), one
-calibration (``Cal3DS2`` / ``Cal3Fisheye``, skew pinned to zero) and the target points pinned by
-tight priors; one ``GeneralSFMFactor2`` per corner. Initialisation: Zhang's focal lengths from
-plane homographies (principal point at the image centre, no distortion), then PnP per frame.
+Graph: one ``Pose3`` per frame (the camera pose in the target frame, ``T_target_cam``), the camera
+parameters ``[fx, fy, cx, cy, d1..d4]`` (a ``Vector8``, no skew, as Kalibr's pinhole) and one corner
+factor per frame (``vical.calib.corner_factors``: the target points are constants). Initialisation:
+Zhang's focal lengths from plane homographies (principal point at the image centre, no
+distortion), then PnP per frame.
 """
 
 from __future__ import annotations
@@ -14,9 +15,8 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
+from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError
-from vical.calib.gtsam_camera import MODEL_INDEX, kind_of, pixel_noise, skew_prior, to_gtsam
-from vical.calib.gtsam_camera import from_gtsam as camera_from_gtsam
 from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera
 from vical.calib.observations import FrameObservation, collect_observations, image_size
 from vical.calib.outliers import reject_outliers
@@ -26,18 +26,15 @@ from vical.calib.uncertainty import weak_parameters
 from vical.data import CameraFrames, Target
 from vical.geometry import CameraModel, invert_transform
 
-LANDMARK_SIGMA = 1e-6  # [m] target points are known; a prior (not a constraint) keeps Marginals well posed
 MIN_VIEWS = 3  # intrinsics with a free principal point need three views of a plane (Zhang)
+MODELS = ("radtan", "equidistant")
+CAMERA_PARAMETERS = 8  # fx, fy, cx, cy, four distortion coefficients
 
 K_KEY = gtsam.symbol("k", 0)
 
 
 def pose_key(k: int) -> int:
     return gtsam.symbol("x", k)
-
-
-def landmark_key(i: int) -> int:
-    return gtsam.symbol("l", i)
 
 
 def distortion_names(model: str) -> list[str]:
@@ -49,36 +46,26 @@ def intrinsic_names(model: str) -> list[str]:
     return ["fx", "fy", "cx", "cy", *distortion_names(model)]
 
 
-def add_landmarks(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, target: Target) -> None:
-    """Target points as variables pinned by priors of ``LANDMARK_SIGMA``."""
-    noise = gtsam.noiseModel.Isotropic.Sigma(3, LANDMARK_SIGMA)
-    for i, p in enumerate(target.points):
-        graph.add(gtsam.PriorFactorPoint3(landmark_key(i), p, noise))
-        values.insert(landmark_key(i), p)
+def check_model(model: str) -> None:
+    if model not in MODELS:
+        raise CalibrationError(f"camera model {model!r} is not supported; use one of {sorted(MODELS)}")
 
 
 def _build_graph(
     camera: CameraModel,
     observations: list[FrameObservation],
     poses: dict[int, np.ndarray],
-    target: Target,
     sigma_px: float,
     huber_k: float | None,
 ) -> tuple[gtsam.NonlinearFactorGraph, gtsam.Values]:
-    kind = kind_of(camera.distortion)
+    keys = CornerKeys(poses=[pose_key(k) for k in poses], camera=K_KEY)
+    corners = CornerFactors([observations[k] for k in poses], camera, keys, sigma_px, huber_k)
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-    add_landmarks(graph, values, target)
-    calibration = to_gtsam(camera)
-    values.insert(K_KEY, calibration)
-    graph.add(skew_prior(K_KEY, calibration))
-    noise = pixel_noise(sigma_px, huber_k)
-    landmark_keys = [landmark_key(i) for i in range(target.num_points)]
+    for factor in corners.factors():
+        graph.add(factor)
+    values.insert(K_KEY, camera.parameters)
     for k, T_cam_target in poses.items():
-        key = pose_key(k)
-        values.insert(key, gtsam.Pose3(invert_transform(T_cam_target)))
-        obs = observations[k]
-        for uv, i in zip(obs.uv, obs.ids.tolist(), strict=True):
-            graph.add(kind.sfm_factor(uv, noise, key, landmark_keys[i], K_KEY))
+        values.insert(pose_key(k), gtsam.Pose3(invert_transform(T_cam_target)))
     return graph, values
 
 
@@ -86,27 +73,20 @@ def _build_graph(
 class _Solve:
     """One intrinsic solve over fixed observations: ``solve(camera0, poses)`` from a starting point.
 
-    Returns the calibrated camera, ``{observation index: T_cam_target}``, the graph, the solution
-    and the elimination ordering (the latter three for the covariance).
+    Returns the calibrated camera, ``{observation index: T_cam_target}``, the graph and the solution.
     """
 
     observations: list[FrameObservation]
-    target: Target
     sigma_px: float
     huber_k: float | None
     max_iterations: int
 
     def __call__(self, camera0: CameraModel, poses: dict[int, np.ndarray]):
-        graph, values = _build_graph(camera0, self.observations, poses, self.target, self.sigma_px, self.huber_k)
-        # Frame poses first, then the shared variables: COLAMD would eliminate the target points early
-        # and make every pose pair dense.
-        ordering = [pose_key(k) for k in poses] + [landmark_key(i) for i in range(self.target.num_points)] + [K_KEY]
-        solution = optimize(graph, values, self.max_iterations, "intrinsic calibration", ordering)
-        radtan = camera0.distortion == "radtan"
-        calibration = solution.values.atCal3DS2(K_KEY) if radtan else solution.values.atCal3Fisheye(K_KEY)
-        camera = camera_from_gtsam(calibration, camera0)
+        graph, values = _build_graph(camera0, self.observations, poses, self.sigma_px, self.huber_k)
+        solution = optimize(graph, values, self.max_iterations, "intrinsic calibration")
+        camera = camera0.with_parameters(solution.values.atVector(K_KEY))
         T_cam_target = {k: invert_transform(solution.values.atPose3(pose_key(k)).matrix()) for k in poses}
-        return camera, T_cam_target, graph, solution, ordering
+        return camera, T_cam_target, graph, solution
 
 
 def reprojection_residuals(
@@ -152,7 +132,7 @@ def calibrate_intrinsics(
         max_iterations: Levenberg-Marquardt iterations.
     """
     start = time.perf_counter()
-    kind_of(model)
+    check_model(model)
     observations = collect_observations(frames, target)
     if image_size_px is None and initial_camera_guess is not None:
         image_size_px = (initial_camera_guess.width, initial_camera_guess.height)
@@ -168,18 +148,18 @@ def calibrate_intrinsics(
             f"(of {len(frames)} frames); collect more views of the whole target"
         )
     sigma_graph = 1.0 if pixel_sigma is None else float(pixel_sigma)
-    solve = _Solve(observations, target, sigma_graph, huber_k, max_iterations)
-    camera, T_cam_target, graph, solution, ordering = solve(camera0, {k: T for k, (T, _) in poses.items()})
+    solve = _Solve(observations, sigma_graph, huber_k, max_iterations)
+    camera, T_cam_target, graph, solution = solve(camera0, {k: T for k, (T, _) in poses.items()})
     # Wrong detections pull the least-squares fit: drop them and solve again from this solution.
     rejection = reject_outliers(camera, observations, T_cam_target, min(MIN_INIT_CORNERS, target.num_points))
     if rejection.changed:
         solve.observations = observations = rejection.observations
-        camera, T_cam_target, graph, solution, ordering = solve(camera, rejection.poses)
+        camera, T_cam_target, graph, solution = solve(camera, rejection.poses)
     poses = T_cam_target
     residuals, frame_index = reprojection_residuals(camera, observations, T_cam_target)
-    covariance = joint_covariance(graph, solution.values, [K_KEY], ordering)[np.ix_(MODEL_INDEX, MODEL_INDEX)]
+    covariance = joint_covariance(graph, solution.values, [K_KEY])
     if pixel_sigma is None:
-        sigma_px = estimated_pixel_sigma(residuals, 6 * len(poses) + len(MODEL_INDEX))
+        sigma_px = estimated_pixel_sigma(residuals, 6 * len(poses) + CAMERA_PARAMETERS)
         covariance = covariance * (sigma_px / sigma_graph) ** 2
     else:
         sigma_px = float(pixel_sigma)

@@ -72,8 +72,9 @@ def joint_covariance(
     """Joint marginal covariance (in the keys' tangent spaces, in order) of the graph linearised at ``values``.
 
     The graph is eliminated with the requested keys last (COLAMD constrained last, or the given
-    ``ordering`` that must end with them), so their joint marginal is the inverse information of
-    the Bayes tree's root clique: several times cheaper than ``gtsam.Marginals``.
+    ``ordering`` that must end with them), so their joint marginal is usually the inverse information
+    of the Bayes tree's root clique: several times cheaper than ``gtsam.Marginals``, which is the
+    fallback when the elimination split the keys over several cliques.
     """
     try:
         linear = graph.linearize(values)
@@ -82,9 +83,9 @@ def joint_covariance(
         else:
             order = _ordering(ordering)
         roots = [r.conditional() for r in linear.eliminateMultifrontal(order).roots()]
-        holding = [c for c in roots if keys[-1] in set(c.keys())]
-        if not holding:
-            raise CalibrationError("internal: the requested keys are not in a root clique")
+        holding = [c for c in roots if set(keys) <= set(c.keys())]
+        if not holding:  # the elimination left them in separate cliques: the general (slower) way
+            return gtsam.Marginals(linear, values).jointMarginalCovariance(keys).fullMatrix()
         return _root_covariance(holding[0], values, keys)
     except (RuntimeError, np.linalg.LinAlgError) as exc:
         raise CalibrationError(

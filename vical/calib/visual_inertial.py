@@ -3,14 +3,14 @@
 Layout (navigation frame = target frame, so no gauge prior is needed):
 
 - per used frame ``i``: IMU state ``X_i`` (``Pose3`` ``T_target_imu`` at IMU time
-  ``t_cam_i + tau0``), velocity ``V_i`` [m/s] (target frame), bias ``B_i``; the IMU pose at the
-  exposure instant ``P_i``, tied to ``X_i`` by the time-offset factor;
+  ``t_cam_i + tau0``), velocity ``V_i`` [m/s] (target frame), bias ``B_i``;
 - shared: ``E`` = ``T_imu_cam`` (``Pose3``), gravity direction ``G`` (``Unit3``, target frame),
-  time-offset correction ``D`` [s] (``tau = tau0 + D``), and in the joint task the calibration ``K``;
-- target points pinned by priors;
-- factors: ``ProjectionFactorPPP(C)`` per corner on ``(P_i, E, point[, K])``,
-  ``CombinedImuFactorWithGravityDirection`` between consecutive states (rotation-compensated
-  midpoint preintegration), one time-offset factor per frame, a weak prior on the first bias.
+  time-offset correction ``D`` [s] (``tau = tau0 + D``), and in the joint task the camera
+  parameters ``K`` (``Vector8``);
+- factors: one corner factor per frame on ``(X_i, V_i, E, D[, K])``, which projects the known
+  target points from the pose at the exposure instant ``X_i Exp([omega_i; R_i^T V_i] D) E``
+  (``vical.calib.corner_factors``), ``CombinedImuFactorWithGravityDirection`` between consecutive
+  states (rotation-compensated midpoint preintegration), a weak prior on the first bias.
 
 Initialisation: PnP poses with the (known or intrinsically calibrated) camera; time offset,
 ``R_cam_imu`` and gyro bias in closed form (``time_alignment``); translation from the guess;
@@ -25,19 +25,17 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
+from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError
-from vical.calib.gtsam_camera import MODEL_INDEX, kind_of, pixel_noise, skew_prior, to_gtsam
-from vical.calib.gtsam_camera import from_gtsam as camera_from_gtsam
 from vical.calib.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
 from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses
-from vical.calib.intrinsics import add_landmarks, estimated_pixel_sigma, intrinsic_names, landmark_key
+from vical.calib.intrinsics import check_model, estimated_pixel_sigma, intrinsic_names
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.observations import FrameObservation
 from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats
 from vical.calib.solver import joint_covariance, optimize
 from vical.calib.time_alignment import align, rotation_increments
-from vical.calib.time_offset_factor import time_offset_factor
 from vical.calib.uncertainty import weak_parameters
 from vical.data import ImuNoise, ImuSamples, Target, seconds_since
 from vical.geometry import CameraModel, invert_transform, make_transform, skew
@@ -204,6 +202,7 @@ class _Graph:
     states: list[int]  # indices into problem.frame_ids of the frames that got a state
     imu_factors: list  # (i, factor, dt) per IMU factor
     state_times: np.ndarray  # (S,) [s] IMU clock
+    corners: CornerFactors
 
 
 def _states_inside_imu(problem: _Problem, tau0: float) -> list[int]:
@@ -225,7 +224,6 @@ def _insert_states(values: gtsam.Values, problem: _Problem, states: list[int], e
     bias = gtsam.imuBias.ConstantBias(est.accel_bias, est.gyro_bias)
     for n, T in enumerate(T_imu):
         values.insert(_key("x", n), gtsam.Pose3(T))
-        values.insert(_key("p", n), gtsam.Pose3(T))
         values.insert(_key("v", n), vel[n])
         values.insert(_key("b", n), bias)
     f = interpolate(problem.t_imu, problem.accel, times)
@@ -252,61 +250,46 @@ def _add_imu_factors(graph: gtsam.NonlinearFactorGraph, problem: _Problem, times
     return factors
 
 
-def _add_projection_factors(graph, problem: _Problem, states: list[int], joint: bool) -> None:
-    kind = kind_of(problem.camera.distortion)
-    noise = pixel_noise(problem.sigma_px, problem.options.huber_k)
-    calibration = to_gtsam(problem.camera)
-    for n, k in enumerate(states):
-        obs = problem.observations[problem.frame_ids[k]]
-        for uv, i in zip(obs.uv, obs.ids, strict=True):
-            if joint:
-                graph.add(kind.pppc_factor(uv, noise, _key("p", n), E_KEY, landmark_key(int(i)), K_KEY))
-            else:
-                graph.add(kind.ppp_factor(uv, noise, _key("p", n), E_KEY, landmark_key(int(i)), calibration))
-
-
-def _add_time_offset_factors(graph, problem: _Problem, times: np.ndarray, est: _Estimate) -> None:
-    omega = interpolate(problem.t_imu, problem.gyro, times) - est.gyro_bias
-    exact = gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)  # [rad, m] exposure pose = state pose when tau is fixed
-    for n in range(len(times)):
-        if problem.options.estimate_time_offset:
-            graph.add(time_offset_factor(_key("p", n), _key("x", n), _key("v", n), D_KEY, omega[n]))
-        else:
-            graph.add(gtsam.BetweenFactorPose3(_key("x", n), _key("p", n), gtsam.Pose3(), exact))
+def _corner_factors(problem: _Problem, states: list[int], times: np.ndarray, est: _Estimate, joint: bool):
+    """The corner factors of the states' frames (``vical.calib.corner_factors``)."""
+    with_offset = problem.options.estimate_time_offset
+    keys = CornerKeys(
+        poses=[_key("x", n) for n in range(len(states))],
+        velocities=[_key("v", n) for n in range(len(states))] if with_offset else None,
+        omegas=interpolate(problem.t_imu, problem.gyro, times) - est.gyro_bias if with_offset else None,
+        extrinsic=E_KEY,
+        delta=D_KEY if with_offset else None,
+        camera=K_KEY if joint else None,
+    )
+    observations = [problem.observations[problem.frame_ids[k]] for k in states]
+    return CornerFactors(observations, problem.camera, keys, problem.sigma_px, problem.options.huber_k)
 
 
 def _build(problem: _Problem, est: _Estimate, joint: bool) -> _Graph:
     states = _states_inside_imu(problem, est.tau0)
     graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-    add_landmarks(graph, values, problem.target)
     values.insert(E_KEY, gtsam.Pose3(invert_transform(est.T_cam_imu)))
-    values.insert(D_KEY, np.zeros(1))
-    if not problem.options.estimate_time_offset:
-        graph.add(gtsam.PriorFactorVector(D_KEY, np.zeros(1), gtsam.noiseModel.Isotropic.Sigma(1, 1e-9)))
+    if problem.options.estimate_time_offset:
+        values.insert(D_KEY, np.zeros(1))
     if joint:
-        calibration = to_gtsam(problem.camera)
-        values.insert(K_KEY, calibration)
-        graph.add(skew_prior(K_KEY, calibration))
+        values.insert(K_KEY, problem.camera.parameters)
     times = _insert_states(values, problem, states, est)
     imu_factors = _add_imu_factors(graph, problem, times, est)
-    _add_projection_factors(graph, problem, states, joint)
-    _add_time_offset_factors(graph, problem, times, est)
-    return _Graph(graph, values, states, imu_factors, times)
+    corners = _corner_factors(problem, states, times, est, joint)
+    for factor in corners.factors():
+        graph.add(factor)
+    return _Graph(graph, values, states, imu_factors, times, corners)
 
 
 # ---------------------------------------------------------------------------------------- solve
 def _camera_of(values: gtsam.Values, problem: _Problem, joint: bool) -> CameraModel:
-    if not joint:
-        return problem.camera
-    radtan = problem.camera.distortion == "radtan"
-    calibration = values.atCal3DS2(K_KEY) if radtan else values.atCal3Fisheye(K_KEY)
-    return camera_from_gtsam(calibration, problem.camera)
+    return problem.camera.with_parameters(values.atVector(K_KEY)) if joint else problem.camera
 
 
 def _estimate_of(values: gtsam.Values, est: _Estimate) -> _Estimate:
     bias = values.atConstantBias(_key("b", 0))
     T_cam_imu = invert_transform(values.atPose3(E_KEY).matrix())
-    tau = est.tau0 + float(values.atVector(D_KEY)[0])
+    tau = est.tau0 + (float(values.atVector(D_KEY)[0]) if values.exists(D_KEY) else 0.0)
     return _Estimate(T_cam_imu, tau, np.asarray(bias.gyroscope()), np.asarray(bias.accelerometer()))
 
 
@@ -317,8 +300,8 @@ def _solve_rounds(problem: _Problem, est: _Estimate, joint: bool):
         g = _build(problem, est, joint)
         solution = optimize(g.graph, g.values, problem.options.max_iterations, "camera-IMU calibration")
         iterations += solution.iterations
-        correction = float(solution.values.atVector(D_KEY)[0])
         new = _estimate_of(solution.values, est)
+        correction = new.tau0 - est.tau0
         problem.camera = _camera_of(solution.values, problem, joint)
         if not problem.options.estimate_time_offset or abs(correction) < RECENTRE_OFFSET:
             return g, solution, new, iterations
@@ -370,7 +353,7 @@ def _parameter_covariance(g: _Graph, values: gtsam.Values, est: _Estimate, joint
     keys = ([K_KEY] if joint else []) + [E_KEY, *offset_keys, _key("b", 0)]
     cov = joint_covariance(g.graph, values, keys)
     offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
-    blocks = ([np.eye(9)[MODEL_INDEX]] if joint else []) + [_extrinsic_jacobian(est.T_cam_imu), offset_block, np.eye(6)]
+    blocks = ([np.eye(8)] if joint else []) + [_extrinsic_jacobian(est.T_cam_imu), offset_block, np.eye(6)]
     J = np.zeros((sum(b.shape[0] for b in blocks), cov.shape[0]))
     r = c = 0
     for b in blocks:
@@ -379,15 +362,10 @@ def _parameter_covariance(g: _Graph, values: gtsam.Values, est: _Estimate, joint
     return J @ cov @ J.T
 
 
-def _reprojection(problem: _Problem, g: _Graph, values: gtsam.Values, camera: CameraModel):
-    T_imu_cam = values.atPose3(E_KEY).matrix()
-    res, frame = [], []
-    for n, k in enumerate(g.states):
-        obs = problem.observations[problem.frame_ids[k]]
-        T_cam_target = invert_transform(values.atPose3(_key("p", n)).matrix() @ T_imu_cam)
-        res.append(obs.residuals(camera, T_cam_target))
-        frame.append(np.full(len(obs.ids), obs.index))
-    return np.concatenate(res), np.concatenate(frame)
+def _reprojection(problem: _Problem, g: _Graph, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
+    """Corner residuals (N, 2) [px] and the recording frame index (N,) of each corner."""
+    frames = np.array([problem.observations[problem.frame_ids[k]].index for k in g.states])
+    return g.corners.residuals(values), frames[g.corners.frame_of]
 
 
 def _imu_residuals(g: _Graph, values: gtsam.Values, gravity_magnitude: float) -> ImuResiduals:
@@ -421,7 +399,7 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
         ([camera.intrinsics, camera.dist] if joint else [])
         + [np.zeros(3), est.T_cam_imu[:3, 3], [est.tau0], est.accel_bias, est.gyro_bias]
     )
-    residuals, frame_index = _reprojection(problem, g, values, camera)
+    residuals, frame_index = _reprojection(problem, g, values)
     gravity = np.asarray(values.atUnit3(G_KEY).point3()) * problem.options.gravity_magnitude
     return CalibrationResult(
         task=task,
@@ -461,6 +439,9 @@ def run_visual_inertial(
     start: float,
 ) -> CalibrationResult:
     """Shared pipeline of the extrinsic (``task="extrinsic"``) and joint (``task="joint"``) solves."""
+    check_model(camera.distortion)
+    if camera.distortion_center_offset.any():
+        raise CalibrationError("the calibrator's camera models have the distortion centre at the principal point")
     T_guess = nominal_T_cam_imu() if initial_T_cam_imu is None else np.asarray(initial_T_cam_imu, float)
     if T_guess.shape != (4, 4):
         raise CalibrationError(f"initial_T_cam_imu must be a 4 x 4 transform, got shape {T_guess.shape}")

@@ -205,6 +205,48 @@ class CameraModel:
         z = np.where(in_front, p[:, 2], 1.0)
         return self.normalized_to_pixels(self.distort(p[:, :2] / z[:, None])), in_front
 
+    @property
+    def parameters(self) -> np.ndarray:
+        """(8,) ``[fx, fy, cx, cy, d1, d2, d3, d4]``: the calibrated parameters, in ``project_jacobians`` order."""
+        return np.concatenate([self.intrinsics, self.dist])
+
+    def with_parameters(self, parameters: np.ndarray) -> CameraModel:
+        """Same model and image size with the parameters ``[fx, fy, cx, cy, d1, d2, d3, d4]`` (8,)."""
+        p = np.asarray(parameters, dtype=float)
+        return self.with_intrinsics(p[0], p[1], p[2], p[3], p[4:8])
+
+    def project_jacobians(self, p_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Pixels of camera-frame points and their analytic derivatives.
+
+        Args:
+            p_cam: (N, 3) [m] points in front of the camera (z > 0).
+
+        Returns:
+            uv (N, 2) [px]; ``d uv / d p_cam`` (N, 2, 3) [px/m]; ``d uv / d parameters`` (N, 2, 8) in the
+            order of ``parameters``.
+        """
+        if self.distortion_center_offset.any():
+            raise CameraModelError("projection Jacobians need the distortion centre at the principal point")
+        p = np.atleast_2d(np.asarray(p_cam, dtype=float))
+        inv_z = 1.0 / p[:, 2]
+        x, y = p[:, 0] * inv_z, p[:, 1] * inv_z
+        jacobian = _radtan_jacobian if self.distortion == "radtan" else _equidistant_jacobian
+        xd, yd, d_xy, d_dist = jacobian(x, y, self.dist)
+        n = len(p)
+        uv = np.stack([self.fx * xd + self.cx, self.fy * yd + self.cy], axis=1)
+        d_params = np.zeros((n, 2, 8))
+        d_params[:, 0, 0], d_params[:, 1, 1] = xd, yd
+        d_params[:, 0, 2], d_params[:, 1, 3] = 1.0, 1.0
+        d_params[:, 0, 4:] = self.fx * d_dist[:, 0]
+        d_params[:, 1, 4:] = self.fy * d_dist[:, 1]
+        # d(xd, yd)/d(x, y) scaled to pixels, then through x = X / Z, y = Y / Z.
+        d_norm = d_xy * np.array([self.fx, self.fy])[None, :, None]
+        d_point = np.empty((n, 2, 3))
+        d_point[:, :, 0] = d_norm[:, :, 0] * inv_z[:, None]
+        d_point[:, :, 1] = d_norm[:, :, 1] * inv_z[:, None]
+        d_point[:, :, 2] = -(d_norm[:, :, 0] * x[:, None] + d_norm[:, :, 1] * y[:, None]) * inv_z[:, None]
+        return uv, d_point, d_params
+
     def unproject(self, uv: np.ndarray) -> np.ndarray:
         """Unit-depth rays (N, 3) (``[x, y, 1]``) of pixels (N, 2)."""
         xy = self.undistort(self.pixels_to_normalized(uv))
@@ -277,3 +319,53 @@ def _equidistant(x: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
     # theta_d / r -> 1 as r -> 0 (theta ~ r).
     scale = np.where(r > 1e-12, theta_d / np.where(r > 1e-12, r, 1.0), 1.0)
     return x * scale[:, None]
+
+
+def _radtan_jacobian(x: np.ndarray, y: np.ndarray, coeffs: np.ndarray):
+    """Distorted ``xd, yd`` (N,), ``d(xd, yd)/d(x, y)`` (N, 2, 2) and ``d(xd, yd)/d[k1, k2, p1, p2]`` (N, 2, 4)."""
+    k1, k2, p1, p2 = coeffs.tolist()
+    xx, yy, xy = x * x, y * y, x * y
+    r2 = xx + yy
+    radial = 1.0 + r2 * (k1 + k2 * r2)
+    xd = x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * xx)
+    yd = y * radial + p1 * (r2 + 2.0 * yy) + 2.0 * p2 * xy
+    d_radial = k1 + 2.0 * k2 * r2  # d radial / d r2
+    cross = 2.0 * xy * d_radial + 2.0 * p1 * x + 2.0 * p2 * y
+    d_xy = np.empty((len(x), 2, 2))
+    d_xy[:, 0, 0] = radial + 2.0 * xx * d_radial + 2.0 * p1 * y + 6.0 * p2 * x
+    d_xy[:, 0, 1] = cross
+    d_xy[:, 1, 0] = cross
+    d_xy[:, 1, 1] = radial + 2.0 * yy * d_radial + 6.0 * p1 * y + 2.0 * p2 * x
+    d_dist = np.empty((len(x), 2, 4))
+    d_dist[:, 0, 0], d_dist[:, 1, 0] = x * r2, y * r2
+    d_dist[:, 0, 1], d_dist[:, 1, 1] = x * r2 * r2, y * r2 * r2
+    d_dist[:, 0, 2], d_dist[:, 1, 2] = 2.0 * xy, r2 + 2.0 * yy
+    d_dist[:, 0, 3], d_dist[:, 1, 3] = r2 + 2.0 * xx, 2.0 * xy
+    return xd, yd, d_xy, d_dist
+
+
+_SMALL_RADIUS = 1e-6  # below this the equidistant scale theta_d / r is taken from its series
+
+
+def _equidistant_jacobian(x: np.ndarray, y: np.ndarray, coeffs: np.ndarray):
+    """As ``_radtan_jacobian`` for ``[k1, k2, k3, k4]``: ``(xd, yd) = theta_d(atan r) / r * (x, y)``."""
+    k1, k2, k3, k4 = coeffs.tolist()
+    r = np.sqrt(x * x + y * y)
+    small = r < _SMALL_RADIUS
+    r_safe = np.where(small, 1.0, r)
+    theta = np.arctan(r)
+    t2 = theta * theta
+    theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+    d_theta_d = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))  # d theta_d / d theta
+    # scale = theta_d / r and (d scale / d r) / r; near the axis scale = 1 + (k1 - 1/3) r^2 + O(r^4).
+    scale = np.where(small, 1.0, theta_d / r_safe)
+    d_scale_over_r = np.where(small, 2.0 * (k1 - 1.0 / 3.0), (d_theta_d / (1.0 + r * r) * r - theta_d) / (r_safe**3))
+    d_xy = np.empty((len(x), 2, 2))
+    d_xy[:, 0, 0] = scale + x * x * d_scale_over_r
+    d_xy[:, 0, 1] = x * y * d_scale_over_r
+    d_xy[:, 1, 0] = d_xy[:, 0, 1]
+    d_xy[:, 1, 1] = scale + y * y * d_scale_over_r
+    powers = np.stack([theta * t2, theta * t2**2, theta * t2**3, theta * t2**4], axis=1)
+    per_r = np.where(small[:, None], np.stack([r**2, r**4, r**6, r**8], axis=1), powers / r_safe[:, None])
+    d_dist = np.stack([x[:, None] * per_r, y[:, None] * per_r], axis=1)
+    return x * scale, y * scale, d_xy, d_dist
