@@ -27,43 +27,85 @@ class Solution:
     error: float
 
 
-def optimize(
-    graph: gtsam.NonlinearFactorGraph,
-    initial: gtsam.Values,
-    max_iterations: int = 50,
-    what: str = "calibration",
-    ordering: list[int] | None = None,
-) -> Solution:
-    """Levenberg-Marquardt (multifrontal Cholesky) from ``initial``.
+# Levenberg-Marquardt's damping schedule (GTSAM's defaults): lambda starts small, is divided by the
+# factor after a step that lowers the error and multiplied by it after one that does not; the
+# solve stops when lambda exceeds the upper bound (no step lowers the error any more).
+LAMBDA_INITIAL = 1e-5
+LAMBDA_FACTOR = 10.0
+LAMBDA_UPPER_BOUND = 1e5
+RELATIVE_ERROR_TOL = 1e-8
+ABSOLUTE_ERROR_TOL = 1e-12
 
-    The elimination ``ordering`` (keys, first eliminated first) defaults to COLAMD.
+
+def optimize(
+    graph: gtsam.NonlinearFactorGraph, initial: gtsam.Values, max_iterations: int = 50, what: str = "calibration"
+) -> Solution:
+    """Levenberg-Marquardt from ``initial``: GTSAM linearisation and multifrontal elimination, damping here.
+
+    The loop runs in Python so that every ``gtsam.Values`` the graph sees is a Python object: GTSAM's
+    own optimizer hands its internal values to each Python factor as a fresh copy of all variables,
+    which made the per-frame corner factors cost O(frames^2).
 
     Raises:
         CalibrationError: when the linear system is singular (an unobservable parameter) or the
             solution is not finite.
     """
-    params = gtsam.LevenbergMarquardtParams()
-    params.setMaxIterations(max_iterations)
-    params.setRelativeErrorTol(1e-8)
-    params.setAbsoluteErrorTol(1e-12)
-    if ordering is None:
-        params.setOrderingType("COLAMD")
-    else:
-        params.setOrdering(_ordering(ordering))
     try:
-        optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
-        values = optimizer.optimize()
+        return _levenberg_marquardt(graph, gtsam.Values(initial), max_iterations)
     except RuntimeError as exc:
         raise CalibrationError(
             f"the {what} problem is singular: some parameter is not constrained by the data ({_first_line(exc)}); "
             "record more varied motion (rotate about all axes, tilt the target) and check the inputs"
         ) from exc
+    except _Diverged:
+        raise CalibrationError(
+            f"the {what} diverged (non-finite residuals); check the initial guess and the data"
+        ) from None
+
+
+class _Diverged(Exception):
+    pass
+
+
+def _damping(values: gtsam.Values) -> list[tuple[int, int]]:
+    zero = values.zeroVectors()
+    return [(key, zero.at(key).size) for key in values.keys()]  # noqa: SIM118 (gtsam.Values is not iterable)
+
+
+def _damped(linear: gtsam.GaussianFactorGraph, variables: list[tuple[int, int]], lam: float):
+    damped = linear.clone()
+    root = np.sqrt(lam)
+    for key, dim in variables:
+        damped.push_back(
+            gtsam.JacobianFactor(key, root * np.eye(dim), np.zeros(dim), gtsam.noiseModel.Unit.Create(dim))
+        )
+    return damped
+
+
+def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, max_iterations: int) -> Solution:
     error = float(graph.error(values))
     if not np.isfinite(error):
-        raise CalibrationError(f"the {what} diverged (non-finite residuals); check the initial guess and the data")
-    iterations = int(optimizer.iterations())
-    status = "max_iterations" if iterations >= max_iterations else "converged"
-    return Solution(values, iterations, status, error)
+        raise _Diverged
+    variables = _damping(values)
+    lam, iterations, ordering = LAMBDA_INITIAL, 0, None
+    while iterations < max_iterations:
+        linear = graph.linearize(values)
+        if ordering is None:
+            ordering = gtsam.Ordering.ColamdGaussianFactorGraph(linear)
+        while lam <= LAMBDA_UPPER_BOUND:
+            candidate = values.retract(_damped(linear, variables, lam).optimize(ordering))
+            new_error = float(graph.error(candidate))
+            if np.isfinite(new_error) and new_error < error:
+                break
+            lam *= LAMBDA_FACTOR
+        else:
+            return Solution(values, iterations, "converged", error)  # no step lowers the error: a minimum
+        iterations += 1
+        decrease = error - new_error
+        values, error, lam = candidate, new_error, lam / LAMBDA_FACTOR
+        if decrease <= ABSOLUTE_ERROR_TOL or decrease <= RELATIVE_ERROR_TOL * (error + decrease):
+            return Solution(values, iterations, "converged", error)
+    return Solution(values, iterations, "max_iterations", error)
 
 
 def joint_covariance(

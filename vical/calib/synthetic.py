@@ -1,4 +1,4 @@
-"""Synthetic camera + IMU recordings from a smooth analytic motion in front of a checkerboard.
+"""Synthetic camera + IMU recordings from a smooth analytic motion in front of a checkerboard or aprilgrid.
 
 The calibrator is developed and tested on these recordings: everything is exact (the IMU is
 computed from analytic derivatives of the motion), so any error the calibrator makes on
@@ -161,11 +161,20 @@ def imu_kinematics(excitation: Excitation, target: Target, T_cam_imu: np.ndarray
 
 
 def _observe(camera: CameraModel, target: Target, T_world_cam: np.ndarray, T_world_target: np.ndarray):
-    """Pixels (K, 2) and ids (K,) of the target seen from one camera pose; empty if not fully in view."""
+    """Pixels (K, 2) and ids (K,) of the target seen from one camera pose.
+
+    A checkerboard is seen whole or not at all; an aprilgrid reports every tag whose four corners
+    are in front of the camera and inside the image (partial views), as its detector does.
+    """
     T_cam_target = np.linalg.inv(T_world_cam) @ T_world_target
     p_cam = target.points @ T_cam_target[:3, :3].T + T_cam_target[:3, 3]
     uv, in_front = camera.project(p_cam)
-    if not (np.all(in_front) and np.all(camera.in_image(uv, border=2.0))):
+    visible = in_front & camera.in_image(uv, border=2.0)
+    if target.kind == "aprilgrid":
+        tags = target.tag_corner_ids(np.arange(target.num_tags))  # (T, 4)
+        ids = np.sort(tags[visible[tags].all(axis=1)].reshape(-1))
+        return uv[ids], ids.astype(np.int64)
+    if not visible.all():
         return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
     return uv, np.arange(target.num_points, dtype=np.int64)
 
