@@ -1,17 +1,31 @@
-"""Benchmark of the calibrator: solve time and errors per task, with OpenCV side by side.
+"""Benchmark of the calibrator: solve time, memory and errors per task, with OpenCV side by side.
 
-Two synthetic recordings (``vical.calib.synthetic``, IMU noise from the paper, 0.3 px corners,
-10 ms time offset, non-zero biases): a standard 20 s one and an episode-sized 8 s one. For the
-intrinsic task ``cv2.calibrateCamera`` (k3 fixed to 0) runs on the same corners in the same
-process; the table shows both times, their ratio and the largest difference in fx, fy, cx, cy.
-Times are the median of ``--repeats`` runs (default 5) (the machine may be shared: the load is printed).
+Synthetic recordings (``vical.calib.synthetic``, IMU noise from the paper, 0.3 px corners, 10 ms
+time offset, non-zero biases):
 
-    .venv/bin/python experiments/bench_calibrator.py [--repeats 5]
+1. the standard 20 s and an episode-sized 8 s recording at 10 Hz (the paper's 7 x 6 board): time
+   and errors per task;
+2. real-size recordings, 20 Hz with 100+ corners per frame, 10, 30, 60 and 120 s long: a 10 x 12
+   checkerboard (4 cm) and Kalibr's 6 x 6 aprilgrid (88 mm tags, partial views as the camera comes
+   close): time and peak extra memory of each task, and the growth of the joint solve against the
+   10 s case per second of data (1.0 = linear);
+3. the intrinsic task against ``cv2.calibrateCamera`` (k3 fixed to 0) on the same detections, 20 and
+   600 frames, outlier rejection included: both times, their ratio, the largest difference in fx,
+   fy, cx, cy.
+
+Times are medians of ``--repeats`` runs (the real-size cases run once each; the machine may be
+shared: the load is printed). Peak memory is the process's high-water mark above its size before
+the solve (Linux ``/proc/self/status``, reset through ``/proc/self/clear_refs``).
+
+    .venv/bin/python experiments/bench_calibrator.py [--repeats 5] [--quick]
 """
 
 from __future__ import annotations
 
 import argparse
+import ctypes
+import functools
+import gc
 import os
 import time
 
@@ -22,7 +36,7 @@ from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint, calibra
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
 from vical.calib.synthetic import make_recording
-from vical.data import ImuNoise, Recording
+from vical.data import ImuNoise, Recording, Target
 
 SIZE = (640, 480)
 BIASES = {"gyro_bias": [0.01, -0.02, 0.005], "accel_bias": [0.05, -0.1, 0.08]}  # [rad/s], [m/s^2]
@@ -48,12 +62,41 @@ def _median_time(fn, repeats: int):
     return float(np.median(times)), out
 
 
-def _opencv(rec: Recording):
-    used = [k for k in range(len(rec.frames)) if len(rec.frames.ids[k]) >= 4]
-    obj = [rec.target.points[rec.frames.ids[k]].astype(np.float32) for k in used]
-    img = [rec.frames.corners[k].astype(np.float32) for k in used]
+def _opencv(rec: Recording, frames=None):
+    """``cv2.calibrateCamera`` on the recording's detections (or those of ``frames``): (fx, fy, cx, cy)."""
+    frames = rec.frames if frames is None else frames
+    used = [k for k in range(len(frames)) if len(frames.ids[k]) >= 4]
+    obj = [rec.target.points[frames.ids[k]].astype(np.float32) for k in used]
+    img = [frames.corners[k].astype(np.float32) for k in used]
     _, K, _, _, _ = cv2.calibrateCamera(obj, img, SIZE, None, None, flags=cv2.CALIB_FIX_K3)
     return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])
+
+
+def _reset_peak() -> int:
+    """Reset the process's peak resident size; its present size [kB]."""
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
+    return _status_kb("VmRSS")
+
+
+def _status_kb(field: str) -> int:
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith(field + ":"))
+
+
+def _time_and_memory(fn, *args):
+    """(seconds, peak resident memory above the size before the call [MB], result) of ``fn(*args)``.
+
+    Memory freed by earlier calls goes back to the system first (``malloc_trim``), so that it is not
+    reused unseen.
+    """
+    gc.collect()
+    ctypes.CDLL("libc.so.6").malloc_trim(0)
+    before = _reset_peak()
+    start = time.perf_counter()
+    out = fn(*args)
+    seconds = time.perf_counter() - start
+    return seconds, (_status_kb("VmHWM") - before) / 1024.0, out
 
 
 def _row(name: str, seconds: float, rec: Recording, result, extra: str = "") -> str:
@@ -84,21 +127,88 @@ def bench(label: str, rec: Recording, repeats: int) -> list[str]:
     ]
 
 
+REAL_DURATIONS = (10.0, 30.0, 60.0, 120.0)  # [s] at 20 Hz
+REAL_TARGETS = {"checkerboard 10x12": Target.checkerboard(10, 12, 0.04), "aprilgrid 6x6": Target.aprilgrid()}
+
+
+def _common() -> dict:
+    return {"time_offset": 0.01, "imu_noise": ImuNoise(), "pixel_sigma": 0.3, **BIASES}
+
+
+def real_size(durations: tuple[float, ...]) -> list[str]:
+    """Time and peak extra memory per task on real-size recordings, and the joint solve's growth."""
+    lines = [
+        "real size (20 Hz): time [s] and peak extra memory [MB] per task; growth = joint time per second of "
+        "data against the 10 s case (1.00 = linear)",
+        f"  {'target':<20} {'length':>6} {'frames':>6} {'corners':>8} {'intrinsic':>14} {'extrinsic':>14} "
+        f"{'joint':>14} {'growth':>7} {'joint rot[deg] trans[mm] dt[ms]':>32}",
+    ]
+    for name, target in REAL_TARGETS.items():
+        base = None
+        for duration in durations:
+            rec = make_recording(duration=duration, camera_rate_hz=20.0, target=target, seed=3, **_common())
+            f, imu, noise = rec.frames, rec.imu, rec.truth.imu_noise
+            cells = [
+                _time_and_memory(calibrate_intrinsics, f, target, "radtan", SIZE),
+                _time_and_memory(calibrate_extrinsics, f, imu, target, rec.truth.camera, noise),
+                _time_and_memory(calibrate_joint, f, imu, target, "radtan", SIZE, noise),
+            ]
+            joint_s, joint = cells[2][0], cells[2][2]
+            base = base or joint_s / duration
+            e = calibration_errors(joint, rec.truth)
+            frames = int(np.sum(f.num_detections > 0))
+            task_cells = " ".join(f"{t:6.2f} {m:6.0f}MB" for t, m, _ in cells)
+            errors = f"{e.rotation_deg:12.4f} {e.translation_mm:10.3f} {e.time_offset_ms:8.4f}"
+            corners = int(f.num_detections.sum())
+            growth = joint_s / duration / base
+            lines.append(f"  {name:<20} {duration:5.0f}s {frames:6d} {corners:8d} {task_cells} {growth:7.2f} {errors}")
+    return lines
+
+
+def versus_opencv(repeats: int) -> list[str]:
+    """The intrinsic task against cv2.calibrateCamera on the same 20 and ~600 frames."""
+    lines = [
+        "intrinsic calibration against cv2.calibrateCamera on the same detections (outlier rejection included)",
+        f"  {'target':<20} {'frames':>6} {'OpenCV[s]':>10} {'vical[s]':>9} {'ratio':>6} {'max |dK| [px]':>14}",
+    ]
+    for name, target in REAL_TARGETS.items():
+        rec = make_recording(duration=30.0, camera_rate_hz=20.0, target=target, seed=4, **_common())
+        seen = np.flatnonzero(rec.frames.num_detections > 0)
+        for count in (20, 600):
+            chosen = seen[np.linspace(0, len(seen) - 1, min(count, len(seen))).round().astype(int)]
+            mask = np.zeros(len(rec.frames), dtype=bool)
+            mask[chosen] = True
+            frames = rec.frames.select(mask)
+            t_cv, K_cv, t_vi, r_vi = _interleaved_times(
+                functools.partial(_opencv, rec, frames),
+                functools.partial(calibrate_intrinsics, frames, target, "radtan", SIZE),
+                repeats,
+            )
+            diff = np.abs(r_vi.camera.intrinsics - K_cv).max()
+            lines.append(f"  {name:<20} {len(chosen):6d} {t_cv:10.3f} {t_vi:9.3f} {t_vi / t_cv:6.2f} {diff:14.4f}")
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--quick", action="store_true", help="real-size cases of 10 and 30 s only")
     args = parser.parse_args()
-    common = {"time_offset": 0.01, "imu_noise": ImuNoise(), "pixel_sigma": 0.3, **BIASES}
     recordings = {
-        "standard": make_recording(duration=20.0, seed=1, **common),
-        "episode": make_recording(duration=8.0, seed=2, **common),
+        "standard": make_recording(duration=20.0, seed=1, **_common()),
+        "episode": make_recording(duration=8.0, seed=2, **_common()),
     }
     calibrate_intrinsics(recordings["episode"].frames, recordings["episode"].target, "radtan", SIZE)  # warm-up
     print(f"load average before: {' '.join(f'{v:.2f}' for v in os.getloadavg())} on {os.cpu_count()} cores")
     for label, rec in recordings.items():
         print("\n".join(bench(label, rec, args.repeats)))
+    print("\n".join(versus_opencv(args.repeats)))
+    print("\n".join(real_size(REAL_DURATIONS[:2] if args.quick else REAL_DURATIONS)))
     print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
-    print("targets: intrinsic <= 1.5x OpenCV; joint <= 2 s (20 s recording), <= 1.5 s (episode)")
+    print(
+        "targets: intrinsic <= 1.5x OpenCV (20 and 600 frames); extrinsic and joint <= 2.5 s and <= 500 MB at "
+        "30 s / 20 Hz; growth ~1 (linear in the recording's length)"
+    )
 
 
 if __name__ == "__main__":

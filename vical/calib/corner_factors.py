@@ -231,18 +231,19 @@ class CornerFactors:
         body_velocity = np.einsum("nji,nj->ni", inputs.poses[:, :3, :3], inputs.velocities)
         return np.concatenate([self.keys.omegas, body_velocity], axis=1)
 
-    def _evaluate(self, inputs: _Inputs, need_jacobians: bool) -> _Pass:
+    def _camera_points(self, inputs: _Inputs) -> tuple[np.ndarray, np.ndarray]:
+        """The exposure shifts (F, 4, 4) and every corner's target point in its frame's camera (N, 3)."""
         shift = self._exposure_shift(inputs)
-        camera_poses = inputs.poses @ shift @ inputs.extrinsic  # C_n = T_target_cam (F, 4, 4)
-        C = camera_poses[self.frame_of]
-        q = np.einsum("nji,nj->ni", C[:, :3, :3], self.points - C[:, :3, 3])  # R^T (p - t): camera frame
+        C = (inputs.poses @ shift @ inputs.extrinsic)[self.frame_of]  # T_target_cam per corner
+        return shift, np.einsum("nji,nj->ni", C[:, :3, :3], self.points - C[:, :3, 3])  # R^T (p - t)
+
+    def _evaluate(self, inputs: _Inputs, need_jacobians: bool) -> _Pass:
+        shift, q = self._camera_points(inputs)
         camera = self.camera.with_parameters(inputs.camera)
-        uv, d_point, d_parameters = camera.project_jacobians(q)
-        raw = (uv - self.measured) / self.sigma_px
-        residuals, kernel = self._huber(raw)
-        result = _Pass(inputs, residuals)
         if not need_jacobians:
-            return result
+            return _Pass(inputs, self._huber((camera.project(q)[0] - self.measured) / self.sigma_px)[0])
+        uv, d_point, d_parameters = camera.project_jacobians(q)
+        residuals, kernel = self._huber((uv - self.measured) / self.sigma_px)
         # Right perturbation C Exp([w; u]): q -> q + q x w - u, so d q / d[w; u] = [skew(q), -I].
         d_pose = np.empty((len(q), 2, 6))
         for row in range(2):
@@ -253,7 +254,7 @@ class CornerFactors:
         if kernel is not None:
             d_pose = np.einsum("nij,njk->nik", kernel, d_pose)
             d_parameters = np.einsum("nij,njk->nik", kernel, d_parameters)
-        result.d_camera_pose, result.d_parameters = d_pose, d_parameters
+        result = _Pass(inputs, residuals, d_pose, d_parameters)
         self._chain(result, shift)
         return result
 
@@ -322,16 +323,12 @@ class CornerFactors:
     def residuals(self, values: gtsam.Values) -> np.ndarray:
         """Measured minus predicted corner pixels (N, 2) [px] at ``values`` (no kernel), frames in order."""
         inputs = self._read(values)
-        shift = self._exposure_shift(inputs)
-        C = (inputs.poses @ shift @ inputs.extrinsic)[self.frame_of]
-        q = np.einsum("nji,nj->ni", C[:, :3, :3], self.points - C[:, :3, 3])
-        uv, _ = self.camera.with_parameters(inputs.camera).project(q)
-        return self.measured - uv
+        _, q = self._camera_points(inputs)
+        return self.measured - self.camera.with_parameters(inputs.camera).project(q)[0]
 
-    def camera_poses(self, values: gtsam.Values) -> np.ndarray:
-        """(F, 4, 4) ``T_target_cam`` of every frame at its exposure instant."""
-        inputs = self._read(values)
-        return inputs.poses @ self._exposure_shift(inputs) @ inputs.extrinsic
+    def chi2(self, values: gtsam.Values) -> float:
+        """Twice the factors' error at ``values``: the sum of squared whitened residuals (after the kernel)."""
+        return float(np.sum(self._evaluate(self._read(values), need_jacobians=False).residuals ** 2))
 
 
 __all__ = ["CornerFactors", "CornerKeys", "adjoint", "skew", "skew_batch"]

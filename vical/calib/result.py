@@ -119,6 +119,8 @@ class CalibrationResult:
         status: ``"converged"`` or ``"max_iterations"``.
         num_frames: frames that entered the graph.
         warnings: plain-language notes about the data (dropped frames, estimated noise).
+        imu_noise_scale: the IMU's noise measured from its residuals over the declared densities
+            (``vical.calib.variance``; the solve weighted the IMU by it), or None (intrinsic task).
     """
 
     task: str
@@ -142,6 +144,7 @@ class CalibrationResult:
     status: str
     num_frames: int
     warnings: list[str] = field(default_factory=list)
+    imu_noise_scale: float | None = None
 
     @property
     def sigmas(self) -> dict[str, float]:

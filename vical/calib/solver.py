@@ -124,7 +124,7 @@ def joint_covariance(
             order = gtsam.Ordering.ColamdConstrainedLastGaussianFactorGraph(linear, keys)
         else:
             order = _ordering(ordering)
-        roots = [r.conditional() for r in linear.eliminateMultifrontal(order).roots()]
+        roots = [r.conditional() for r in linear.eliminateMultifrontal(order, gtsam.EliminateQR).roots()]
         holding = [c for c in roots if set(keys) <= set(c.keys())]
         if not holding:  # the elimination left them in separate cliques: the general (slower) way
             return gtsam.Marginals(linear, values).jointMarginalCovariance(keys).fullMatrix()

@@ -37,6 +37,7 @@ from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats
 from vical.calib.solver import joint_covariance, optimize
 from vical.calib.time_alignment import align, rotation_increments
 from vical.calib.uncertainty import weak_parameters
+from vical.calib.variance import used_dof, variance_factor
 from vical.data import ImuNoise, ImuSamples, Target, seconds_since
 from vical.geometry import CameraModel, invert_transform, make_transform, skew
 
@@ -46,6 +47,12 @@ ACCEL_BIAS_PRIOR_SIGMA = 1.0  # [m/s^2] weak prior on the first accelerometer bi
 MIN_PIXEL_SIGMA = 0.01  # [px] floor of the estimated corner noise (noise-free data would weight pixels infinitely)
 RECENTRE_OFFSET = 1e-3  # [s] re-linearise the states at the new offset when the in-graph correction exceeds this
 MAX_ROUNDS = 3
+# Noise levels (vical.calib.variance): a sensor whose residuals say its noise is off by more than this
+# factor is reweighted and the problem solved again, at most MAX_REWEIGHTS times.
+REWEIGHT_TOLERANCE = 1.15
+MAX_REWEIGHTS = 2
+IMU_NOISE_WARNING = 2.0  # tell the user when the IMU's noise is off by more than this factor
+IMU_RESIDUAL_DIM = 15  # per CombinedImuFactor: rotation, velocity, position, accel and gyro bias changes
 MIN_GAP_WARNING = 0.5  # [s] a stretch without target views this long (and ...
 GAP_WARNING_FACTOR = 5.0  # ... this many typical frame intervals) is reported
 
@@ -112,6 +119,7 @@ class _Problem:
     options: ViOptions
     t0_ns: int
     sigma_px: float = 1.0
+    imu_noise_scale: float = 1.0  # a posteriori / declared IMU noise (the variance factors' product)
     warnings: list[str] = field(default_factory=list)
 
 
@@ -203,6 +211,7 @@ class _Graph:
     imu_factors: list  # (i, factor, dt) per IMU factor
     state_times: np.ndarray  # (S,) [s] IMU clock
     corners: CornerFactors
+    first_corner_factor: int  # index in the graph of the first corner factor (the IMU factors come first)
 
 
 def _states_inside_imu(problem: _Problem, tau0: float) -> list[int]:
@@ -276,9 +285,10 @@ def _build(problem: _Problem, est: _Estimate, joint: bool) -> _Graph:
     times = _insert_states(values, problem, states, est)
     imu_factors = _add_imu_factors(graph, problem, times, est)
     corners = _corner_factors(problem, states, times, est, joint)
+    first_corner_factor = graph.size()
     for factor in corners.factors():
         graph.add(factor)
-    return _Graph(graph, values, states, imu_factors, times, corners)
+    return _Graph(graph, values, states, imu_factors, times, corners, first_corner_factor)
 
 
 # ---------------------------------------------------------------------------------------- solve
@@ -308,6 +318,53 @@ def _solve_rounds(problem: _Problem, est: _Estimate, joint: bool):
         est = new
     problem.warnings.append(f"the time offset moved by {correction * 1e3:.2f} ms in the last round")
     return g, solution, new, iterations
+
+
+def _noise_factors(g: _Graph, values: gtsam.Values) -> tuple[float, float]:
+    """(camera, IMU): the sensors' a posteriori noise over the noise they were weighted with."""
+    linear = g.graph.linearize(values)
+    ordering = gtsam.Ordering.ColamdGaussianFactorGraph(linear)
+    imu = range(len(g.imu_factors))
+    corners = range(g.first_corner_factor, linear.size())
+    chi2_imu = 2.0 * sum(f.error(values) for _, f, _ in g.imu_factors)
+    s2_imu = variance_factor(chi2_imu, IMU_RESIDUAL_DIM * len(imu), used_dof(linear, imu, ordering))
+    s2_camera = variance_factor(g.corners.chi2(values), 2 * len(g.corners.points), used_dof(linear, corners, ordering))
+    return float(np.sqrt(s2_camera)), float(np.sqrt(s2_imu))
+
+
+def _reweighted_solve(problem: _Problem, g: _Graph, solution, est: _Estimate, joint: bool):
+    """Weight each sensor by the noise its residuals show, solving again while a weight is off (``_noise_factors``).
+
+    Noise-free corners (the corner noise at its floor) leave nothing to weigh: any weights give the
+    exact solution, and the IMU's own model error would take over.
+    """
+    iterations = 0
+    if problem.sigma_px <= MIN_PIXEL_SIGMA:
+        return g, solution, est, iterations
+    for _ in range(MAX_REWEIGHTS):
+        s_camera, s_imu = _noise_factors(g, solution.values)
+        if not all(np.isfinite([s_camera, s_imu])):
+            break
+        s_camera = max(s_camera, MIN_PIXEL_SIGMA / problem.sigma_px)  # the corner noise keeps its floor
+        if max(s_camera, 1 / s_camera, s_imu, 1 / s_imu) <= REWEIGHT_TOLERANCE:
+            break
+        problem.sigma_px *= s_camera
+        problem.noise = problem.noise.scaled(s_imu)
+        problem.imu_noise_scale *= s_imu
+        g, solution, est, more = _solve_rounds(problem, est, joint)
+        iterations += more
+    return g, solution, est, iterations
+
+
+def _imu_noise_warning(scale: float) -> list[str]:
+    if 1 / IMU_NOISE_WARNING <= scale <= IMU_NOISE_WARNING:
+        return []
+    side = "larger" if scale > 1 else "smaller"
+    return [
+        f"the IMU residuals show a noise {scale:.2g}x the declared densities ({side}); the solve weighted the IMU "
+        "by its measured noise and the uncertainty uses it. Check the IMU noise settings (imu.yaml)"
+        + (": inflated densities are common and harmless here" if scale < 1 else "")
+    ]
 
 
 # ---------------------------------------------------------------------------------------- data notes
@@ -423,6 +480,7 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
         status=solution.status,
         num_frames=len(g.states),
         warnings=problem.warnings,
+        imu_noise_scale=problem.imu_noise_scale,
     )
 
 
@@ -448,5 +506,7 @@ def run_visual_inertial(
     problem = _prepare(observations, imu, camera, target, imu_noise, options, float(initial_time_offset))
     est = _initial_estimate(problem, T_guess, float(initial_time_offset))
     g, solution, est, iterations = _solve_rounds(problem, est, task == "joint")
+    g, solution, est, more = _reweighted_solve(problem, g, solution, est, task == "joint")
     problem.warnings += _span_warnings(problem, g) + _gap_warnings(g.state_times)
-    return _result(task, problem, g, solution, est, iterations, start)
+    problem.warnings += _imu_noise_warning(problem.imu_noise_scale)
+    return _result(task, problem, g, solution, est, iterations + more, start)

@@ -78,6 +78,16 @@ class ImuNoise:
     def from_dict(cls, d: dict) -> ImuNoise:
         return cls(**{k: float(v) for k, v in d.items() if k in cls.__dataclass_fields__})
 
+    def scaled(self, factor: float) -> ImuNoise:
+        """Every density (white noise and random walk) times ``factor``; the same rate."""
+        return ImuNoise(
+            self.accel_noise_density * factor,
+            self.accel_random_walk * factor,
+            self.gyro_noise_density * factor,
+            self.gyro_random_walk * factor,
+            self.rate_hz,
+        )
+
 
 @dataclass(frozen=True)
 class ImuSamples:
