@@ -8,7 +8,7 @@ from vical.calib import intrinsics
 from vical.calib.errors import CalibrationError
 from vical.calib.initialization import frame_poses, initial_camera
 from vical.calib.observations import collect_observations
-from vical.calib.solver import joint_covariance, optimize
+from vical.calib.solver import covariance_or_unobservable, linear_covariance, optimize
 from vical.calib.synthetic import make_recording
 
 
@@ -26,7 +26,7 @@ def solved_intrinsic_graph():
 def test_joint_covariance_matches_gtsam_marginals(solved_intrinsic_graph, with_pose):
     graph, values, frames = solved_intrinsic_graph
     keys = [intrinsics.K_KEY] + ([intrinsics.pose_key(frames[3])] if with_pose else [])
-    ours = joint_covariance(graph, values, keys)
+    ours = linear_covariance(graph.linearize(values), values, keys)
     reference = gtsam.Marginals(graph, values).jointMarginalCovariance(keys).fullMatrix()
     assert np.allclose(ours, reference, rtol=1e-6, atol=1e-12 * np.abs(reference).max())
 
@@ -39,4 +39,19 @@ def test_singular_graph_is_a_calibration_error():
     graph.add(gtsam.BetweenFactorPose3(0, 1, gtsam.Pose3(), noise))  # no prior: the gauge is free
     solution = optimize(graph, values)  # Levenberg-Marquardt's damping still finds a point
     with pytest.raises(CalibrationError, match="singular"):
-        joint_covariance(graph, solution.values, [1])
+        linear_covariance(graph.linearize(solution.values), solution.values, [1])
+
+
+def test_unobservable_directions_become_nan_and_the_rest_keeps_its_covariance():
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    values.insert(0, gtsam.Pose3())
+    values.insert(1, gtsam.Pose3())
+    values.insert(2, np.array([1.0, 2.0, 3.0]))
+    graph.add(gtsam.BetweenFactorPose3(0, 1, gtsam.Pose3(), gtsam.noiseModel.Isotropic.Sigma(6, 0.1)))  # no gauge
+    graph.add(gtsam.PriorFactorVector(2, np.array([1.0, 2.0, 3.0]), gtsam.noiseModel.Isotropic.Sigma(3, 0.5)))
+    linear = graph.linearize(values)
+    with pytest.raises(CalibrationError, match="singular"):
+        linear_covariance(linear, values, [2, 1])
+    covariance = covariance_or_unobservable(linear, values, [2, 1])
+    assert np.allclose(covariance[:3, :3], 0.25 * np.eye(3), rtol=1e-5)  # the prior's variance, undamped
+    assert np.all(np.isnan(covariance[3:, :])) and np.all(np.isnan(covariance[:, 3:]))

@@ -11,7 +11,7 @@ from vical.calib.errors import CalibrationError
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.observations import collect_observations
 from vical.calib.result import CalibrationResult
-from vical.calib.uncertainty import weak_parameters
+from vical.calib.uncertainty import correlations, weak_parameters
 from vical.calib.visual_inertial import ViOptions, run_visual_inertial
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target
 from vical.geometry import CameraModel
@@ -121,6 +121,7 @@ def _combine(intrinsic: CalibrationResult, extrinsic: CalibrationResult, elapsed
         estimate=estimate,
         covariance=covariance,
         weak_parameters=weak_parameters(names, covariance, extrinsic.camera),
+        correlations=correlations(names, covariance),
         iterations=intrinsic.iterations + extrinsic.iterations,
         solve_time=elapsed,
         warnings=intrinsic.warnings + extrinsic.warnings,

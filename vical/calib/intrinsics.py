@@ -21,8 +21,8 @@ from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_ca
 from vical.calib.observations import FrameObservation, collect_observations, image_size
 from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ResidualStats
-from vical.calib.solver import joint_covariance, optimize
-from vical.calib.uncertainty import weak_parameters
+from vical.calib.solver import covariance_or_unobservable, optimize
+from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
 from vical.data import CameraFrames, Target
 from vical.geometry import CameraModel, invert_transform
 
@@ -157,13 +157,14 @@ def calibrate_intrinsics(
         camera, T_cam_target, graph, solution = solve(camera, rejection.poses)
     poses = T_cam_target
     residuals, frame_index = reprojection_residuals(camera, observations, T_cam_target)
-    covariance = joint_covariance(graph, solution.values, [K_KEY])
+    covariance = covariance_or_unobservable(graph.linearize(solution.values), solution.values, [K_KEY])
     if pixel_sigma is None:
         sigma_px = estimated_pixel_sigma(residuals, 6 * len(poses) + CAMERA_PARAMETERS)
         covariance = covariance * (sigma_px / sigma_graph) ** 2
     else:
         sigma_px = float(pixel_sigma)
     names = intrinsic_names(model)
+    found = correlations(names, covariance)
     estimate = np.concatenate([camera.intrinsics, camera.dist])
     return CalibrationResult(
         task="intrinsic",
@@ -177,6 +178,7 @@ def calibrate_intrinsics(
         estimate=estimate,
         covariance=covariance,
         weak_parameters=weak_parameters(names, covariance, camera),
+        correlations=found,
         reprojection=ResidualStats.of(residuals),
         reprojection_residuals=residuals,
         reprojection_frames=frame_index,
@@ -186,7 +188,10 @@ def calibrate_intrinsics(
         solve_time=time.perf_counter() - start,
         status=solution.status,
         num_frames=len(poses),
-        warnings=rejection.warnings + _dropped_frames_warning(len(frames), len(poses)),
+        warnings=rejection.warnings
+        + _dropped_frames_warning(len(frames), len(poses))
+        + correlation_warnings(found)
+        + unobservable_warnings(names, covariance),
     )
 
 

@@ -73,6 +73,8 @@ def _quality_lines(result: CalibrationResult) -> list[str]:
         lines.append(_stats_line("gyro", result.imu_residuals.gyro_stats, "rad/s"))
         lines.append(_stats_line("accel", result.imu_residuals.accel_stats, "m/s^2"))
     lines.append(f"  corner noise used: {result.pixel_sigma:.4g} px")
+    if result.imu_noise_scale is not None:
+        lines.append(f"  IMU noise from its residuals: {result.imu_noise_scale:.3g} x the declared densities")
     lines.append(
         f"solver: {result.status}, {result.iterations} iterations, {result.solve_time:.3f} s, "
         f"{result.num_frames} frames"
@@ -86,6 +88,14 @@ def _weak_lines(result: CalibrationResult) -> list[str]:
     lines = ["weakly observed parameters (weakest first):"]
     for w in result.weak_parameters:
         lines.append(f"  {w.name}: 1-sigma {w.sigma:.4g} > {w.threshold:.4g} -> {w.hint}")
+    return lines
+
+
+def _correlation_lines(result: CalibrationResult) -> list[str]:
+    if not result.correlations:
+        return []
+    lines = ["strongest correlations between parameter groups (|rho| near 1: the data hardly tell them apart):"]
+    lines += [f"  {c.a:<12} {c.b:<12} rho {c.rho:+.3f}" for c in result.correlations]
     return lines
 
 
@@ -112,6 +122,7 @@ def results_text(result: CalibrationResult, errors: CalibrationErrors | None = N
         _extrinsic_lines(result),
         _quality_lines(result),
         _weak_lines(result),
+        _correlation_lines(result),
         _error_lines(errors),
         ["warnings:", *[f"  {w}" for w in result.warnings]] if result.warnings else [],
         ["note: " + UNCERTAINTY_NOTE],

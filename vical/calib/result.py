@@ -64,6 +64,21 @@ class WeakParameter:
 
 
 @dataclass(frozen=True)
+class Correlation:
+    """Two parameters of different groups whose estimates are correlated.
+
+    Attributes:
+        a, b: parameter names; rho: their correlation coefficient in [-1, 1];
+        hint: what motion would separate them, in plain words.
+    """
+
+    a: str
+    b: str
+    rho: float
+    hint: str
+
+
+@dataclass(frozen=True)
 class ImuResiduals:
     """Gyro and accelerometer residuals per IMU factor (state interval), for reports and plots.
 
@@ -121,6 +136,7 @@ class CalibrationResult:
         warnings: plain-language notes about the data (dropped frames, estimated noise).
         imu_noise_scale: the IMU's noise measured from its residuals over the declared densities
             (``vical.calib.variance``; the solve weighted the IMU by it), or None (intrinsic task).
+        correlations: the strongest correlations between parameter groups, strongest first.
     """
 
     task: str
@@ -145,6 +161,7 @@ class CalibrationResult:
     num_frames: int
     warnings: list[str] = field(default_factory=list)
     imu_noise_scale: float | None = None
+    correlations: list[Correlation] = field(default_factory=list)
 
     @property
     def sigmas(self) -> dict[str, float]:

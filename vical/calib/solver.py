@@ -68,6 +68,7 @@ class _Diverged(Exception):
 
 
 def _damping(values: gtsam.Values) -> list[tuple[int, int]]:
+    """(key, tangent dimension) of every variable."""
     zero = values.zeroVectors()
     return [(key, zero.at(key).size) for key in values.keys()]  # noqa: SIM118 (gtsam.Values is not iterable)
 
@@ -108,27 +109,22 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
     return Solution(values, iterations, "max_iterations", error)
 
 
-def joint_covariance(
-    graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, keys: list[int], ordering: list[int] | None = None
-) -> np.ndarray:
-    """Joint marginal covariance (in the keys' tangent spaces, in order) of the graph linearised at ``values``.
+SINGULAR_EIGENVALUE = 1e-12  # relative to 1 in the equilibrated marginal information: a free direction
 
-    The graph is eliminated with the requested keys last (COLAMD constrained last, or the given
-    ``ordering`` that must end with them), so their joint marginal is usually the inverse information
-    of the Bayes tree's root clique: several times cheaper than ``gtsam.Marginals``, which is the
-    fallback when the elimination split the keys over several cliques.
+
+def linear_covariance(linear: gtsam.GaussianFactorGraph, values: gtsam.Values, keys: list[int]) -> np.ndarray:
+    """Joint marginal covariance of ``keys`` in the linearised graph ``linear`` (at ``values``).
+
+    Every other variable is eliminated (QR: accurate where the information spans many decades, as
+    with tiny IMU random walks); what remains is the keys' marginal information, a small dense
+    matrix that is inverted (``values`` gives the keys' dimensions through the remaining graph).
     """
     try:
-        linear = graph.linearize(values)
-        if ordering is None:
-            order = gtsam.Ordering.ColamdConstrainedLastGaussianFactorGraph(linear, keys)
-        else:
-            order = _ordering(ordering)
-        roots = [r.conditional() for r in linear.eliminateMultifrontal(order, gtsam.EliminateQR).roots()]
-        holding = [c for c in roots if set(keys) <= set(c.keys())]
-        if not holding:  # the elimination left them in separate cliques: the general (slower) way
-            return gtsam.Marginals(linear, values).jointMarginalCovariance(keys).fullMatrix()
-        return _root_covariance(holding[0], values, keys)
+        order = gtsam.Ordering.ColamdConstrainedLastGaussianFactorGraph(linear, keys)
+        others = [order.at(i) for i in range(order.size() - len(keys))]  # the keys come last
+        _, remaining = linear.eliminatePartialMultifrontal(_ordering(others), gtsam.EliminateQR)
+        information = remaining.augmentedHessian(_ordering(keys))[:-1, :-1]
+        return _inverse(information)
     except (RuntimeError, np.linalg.LinAlgError) as exc:
         raise CalibrationError(
             f"the uncertainty cannot be computed: the information matrix is singular ({_first_line(exc)}); "
@@ -136,29 +132,39 @@ def joint_covariance(
         ) from exc
 
 
-def _root_covariance(conditional: gtsam.GaussianConditional, values: gtsam.Values, keys: list[int]) -> np.ndarray:
-    """Covariance of ``keys``, eliminated last and so the trailing block of the root clique's ``R``.
+def _inverse(information: np.ndarray) -> np.ndarray:
+    """Inverse of a symmetric positive definite information matrix, equilibrated (its units may differ by decades).
 
-    With ``R = [[R11, R12], [0, R22]]`` the marginal information of the trailing variables is
-    ``R22^T R22``, so only the small ``R22`` is inverted.
+    Raises:
+        numpy.linalg.LinAlgError: when a direction is (numerically) free.
     """
-    zero = values.zeroVectors()
-    offsets, start = {}, 0
-    root_keys = list(conditional.keys())  # a GaussianConditional, not a dict
-    for key in root_keys:
-        offsets[key] = (start, start + zero.at(key).size)
-        start += zero.at(key).size
-    missing = [k for k in keys if k not in offsets]
-    if missing:
-        raise CalibrationError(f"internal: keys {missing} were not eliminated last")
-    first = min(offsets[k][0] for k in keys)
-    if sum(offsets[k][1] - offsets[k][0] for k in keys) != start - first:
-        raise CalibrationError("internal: the requested keys are not the trailing block of the root clique")
-    R22 = conditional.R()[first:, first:]
-    R22_inv = np.linalg.solve(R22, np.eye(len(R22)))
-    covariance = R22_inv @ R22_inv.T
-    idx = np.concatenate([np.arange(offsets[k][0] - first, offsets[k][1] - first) for k in keys])
-    return covariance[np.ix_(idx, idx)]
+    scale = 1.0 / np.sqrt(np.maximum(np.diag(information), np.finfo(float).tiny))
+    equilibrated = information * np.outer(scale, scale)
+    eigenvalues, vectors = np.linalg.eigh(0.5 * (equilibrated + equilibrated.T))
+    if not eigenvalues[0] > SINGULAR_EIGENVALUE * eigenvalues[-1]:
+        raise np.linalg.LinAlgError("Indeterminate: the marginal information has a free direction")
+    return (vectors / eigenvalues) @ vectors.T * np.outer(scale, scale)
+
+
+UNOBSERVABLE_DAMPING = 1e-6  # [whitened information] added to every variable when the information is singular
+UNOBSERVABLE_SIGMA = 1e2  # a damped 1-sigma this large (in the tangent's unit) means: not determined by the data
+
+
+def covariance_or_unobservable(linear: gtsam.GaussianFactorGraph, values: gtsam.Values, keys: list[int]) -> np.ndarray:
+    """``linear_covariance``, or where the information is singular, NaN for the directions the data leave free.
+
+    A tiny damping of every variable makes the information invertible; parameters whose damped
+    1-sigma stays huge are the unobservable ones (their rows and columns become NaN), the others
+    keep their (practically undamped) covariance. The estimate itself is never lost.
+    """
+    try:
+        return linear_covariance(linear, values, keys)
+    except CalibrationError:
+        covariance = linear_covariance(_damped(linear, _damping(values), UNOBSERVABLE_DAMPING), values, keys)
+        free = np.sqrt(np.abs(np.diag(covariance))) > UNOBSERVABLE_SIGMA
+        covariance[free, :] = np.nan
+        covariance[:, free] = np.nan
+        return covariance
 
 
 def _ordering(keys: list[int]) -> gtsam.Ordering:

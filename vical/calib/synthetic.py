@@ -179,6 +179,25 @@ def _observe(camera: CameraModel, target: Target, T_world_cam: np.ndarray, T_wor
     return uv, np.arange(target.num_points, dtype=np.int64)
 
 
+def _rolling_shutter(
+    camera: CameraModel,
+    target: Target,
+    excitation: Excitation,
+    T_cam_imu: np.ndarray,
+    T_world_target: np.ndarray,
+    t: float,
+    uv: np.ndarray,
+    ids: np.ndarray,
+    readout: float,
+) -> np.ndarray:
+    """Pixels (K, 2) of corners ``ids`` each seen at its row's exposure time (one fixed-point step from ``uv``)."""
+    times = t + readout * (uv[:, 1] / camera.height - 0.5)
+    T_world_cam = imu_kinematics(excitation, target, T_cam_imu, times)[0] @ np.linalg.inv(T_cam_imu)
+    T_cam_target = np.linalg.inv(T_world_cam) @ T_world_target  # (K, 4, 4)
+    p = np.einsum("kij,kj->ki", T_cam_target[:, :3, :3], target.points[ids]) + T_cam_target[:, :3, 3]
+    return camera.project(p)[0]
+
+
 def default_camera(distortion: str = "radtan") -> CameraModel:
     """The paper's 640 x 480 camera (1.0 rad horizontal FOV) with mild distortion."""
     dist = np.array([-0.05, 0.02, 0.001, -0.0005]) if distortion == "radtan" else np.array([0.01, -0.005, 0.002, 0.0])
@@ -213,6 +232,7 @@ def make_recording(
     target: Target | None = None,
     camera_rate_hz: float = 10.0,
     seed: int = 0,
+    rolling_shutter: float = 0.0,
 ) -> Recording:
     """A camera + IMU recording of the analytic motion, optionally noisy.
 
@@ -229,6 +249,9 @@ def make_recording(
         target: checkerboard (the paper's 7 x 6 inner corners, 7 cm) if None.
         camera_rate_hz: [Hz] frame rate.
         seed: seed of the noise generator.
+        rolling_shutter: [s] readout time of a rolling shutter (0: global shutter): image row ``v``
+            is exposed ``rolling_shutter * (v / height - 0.5)`` after the frame's timestamp, an effect
+            the calibrator does not model.
     """
     if abs(time_offset) >= 0.1:
         raise ValueError(f"time_offset must be within +-0.1 s for this generator, got {time_offset}")
@@ -252,12 +275,15 @@ def make_recording(
     t_cam_ns = np.arange(
         int(0.1 * NS_PER_S), int((duration - 0.1) * NS_PER_S) + 1, round(NS_PER_S / camera_rate_hz), dtype=np.int64
     )
-    T_wi_exposure = imu_kinematics(excitation, target, T_cam_imu, t_cam_ns / NS_PER_S + time_offset)[0]
+    t_exposure = t_cam_ns / NS_PER_S + time_offset
+    T_wi_exposure = imu_kinematics(excitation, target, T_cam_imu, t_exposure)[0]
     T_world_target = _T_world_target(target)
     T_imu_cam = np.linalg.inv(T_cam_imu)
     corners, ids = [], []
-    for T in T_wi_exposure:
+    for t, T in zip(t_exposure, T_wi_exposure, strict=True):
         uv, i = _observe(camera, target, T @ T_imu_cam, T_world_target)
+        if rolling_shutter and len(i):
+            uv = _rolling_shutter(camera, target, excitation, T_cam_imu, T_world_target, t, uv, i, rolling_shutter)
         corners.append(uv + rng.normal(0.0, pixel_sigma, size=uv.shape) if pixel_sigma > 0 else uv)
         ids.append(i)
 

@@ -1,15 +1,18 @@
-"""Weakly observed parameters: 1-sigma beyond what a good data set reaches, with a motion hint.
+"""Weakly observed parameters and parameters the data cannot tell apart, with motion hints.
 
 The thresholds are 1-sigma values that a well-excited 20 s recording of the paper's camera
 (640 x 480, 1 rad FOV, 7 x 6 board at 0.5-1.2 m) beats comfortably; a parameter above its
-threshold is flagged, the weakest first (largest sigma / threshold).
+threshold is flagged, the weakest first (largest sigma / threshold). Correlations between
+parameters of different groups (focal length, principal point, distortion, extrinsic rotation,
+translation, time offset, biases) show trade-offs the 1-sigma alone hide: a principal-point shift
+absorbed by the camera-IMU rotation, say.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from vical.calib.result import WeakParameter
+from vical.calib.result import Correlation, WeakParameter
 from vical.geometry import CameraModel
 
 _TILT_HINT = "move closer to the target and tilt it more (30-60 deg views) so focal length separates from distance"
@@ -78,3 +81,82 @@ def weak_parameters(names: list[str], covariance: np.ndarray, camera: CameraMode
         if n in limits and s > limits[n]
     ]
     return sorted(weak, key=lambda w: -w.ratio)
+
+
+GROUPS = {
+    "focal length": ("fx", "fy"),
+    "principal point": ("cx", "cy"),
+    "distortion": ("k1", "k2", "k3", "k4", "p1", "p2"),
+    "extrinsic rotation": ("rot_x", "rot_y", "rot_z"),
+    "extrinsic translation": ("t_x", "t_y", "t_z"),
+    "time offset": ("time_offset",),
+    "accelerometer bias": ("ba_x", "ba_y", "ba_z"),
+    "gyroscope bias": ("bg_x", "bg_y", "bg_z"),
+}
+STRONG_CORRELATION = 0.9  # |rho| above which two parameters are hard to tell apart
+_PAIR_HINTS = {
+    frozenset(("principal point", "extrinsic rotation")): (
+        "show the target near every image edge and rotate about the camera's x and y axes both ways, so a "
+        "principal-point shift and a camera-IMU rotation look different"
+    ),
+    frozenset(("focal length", "extrinsic translation")): (
+        "vary the distance to the target and move along the optical axis"
+    ),
+    frozenset(("focal length", "distortion")): _BORDER_HINT,
+    frozenset(("principal point", "distortion")): _BORDER_HINT,
+    frozenset(("time offset", "extrinsic translation")): "move with faster and changing rotation rates",
+    frozenset(("time offset", "extrinsic rotation")): "move with faster and changing rotation rates",
+    frozenset(("extrinsic translation", "accelerometer bias")): (
+        "rotate more about all axes and hold the sensor in several orientations relative to gravity"
+    ),
+}
+
+
+def group_of(name: str) -> str | None:
+    return next((group for group, names in GROUPS.items() if name in names), None)
+
+
+def correlations(names: list[str], covariance: np.ndarray, limit: int = 5) -> list[Correlation]:
+    """The ``limit`` strongest correlations between parameters of different groups, strongest first.
+
+    Args:
+        names: parameter names (P,); covariance: (P, P) their covariance.
+    """
+    sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rho = covariance / np.outer(sigma, sigma)
+    pairs = []
+    for i, a in enumerate(names):
+        for j in range(i + 1, len(names)):
+            ga, gb = group_of(a), group_of(names[j])
+            if ga is not None and gb is not None and ga != gb and np.isfinite(rho[i, j]):
+                pairs.append((abs(rho[i, j]), a, names[j], ga, gb, float(rho[i, j])))
+    pairs.sort(key=lambda p: -p[0])
+    return [
+        Correlation(a, b, value, _PAIR_HINTS.get(frozenset((ga, gb)), _GENERIC_PAIR_HINT))
+        for _, a, b, ga, gb, value in pairs[:limit]
+    ]
+
+
+_GENERIC_PAIR_HINT = "record more varied motion: rotate and translate along every axis, near and far"
+
+
+def correlation_warnings(found: list[Correlation]) -> list[str]:
+    """Plain-language notes on pairs correlated beyond ``STRONG_CORRELATION``."""
+    return [
+        f"{c.a} and {c.b} are strongly correlated (rho = {c.rho:+.2f}): this data can hardly tell them apart; {c.hint}"
+        for c in found
+        if abs(c.rho) >= STRONG_CORRELATION
+    ]
+
+
+def unobservable_warnings(names: list[str], covariance: np.ndarray) -> list[str]:
+    """A note naming the parameters whose uncertainty could not be computed (NaN variance), with hints."""
+    free = [n for n, v in zip(names, np.diag(covariance), strict=True) if not np.isfinite(v)]
+    if not free:
+        return []
+    hints = "; ".join(dict.fromkeys(hint(n) for n in free))
+    return [
+        f"the data do not determine {', '.join(free)} (the information matrix is singular): their estimates are "
+        f"kept but their uncertainty is unknown (NaN); {hints}"
+    ]

@@ -34,9 +34,10 @@ from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.observations import FrameObservation
 from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats
-from vical.calib.solver import joint_covariance, optimize
+from vical.calib.robust_covariance import robust_covariance, widen
+from vical.calib.solver import covariance_or_unobservable, optimize
 from vical.calib.time_alignment import align, rotation_increments
-from vical.calib.uncertainty import weak_parameters
+from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
 from vical.calib.variance import used_dof, variance_factor
 from vical.data import ImuNoise, ImuSamples, Target, seconds_since
 from vical.geometry import CameraModel, invert_transform, make_transform, skew
@@ -52,6 +53,8 @@ MAX_ROUNDS = 3
 REWEIGHT_TOLERANCE = 1.15
 MAX_REWEIGHTS = 2
 IMU_NOISE_WARNING = 2.0  # tell the user when the IMU's noise is off by more than this factor
+CLUSTER_SECONDS = 0.5  # [s] time windows of the cluster-robust covariance
+WIDENING_WARNING = 2.0  # tell the user when a 1-sigma was widened by more than this factor
 IMU_RESIDUAL_DIM = 15  # per CombinedImuFactor: rotation, velocity, position, accel and gyro bias changes
 MIN_GAP_WARNING = 0.5  # [s] a stretch without target views this long (and ...
 GAP_WARNING_FACTOR = 5.0  # ... this many typical frame intervals) is reported
@@ -404,11 +407,27 @@ def _extrinsic_jacobian(T_cam_imu: np.ndarray) -> np.ndarray:
     return J
 
 
+def _clusters(g: _Graph, num_factors: int) -> np.ndarray:
+    """The time window (``CLUSTER_SECONDS``) of every factor of the graph; -1 for the bias prior."""
+    window = np.floor((g.state_times - g.state_times[0]) / CLUSTER_SECONDS).astype(np.int64)
+    clusters = np.full(num_factors, -1, dtype=np.int64)
+    clusters[: len(g.imu_factors)] = window[:-1]  # IMU factor n joins states n and n + 1
+    clusters[g.first_corner_factor :] = window  # corner factor n: the frame of state n
+    return clusters
+
+
 def _parameter_covariance(g: _Graph, values: gtsam.Values, est: _Estimate, joint: bool, fixed_offset: bool):
-    """(P, P) covariance in the order of the result's parameter names; a fixed time offset gets zero variance."""
+    """(P, P) covariance in the order of the result's parameter names and its widening (P,) over the noise model's.
+
+    The noise model's covariance widened wherever the cluster-robust one (``vical.calib.robust_covariance``)
+    is larger; a fixed time offset gets zero variance.
+    """
     offset_keys = [] if fixed_offset else [D_KEY]
     keys = ([K_KEY] if joint else []) + [E_KEY, *offset_keys, _key("b", 0)]
-    cov = joint_covariance(g.graph, values, keys)
+    linear = g.graph.linearize(values)
+    model = covariance_or_unobservable(linear, values, keys)
+    robust = robust_covariance(linear, values, keys, _clusters(g, linear.size()))
+    cov = model if robust is None else widen(model, robust)
     offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
     blocks = ([np.eye(8)] if joint else []) + [_extrinsic_jacobian(est.T_cam_imu), offset_block, np.eye(6)]
     J = np.zeros((sum(b.shape[0] for b in blocks), cov.shape[0]))
@@ -416,7 +435,21 @@ def _parameter_covariance(g: _Graph, values: gtsam.Values, est: _Estimate, joint
     for b in blocks:
         J[r : r + b.shape[0], c : c + b.shape[1]] = b
         r, c = r + b.shape[0], c + b.shape[1]
-    return J @ cov @ J.T
+    final, noise_model = J @ cov @ J.T, J @ model @ J.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        widening = np.sqrt(np.diag(final) / np.diag(noise_model))
+    return final, np.where(np.isfinite(widening), widening, 1.0)
+
+
+def _widening_warning(names: list[str], widening: np.ndarray) -> list[str]:
+    wide = [(n, w) for n, w in zip(names, widening, strict=True) if w > WIDENING_WARNING]
+    if not wide:
+        return []
+    listing = ", ".join(f"{n} {w:.1f}x" for n, w in sorted(wide, key=lambda x: -x[1]))
+    return [
+        "the parameters move more with the data over time than the noise model explains (unmodelled effects such "
+        f"as a rolling shutter or detector biases): their 1-sigma were widened to match ({listing})"
+    ]
 
 
 def _reprojection(problem: _Problem, g: _Graph, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
@@ -450,8 +483,11 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
     joint = task == "joint"
     values = solution.values
     camera = problem.camera
-    covariance = _parameter_covariance(g, values, est, joint, not problem.options.estimate_time_offset)
+    covariance, widening = _parameter_covariance(g, values, est, joint, not problem.options.estimate_time_offset)
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
+    found = correlations(names, covariance)
+    problem.warnings += _widening_warning(names, widening) + correlation_warnings(found)
+    problem.warnings += unobservable_warnings(names, covariance)
     estimate = np.concatenate(
         ([camera.intrinsics, camera.dist] if joint else [])
         + [np.zeros(3), est.T_cam_imu[:3, 3], [est.tau0], est.accel_bias, est.gyro_bias]
@@ -470,6 +506,7 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
         estimate=estimate,
         covariance=covariance,
         weak_parameters=weak_parameters(names, covariance, camera),
+        correlations=found,
         reprojection=ResidualStats.of(residuals),
         reprojection_residuals=residuals,
         reprojection_frames=frame_index,
