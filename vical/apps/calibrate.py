@@ -66,6 +66,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--huber", type=float, default=None, help="Huber kernel width in sigmas (robust to outliers)")
     p.add_argument("--max-time-offset", type=float, default=0.1, help="time-offset search half-width [s]")
     p.add_argument("--fixed-time-offset", action="store_true", help="do not estimate the time offset")
+    p.add_argument(
+        "--frame-stride", type=int, default=1, help="use every N-th frame with a target view (thins long recordings)"
+    )
+    p.add_argument(
+        "--memory-limit", type=float, default=4000.0, help="[MB] refuse a solve that would need more (default 4000)"
+    )
     p.add_argument("--out", default="calibration", help="output directory (default: ./calibration)")
     p.add_argument("--no-report", action="store_true", help="skip the PNG/PDF plots")
     return p
@@ -159,15 +165,21 @@ def _imu_noise(args, rec: Recording) -> ImuNoise:
 
 def run(args: argparse.Namespace) -> CalibrationResult:
     """Calibrate as the parsed arguments say, write the outputs and print the summary."""
+    options = ViOptions(  # first: a bad option fails before the recording is read
+        estimate_time_offset=not args.fixed_time_offset,
+        max_time_offset=args.max_time_offset,
+        huber_k=args.huber,
+        frame_stride=args.frame_stride,
+        memory_limit_mb=args.memory_limit,
+    )
     rec, seen = load_source(args)
     camera, T_guess, shift = _known_intrinsics(args)
     size = _image_size(args, rec, camera, seen)
-    options = ViOptions(
-        estimate_time_offset=not args.fixed_time_offset, max_time_offset=args.max_time_offset, huber_k=args.huber
-    )
     common = {"initial_T_cam_imu": T_guess, "initial_time_offset": shift or 0.0, "options": options}
     if args.task == "intrinsic":
-        result = calibrate_intrinsics(rec.frames, rec.target, args.model, size, camera, huber_k=args.huber)
+        result = calibrate_intrinsics(
+            rec.frames, rec.target, args.model, size, camera, huber_k=args.huber, frame_stride=args.frame_stride
+        )
         _write_outputs(Path(args.out), result, rec, args, None)
         return result
     if args.task == "extrinsic" and camera is None:

@@ -68,8 +68,9 @@ def calibrate_joint(
     start = time.perf_counter()
     opts = options or ViOptions()
     intrinsic = calibrate_intrinsics(
-        frames, target, model, image_size_px, initial_camera, opts.pixel_sigma, opts.huber_k
-    )
+        frames, target, model, image_size_px, initial_camera, opts.pixel_sigma, opts.huber_k,
+        frame_stride=opts.frame_stride,
+    )  # fmt: skip
     observations = collect_observations(frames, target)
     return run_visual_inertial(
         "joint", observations, imu, target, intrinsic.camera, imu_noise or ImuNoise(), initial_T_cam_imu,
@@ -97,8 +98,9 @@ def calibrate_two_stage(
     start = time.perf_counter()
     opts = options or ViOptions()
     intrinsic = calibrate_intrinsics(
-        intrinsic_frames or frames, target, model, image_size_px, None, opts.pixel_sigma, opts.huber_k
-    )
+        intrinsic_frames or frames, target, model, image_size_px, None, opts.pixel_sigma, opts.huber_k,
+        frame_stride=opts.frame_stride,
+    )  # fmt: skip
     extrinsic = calibrate_extrinsics(
         frames, imu, target, intrinsic.camera, imu_noise, initial_T_cam_imu, initial_time_offset, opts
     )

@@ -118,6 +118,7 @@ def calibrate_intrinsics(
     pixel_sigma: float | None = None,
     huber_k: float | None = None,
     max_iterations: int = 50,
+    frame_stride: int = 1,
 ) -> CalibrationResult:
     """Calibrate the camera's intrinsics and distortion from target observations.
 
@@ -130,10 +131,13 @@ def calibrate_intrinsics(
         pixel_sigma: [px] corner noise; None estimates it from the residuals and scales the covariance.
         huber_k: Huber kernel width in sigmas (None: plain least squares).
         max_iterations: Levenberg-Marquardt iterations.
+        frame_stride: use every ``frame_stride``-th frame with a target view (1: all).
     """
     start = time.perf_counter()
     check_model(model)
-    observations = collect_observations(frames, target)
+    if not (isinstance(frame_stride, int) and frame_stride >= 1):
+        raise CalibrationError(f"frame_stride must be an integer >= 1, got {frame_stride!r}")
+    observations = collect_observations(frames, target)[::frame_stride]
     if image_size_px is None and initial_camera_guess is not None:
         image_size_px = (initial_camera_guess.width, initial_camera_guess.height)
     size = image_size(frames, image_size_px)

@@ -1,8 +1,9 @@
-"""Wrong detections: corners far from where the fitted target pose puts them, and frames that fit no pose.
+"""Outliers: corners far from where the fitted target pose puts them, and frames that fit no pose.
 
 Real detectors return a few bad corners (a reflection mistaken for a junction, a tag decoded on
-the wrong board) and, rarely, frames whose ids are scrambled. Least squares lets each of them
-pull the whole solution, so they are removed before the final solve:
+the wrong board), corner noise with heavier tails than a Gaussian's and, rarely, frames whose ids
+are scrambled. Least squares lets each of them pull the whole solution, so they are removed
+before the final solve, and the result says how many, by which threshold and in which frames:
 
 - the corner noise is estimated robustly from the median residual norm (for 2-D Gaussian noise of
   sigma per axis the norm is Rayleigh distributed with median ``sigma sqrt(2 ln 2)``);
@@ -64,19 +65,28 @@ def robust_pose(
     return None
 
 
-def rejection_warnings(num_frames: int, dropped: list[int], corners: dict[int, int], threshold: float) -> list[str]:
-    """Plain-language notes on dropped frames (their recording indices) and rejected corners per frame."""
+def rejection_warnings(
+    observations: list[FrameObservation], dropped: list[int], corners: dict[int, int], threshold: float, sigma: float
+) -> list[str]:
+    """Plain-language notes on outlier corners (how many, by which rule, in which frames) and dropped frames."""
     notes = []
+    if corners:
+        rejected, total = sum(corners.values()), sum(len(o.ids) for o in observations)
+        rule = (
+            f"{OUTLIER_SIGMAS:g} x the corner noise measured robustly from all residuals ({sigma:.3g} px)"
+            if threshold > MIN_OUTLIER_PX
+            else f"the {MIN_OUTLIER_PX:g} px floor (the measured corner noise is only {sigma:.3g} px)"
+        )
+        notes.append(
+            f"{rejected} of {total} corners ({100 * rejected / total:.2g} %) in {len(corners)} frames are outliers and "
+            f"were left out: their reprojection error after fitting the frame's pose exceeds {threshold:.2f} px, "
+            f"{rule}; frames {_listing(sorted(corners))}"
+        )
     if dropped:
         notes.append(
-            f"{len(dropped)} of {num_frames} frames with detections fit no target pose "
-            f"(wrong or scrambled detections) and were dropped: frames {_listing(dropped)}"
-        )
-    if corners:
-        notes.append(
-            f"{sum(corners.values())} corners in {len(corners)} frames were rejected as wrong detections "
-            f"(reprojection error > {threshold:.2f} px after fitting the frame's pose): "
-            f"frames {_listing(sorted(corners))}"
+            f"{len(dropped)} of {len(observations)} frames with detections fit no target pose even without their "
+            f"worst {MAX_OUTLIER_FRACTION:.0%} of corners (scrambled ids, or another target than the one given?) and "
+            f"were dropped: frames {_listing(dropped)}"
         )
     return notes
 
@@ -123,7 +133,8 @@ def reject_outliers(
     if not poses:
         return Rejection(list(observations), {}, [], MIN_OUTLIER_PX)
     norms = {k: np.linalg.norm(observations[k].residuals(camera, T), axis=1) for k, T in poses.items()}
-    threshold = max(OUTLIER_SIGMAS * robust_sigma_of_norms(np.concatenate(list(norms.values()))), MIN_OUTLIER_PX)
+    sigma = robust_sigma_of_norms(np.concatenate(list(norms.values())))
+    threshold = max(OUTLIER_SIGMAS * sigma, MIN_OUTLIER_PX)
     cleaned, kept, dropped, rejected = list(observations), {}, [], {}
     for k, obs in enumerate(observations):
         if k in norms and norms[k].max() <= threshold:
@@ -139,5 +150,5 @@ def reject_outliers(
         if not inliers.all():
             cleaned[k] = keep_inliers(obs, inliers)
             rejected[obs.index] = int((~inliers).sum())
-    notes = rejection_warnings(len(observations), dropped, rejected, threshold)
+    notes = rejection_warnings(observations, dropped, rejected, threshold, sigma)
     return Rejection(cleaned, kept, notes, threshold)

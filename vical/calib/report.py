@@ -18,9 +18,10 @@ from vical.geometry import matrix_to_euler
 from vical.io.atomic import atomic_file, write_text_atomic
 
 UNCERTAINTY_NOTE = (
-    "1-sigma values come from the factor graph's marginal covariance under the stated noise models; "
-    "on real data unmodelled effects (rolling shutter, board flatness, IMU axis misalignment) make "
-    "them optimistic, the extrinsic translation most of all."
+    "1-sigma values come from the factor graph's marginal covariance, each sensor weighted by the noise its "
+    "residuals show, and widened wherever the parameters move more with the data over time than the noise "
+    "model explains (cluster-robust covariance over 0.5 s windows). Errors that stay the same over the whole "
+    "recording (a wrong board size, a bent board) are not covered."
 )
 
 

@@ -83,6 +83,14 @@ def _damped(linear: gtsam.GaussianFactorGraph, variables: list[tuple[int, int]],
     return damped
 
 
+def _solve_linear(system: gtsam.GaussianFactorGraph, ordering: gtsam.Ordering) -> gtsam.VectorValues:
+    """The least-squares step: Cholesky, or QR where the information spans too many decades for it."""
+    try:
+        return system.optimize(ordering)
+    except RuntimeError:
+        return system.eliminateMultifrontal(ordering, gtsam.EliminateQR).optimize()
+
+
 def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, max_iterations: int) -> Solution:
     error = float(graph.error(values))
     if not np.isfinite(error):
@@ -94,7 +102,7 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
         if ordering is None:
             ordering = gtsam.Ordering.ColamdGaussianFactorGraph(linear)
         while lam <= LAMBDA_UPPER_BOUND:
-            candidate = values.retract(_damped(linear, variables, lam).optimize(ordering))
+            candidate = values.retract(_solve_linear(_damped(linear, variables, lam), ordering))
             new_error = float(graph.error(candidate))
             if np.isfinite(new_error) and new_error < error:
                 break

@@ -206,8 +206,8 @@ def read_imu_yaml(path: str | os.PathLike) -> ImuNoise:
     values = {}
     for field_name, key in keys.items():
         value = _floats(entry, key, 1, where)[0]
-        if value <= 0:
-            raise KalibrFormatError(f"{where}: {key} must be positive, got {value}")
+        if not (np.isfinite(value) and value > 0):
+            raise KalibrFormatError(f"{where}: {key} must be a positive finite number, got {value}")
         values[field_name] = float(value)
     return ImuNoise(**values)
 

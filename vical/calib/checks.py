@@ -1,0 +1,69 @@
+"""Checks of a calibration's inputs before the solve: the IMU noise settings and the memory a recording needs."""
+
+from __future__ import annotations
+
+import math
+
+from vical.calib.errors import CalibrationError
+from vical.data import ImuNoise
+
+# Kalibr's imu.yaml keys of the noise settings, and the paper's IMU (a typical MEMS unit) for scale.
+NOISE_KEYS = {
+    "accel_noise_density": "accelerometer_noise_density",
+    "accel_random_walk": "accelerometer_random_walk",
+    "gyro_noise_density": "gyroscope_noise_density",
+    "gyro_random_walk": "gyroscope_random_walk",
+}
+TYPICAL = ImuNoise()
+PLAUSIBLE_RANGE = (0.01, 1000.0)  # x the typical value: outside it, no real IMU (or the wrong unit)
+
+# Peak memory of a camera-IMU solve, measured with experiments/bench_calibrator.py (real-size cases):
+# about 1 kB per corner (whitened Jacobians, the batched projection pass, the robust covariance) and
+# 25 kB per frame (its state, IMU factor and GTSAM's elimination).
+BYTES_PER_CORNER = 1000
+BYTES_PER_FRAME = 25_000
+
+
+def check_imu_noise(noise: ImuNoise) -> list[str]:
+    """Refuse noise settings that are zero, negative or not finite; warn about implausible ones.
+
+    Returns:
+        Plain-language warnings (the solve still runs: each sensor is weighted by the noise its
+        residuals show, ``vical.calib.variance``).
+
+    Raises:
+        CalibrationError: naming the imu.yaml key of a value that cannot be a noise density.
+    """
+    warnings = []
+    for field, key in NOISE_KEYS.items():
+        value, typical = getattr(noise, field), getattr(TYPICAL, field)
+        if not (math.isfinite(value) and value > 0):
+            raise CalibrationError(
+                f"IMU noise setting {key} must be a positive finite number, got {value}; set it in the imu.yaml "
+                f"(a MEMS IMU: about {typical:g})"
+            )
+        ratio = value / typical
+        if not PLAUSIBLE_RANGE[0] <= ratio <= PLAUSIBLE_RANGE[1]:
+            warnings.append(
+                f"IMU noise setting {key} = {value:g} is {ratio:.3g}x a typical MEMS IMU's ({typical:g}): check its "
+                "unit and value in the imu.yaml; the solve weights the IMU by the noise its residuals show anyway"
+            )
+    return warnings
+
+
+def estimated_memory_mb(frames: int, corners: int) -> float:
+    """Peak extra memory [MB] of a camera-IMU solve of ``frames`` frames with ``corners`` corners in all."""
+    return (BYTES_PER_CORNER * corners + BYTES_PER_FRAME * frames) / 1e6
+
+
+def check_memory(frames: int, corners: int, limit_mb: float, stride: int) -> None:
+    """Refuse, before solving, a recording that would need more than ``limit_mb``; name the option that thins it."""
+    need = estimated_memory_mb(frames, corners)
+    if need <= limit_mb:
+        return
+    thin = math.ceil(stride * need / limit_mb)
+    raise CalibrationError(
+        f"the recording's {frames} frames with {corners} corners need about {need:.0f} MB to calibrate, more than the "
+        f"limit of {limit_mb:.0f} MB; use every {thin}th frame (frame_stride={thin}, vical-calibrate --frame-stride "
+        f"{thin}) or raise the limit (memory_limit_mb, --memory-limit)"
+    )
