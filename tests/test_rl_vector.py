@@ -47,8 +47,9 @@ def vector_config(run_dir, env: dict = FRAGILE, **train_settings) -> dict:
 def test_same_seed_and_num_envs_give_identical_parameters(tmp_path):
     first = train(vector_config(tmp_path / "a"))
     second = train(vector_config(tmp_path / "b"))
-    # 600 transitions from 2 envs of 50-step episodes; one update per transition after the 100 warm-up steps
-    assert (first.steps, first.episodes, first.updates) == (600, 12, 500)
+    # 600 transitions from 2 envs of 50-step episodes; one update per transition once more than the 100 warm-up
+    # transitions are stored, run while the envs make the next ones: 2 x 249 vector steps (pre-step 102 .. 598)
+    assert (first.steps, first.episodes, first.updates) == (600, 12, 498)
     assert_same_parameters(parameters(first.agent), parameters(second.agent))
     other = train(vector_config(tmp_path / "c") | {"seed": 1})
     assert not torch.equal(

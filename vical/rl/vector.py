@@ -104,6 +104,7 @@ class RayVectorEnv:
         actor = ray.remote(num_cpus=1)(_EnvActor)
         self.actors = [actor.remote(factory) for _ in range(num_envs)]
         self.num_envs = num_envs
+        self._pending: list | None = None
         self.single_observation_space, self.single_action_space = ray.get(self.actors[0].spaces.remote())
 
     def reset(self, seed: Sequence[int] | None = None, options: dict | None = None):
@@ -116,8 +117,11 @@ class RayVectorEnv:
                         for i in range(self.num_envs)])  # fmt: skip
         return obs, _stack_infos([results[i][1] if i in results else {} for i in range(self.num_envs)])
 
-    def step(self, actions: np.ndarray):
-        results = self._ray.get([a.step.remote(act) for a, act in zip(self.actors, actions, strict=True)])
+    def step_async(self, actions: np.ndarray) -> None:
+        self._pending = [a.step.remote(act) for a, act in zip(self.actors, actions, strict=True)]
+
+    def step_wait(self):
+        results, self._pending = self._ray.get(self._pending), None
         obs, rewards, terminated, truncated, infos = zip(*results, strict=True)
         return (np.stack(obs), np.array(rewards), np.array(terminated), np.array(truncated), _stack_infos(infos))
 

@@ -1,10 +1,11 @@
 """Training with ``train.num_envs`` environments in worker processes (``vical.rl.vector``).
 
 The loop steps every env at once: one action per env (uniform during warm-up, else the policy's
-sample for that env's observation, in env order), one vector step (the envs run in parallel, an
-episode's terminal work included), then the ``num_envs`` transitions go into the buffer in env
-order and ``num_envs * updates_per_step`` gradient updates follow, so ``updates_per_step`` keeps
-its meaning per collected transition. An env whose episode ended is reset before the next step
+sample for that env's observation, in env order); the envs step in their workers (an episode's
+terminal work included) while the learner does ``num_envs * updates_per_step`` gradient updates on
+the transitions stored before (once more than ``warmup_steps`` are stored), so ``updates_per_step``
+keeps its meaning per collected transition and collecting overlaps with learning; then the
+``num_envs`` new transitions go into the buffer in env order. An env whose episode ended is reset before the next step
 with a seed drawn from the trainer's generator. Steps count transitions: logging, evaluation and
 checkpoints happen when the count crosses a multiple of their interval, and a run may end up to
 ``num_envs - 1`` transitions past ``total_steps``.
@@ -68,9 +69,8 @@ class VectorTrainer(Trainer):
         try:
             episodes = self._resume_episodes() if self._restored_episodes else self._start(range(self.num_envs), None)
             while self.step < t.total_steps:
+                before = self.step
                 done = self._vector_step(episodes)
-                before = self.step - self.num_envs
-                self._updates()
                 self._periodic(before)
                 bar.update(self.num_envs)
                 for i in np.flatnonzero(done):
@@ -104,7 +104,11 @@ class VectorTrainer(Trainer):
         return episodes
 
     def _vector_step(self, episodes: list[RunningEpisode]) -> np.ndarray:
-        """One action per env, one step of all of them, the transitions stored in env order; which envs ended."""
+        """Act in every env, learn while they step, store their transitions in env order; which envs ended.
+
+        The gradient updates of this vector step run while the envs step in their workers (on the
+        transitions collected before it), so learning and collecting overlap.
+        """
         warmup = self.step < self.settings.train.warmup_steps
         actions = [
             self.rng.uniform(-1.0, 1.0, self.act_dim).astype(np.float32)
@@ -113,7 +117,9 @@ class VectorTrainer(Trainer):
             for e in episodes
         ]
         env_actions = np.stack([self.actions.to_env(a) for a in actions])
-        next_obs, rewards, terminated, truncated, infos = self._guarded(lambda: self.vec.step(env_actions))
+        self._guarded(lambda: self.vec.step_async(env_actions))
+        self._updates()
+        next_obs, rewards, terminated, truncated, infos = self._guarded(self.vec.step_wait)
         for i, (episode, info) in enumerate(zip(episodes, per_env_infos(infos, self.num_envs), strict=True)):
             obs = self._checked_obs(next_obs[i], "observation")
             if not np.isfinite(rewards[i]):
@@ -132,6 +138,7 @@ class VectorTrainer(Trainer):
         return np.asarray(terminated) | np.asarray(truncated)
 
     def _updates(self) -> None:
+        """``num_envs * updates_per_step`` updates once more than ``warmup_steps`` transitions are stored."""
         t = self.settings.train
         if self.step > t.warmup_steps:
             for _ in range(t.updates_per_step * self.num_envs):
