@@ -17,6 +17,7 @@ FORBIDDEN = {
     "rl": {"sim", "calib", "env", "policies", "apps"},
     "env": {"rl", "policies", "apps"},
     "policies": {"apps"},
+    "parallel": {"geometry", "data", "io", "sim", "calib", "env", "rl", "policies", "apps"},  # generic: config only
 }
 
 

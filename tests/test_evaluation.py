@@ -7,10 +7,13 @@ from configs import env_config
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.tasks import run_task
 from vical.config import ConfigError
+from vical.parallel import ParallelConfig
+from vical.policies.base import Policy
 from vical.policies.evaluation import (
     EpisodeRow,
     PolicyEvaluator,
     PolicySpec,
+    evaluate_policies,
     evaluate_policy,
     instantiate_policy,
     run_trajectory,
@@ -119,3 +122,41 @@ def test_policy_specs_are_checked():
         instantiate_policy({"_target_": "builtins.dict"}, "p")
     with pytest.raises(ConfigError, match=r"policy 'p': .*handcrafted_policy failed: .*lengths"):
         instantiate_policy({**SHORT, "task": "intrinsic", "length": "medium"}, "p")
+
+
+RANDOM_SHORT = PolicySpec(
+    "random moving (3 steps)",
+    {"_target_": "vical.policies.random_policy.RandomMovingPolicy", "max_steps": 3},
+    {"_target_": "vical.policies.random_policy.RandomMovingPolicy", "max_steps": 3},
+)
+
+
+def _without_wall_time(rows: list[EpisodeRow]) -> list[dict]:
+    return [{k: v for k, v in vars(r).items() if k != "calib_time_s"} for r in rows]
+
+
+def test_parallel_evaluation_gives_the_serial_rows():
+    """Episodes on two worker processes: the same rows in the same order (all but the wall time of the solves)."""
+    specs, env, seeds = [HANDCRAFTED_SHORT, RANDOM_SHORT], env_config("intrinsic", "paper"), [0, 1, 2]
+    serial = evaluate_policies(specs, env, seeds, budgets=(0.3,), progress=False)
+    parallel = evaluate_policies(specs, env, seeds, budgets=(0.3,), parallel=ParallelConfig(2), progress=False)
+    for s, p in zip(serial, parallel, strict=True):
+        assert len(s.rows) >= len(seeds) and _without_wall_time(s.rows) == _without_wall_time(p.rows)
+    assert any(r.budget_m == 0.3 for r in serial[0].rows)  # budget rows too
+
+
+class BrokenPolicy(Policy):
+    """A policy whose action has the wrong length: the env's step raises in the middle of the episode."""
+
+    name = "broken"
+
+    def act(self, obs: np.ndarray, env) -> np.ndarray:
+        return np.zeros(5)
+
+
+def test_an_episode_that_raises_becomes_a_failed_row_naming_its_seed_and_the_rest_runs():
+    broken = PolicySpec("broken", {"_target_": "test_evaluation.BrokenPolicy"}, None)
+    evaluation = evaluate_policies([broken, HANDCRAFTED_SHORT], env_config("intrinsic", "paper"), [4], progress=False)
+    (row,) = evaluation[0].rows
+    assert row.failed and row.seed == 4 and row.error.startswith("the episode of sensor seed 4 failed: ")
+    assert not evaluation[1].rows[0].failed  # the other policy's episode ran

@@ -7,11 +7,14 @@ traceback), and report user errors as ``<app>: error: <message>`` with exit stat
 
 from __future__ import annotations
 
+import importlib.util
 import sys
 from typing import NoReturn
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
+
+from vical.config import ConfigError
 
 EXIT_USER_ERROR = 2
 
@@ -37,3 +40,25 @@ def override_value(argv: list[str], key: str) -> str | None:
             value = None if override.is_sweep_override() else override.value()
             return value if isinstance(value, str) and value else None
     return None
+
+
+# Hydra launcher choices -> (module of the plugin, what to install).
+LAUNCHER_PLUGINS = {
+    "joblib": ("hydra_plugins.hydra_joblib_launcher", "pip install hydra-joblib-launcher"),
+    "submitit_slurm": ("hydra_plugins.hydra_submitit_launcher", "pip install 'vical[slurm]'"),
+    "submitit_local": ("hydra_plugins.hydra_submitit_launcher", "pip install 'vical[slurm]'"),
+    "vical_slurm": ("hydra_plugins.hydra_submitit_launcher", "pip install 'vical[slurm]'"),
+    "ray": ("hydra_plugins.hydra_ray_launcher", "pip install hydra-ray-launcher (in its own environment)"),
+    "ray_aws": ("hydra_plugins.hydra_ray_launcher", "pip install hydra-ray-launcher (in its own environment)"),
+    "vical_ray": ("hydra_plugins.hydra_ray_launcher", "pip install hydra-ray-launcher (in its own environment)"),
+}
+
+
+def check_launcher(argv: list[str]) -> None:
+    """Refuse in one line a ``hydra/launcher=`` whose plugin is not installed, saying what to install."""
+    choice = override_value(argv, "hydra/launcher")
+    if choice not in LAUNCHER_PLUGINS:
+        return  # the basic launcher, or a name Hydra itself will refuse with the list of choices
+    module, install = LAUNCHER_PLUGINS[choice]
+    if importlib.util.find_spec(module) is None:
+        raise ConfigError(f"hydra/launcher={choice} needs a Hydra launcher plugin that is not installed: {install}")

@@ -26,25 +26,26 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
-from vical.apps.cli import fail, override_value
+from vical.apps.cli import check_launcher, fail, override_value
 from vical.config import ConfigError, require
 from vical.io.atomic import write_text_atomic
+from vical.parallel import ParallelConfig, WorkerCrashed
 from vical.policies.effort import BudgetSummary, budget_label, significance_lines, summarize_effort, write_effort_figure
 from vical.policies.evaluation import (
     COLUMNS,
+    EPISODE_FAILED,
     Evaluation,
-    PolicyEvaluator,
     PolicySpec,
     Summary,
     check_budgets,
-    run_evaluator,
+    evaluate_policies,
 )
 from vical.policies.yardstick import PROTOCOL_KEYS, fingerprint
 
 # An absolute path: the console script imports this module from anywhere.
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 POLICY_DIR = CONF_DIR / "policy"
-USER_ERRORS = (ConfigError, FileNotFoundError, FileExistsError, OmegaConfBaseException)
+USER_ERRORS = (ConfigError, FileNotFoundError, FileExistsError, OmegaConfBaseException, WorkerCrashed)
 APP = "vical-evaluate"
 RESULTS, SUMMARY, FIGURE = "results.csv", "summary.md", "error_vs_effort.png"
 
@@ -241,9 +242,12 @@ def evaluate(cfg: DictConfig, chosen: str | None) -> tuple[Path, list[Summary], 
     specs = [PolicySpec.from_config(c, "policy") for c in configs]
     reference = reference_policy(cfg, specs, configs)
     paper = bool(cfg.get("paper_protocol", False))
-    # Build every policy before the first episode, so a bad spec (a missing run) fails in seconds.
-    evaluators = [PolicyEvaluator(spec, env_cfg, budgets, paper) for spec in specs]
-    evaluations = [run_evaluator(e, seeds, bool(cfg.progress)) for e in evaluators]
+    parallel = ParallelConfig.from_config(cfg.get("parallel"))
+    evaluations = evaluate_policies(specs, env_cfg, seeds, budgets, paper, parallel, bool(cfg.progress))
+    for evaluation in evaluations:
+        for row in evaluation.rows:
+            if row.error.startswith(EPISODE_FAILED):
+                print(f"warning: {row.policy}: {row.error}", file=sys.stderr)
     summaries = [e.summary for e in evaluations]
     effort = summarize_effort({e.summary.policy: e.rows for e in evaluations}, budgets, reference)
     write_text_atomic(out / RESULTS, results_csv(evaluations))
@@ -287,13 +291,14 @@ def hydra_main(cfg: DictConfig) -> None:
 
 
 def main() -> None:
-    """Console entry point: refuse an unknown ``policy=`` choice in one line before Hydra composes."""
+    """Console entry point: an unknown ``policy=`` or a missing launcher plugin is one line before Hydra composes."""
     name = override_value(sys.argv[1:], "policy")
-    if name is not None:
-        try:
+    try:
+        check_launcher(sys.argv[1:])
+        if name is not None:
             check_policy_name(name)
-        except ConfigError as err:
-            fail(APP, err)
+    except ConfigError as err:
+        fail(APP, err)
     hydra_main()
 
 

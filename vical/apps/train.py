@@ -22,7 +22,7 @@ from hydra.core.override_parser.types import Override, OverrideType
 from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf
 
-from vical.apps.cli import fail, override_value
+from vical.apps.cli import check_launcher, fail, override_value
 from vical.config import ConfigError
 from vical.rl.checkpoint import IncompatibleCheckpointError
 from vical.rl.trainer import TrainingDivergedError, train
@@ -119,13 +119,14 @@ def hydra_main(cfg: DictConfig) -> None:
 
 
 def main() -> None:
-    """Console entry point: check a ``resume=`` path before Hydra creates its run directory, then run."""
+    """Console entry point: check a ``resume=`` path and the launcher plugin before Hydra starts, then run."""
     resume = override_value(sys.argv[1:], "resume")
-    if resume is not None:
-        try:
+    try:
+        check_launcher(sys.argv[1:])
+        if resume is not None:
             check_resume_dir(resume)
-        except ConfigError as err:
-            fail(APP, err)
+    except ConfigError as err:
+        fail(APP, err)
     hydra_main()
 
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import json
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -38,10 +39,12 @@ from vical.calib.tasks import CalibrationTask, TaskOutcome, run_task, task_score
 from vical.config import ConfigError, require
 from vical.data import CameraFrames, Recording, SensorTruth
 from vical.env.calibration import CalibrationEnv
+from vical.parallel import ParallelConfig, connect_ray, imap_ordered
 from vical.policies.base import Policy
 from vical.sim.sampling import mean_sensor
 
 SPEC_KEYS = ("intrinsic", "extrinsic", "joint")
+EPISODE_FAILED = "the episode of sensor seed"  # how a failed row of an episode that raised begins
 END = math.inf  # the budget of a row that calibrates the whole episode
 
 
@@ -322,6 +325,7 @@ class PolicyEvaluator:
         self.spec = spec
         self.task = CalibrationTask.from_config(env_cfg["task"])
         self.budgets = check_budgets(budgets)
+        self.paper_protocol = paper_protocol
         self.policies = [instantiate_policy(s, spec.name) for s in spec.for_task(self.task, paper_protocol)]
         self.envs = [build_env(env_cfg, p) for p in self.policies]
         for policy, env in zip(self.policies, self.envs, strict=True):
@@ -394,17 +398,104 @@ def summarize(name: str, rows: Sequence[EpisodeRow]) -> Summary:
     )
 
 
-def run_evaluator(evaluator: PolicyEvaluator, seeds: Sequence[int], progress: bool = True) -> Evaluation:
-    """One episode per sensor seed with a built evaluator (closed at the end); rows and the table summary."""
+@dataclass(frozen=True)
+class EpisodeTask:
+    """One episode to evaluate, self-contained so that any worker process can run it (picklable).
+
+    Attributes:
+        spec: the policy; env_cfg: the resolved calibration env config; budgets: path budgets [m];
+        paper_protocol: the paper's protocol; seed: the env reset seed (the sensor).
+    """
+
+    spec: PolicySpec
+    env_cfg: Mapping[str, Any]
+    budgets: tuple[float, ...]
+    paper_protocol: bool
+    seed: int
+
+    @property
+    def evaluator_key(self) -> str:
+        """What a worker's cached evaluator must match to run this episode."""
+        parts = [dataclasses.asdict(self.spec), self.env_cfg, self.budgets, self.paper_protocol]
+        return json.dumps(parts, sort_keys=True, default=str)
+
+
+# Per process: evaluators built once (their env compiles a MuJoCo model, the policy may load a network)
+# and reused for every episode of the same policy that this process runs.
+_EVALUATORS: dict[str, PolicyEvaluator] = {}
+
+
+def run_episode(task: EpisodeTask) -> list[EpisodeRow]:
+    """Evaluate one episode (in whatever process runs it); an unexpected error becomes a failed row naming the seed.
+
+    A ``CalibrationError`` already yields a failed row (``calibrate_row``); anything else that goes wrong
+    in the episode (the simulator, the policy) is reported the same way instead of ending the whole
+    evaluation.
+    """
+    evaluator = _EVALUATORS.get(task.evaluator_key)
+    if evaluator is None:
+        evaluator = _EVALUATORS[task.evaluator_key] = PolicyEvaluator(
+            task.spec, task.env_cfg, task.budgets, task.paper_protocol
+        )
+    try:
+        return evaluator.episode(task.seed)
+    except Exception as err:  # reported in the results; the evaluation goes on
+        message = f"{EPISODE_FAILED} {task.seed} failed: {type(err).__name__}: {err}"
+        return [EpisodeRow(task.spec.name, task.seed, failed=True, error=message)]
+
+
+def adopt(evaluator: PolicyEvaluator, env_cfg: Mapping[str, Any]) -> None:
+    """Let ``run_episode`` in this process use an evaluator built here already (a serial run builds it once)."""
+    task = EpisodeTask(evaluator.spec, env_cfg, evaluator.budgets, evaluator.paper_protocol, 0)
+    _EVALUATORS[task.evaluator_key] = evaluator
+
+
+def release_evaluators() -> None:
+    """Close and forget this process's cached evaluators (their envs hold simulators and renderers)."""
+    while _EVALUATORS:
+        _EVALUATORS.popitem()[1].close()
+
+
+def evaluate_policies(
+    specs: Sequence[PolicySpec],
+    env_cfg: Mapping[str, Any],
+    seeds: Sequence[int],
+    budgets: Sequence[float] = (),
+    paper_protocol: bool = False,
+    parallel: ParallelConfig | None = None,
+    progress: bool = True,
+) -> list[Evaluation]:
+    """Every policy on every sensor seed, the episodes spread over ``parallel``'s workers.
+
+    Every policy is built here first, so that a bad spec fails in seconds, not after hours of episodes.
+    The rows come back in (policy, seed) order whatever ran them: a parallel evaluation is the serial
+    one, only faster.
+    """
     if not seeds:
         raise ConfigError("episodes must be at least 1 (no seeds to evaluate)")
-    rows: list[EpisodeRow] = []
+    parallel = parallel or ParallelConfig()
+    budgets = check_budgets(budgets)
+    if parallel.backend == "ray":
+        connect_ray(parallel)  # an unreachable cluster fails now, not after the policies are built
+    evaluators = [PolicyEvaluator(spec, env_cfg, budgets, paper_protocol) for spec in specs]
     try:
-        for seed in tqdm(seeds, desc=evaluator.spec.name, unit="episode", disable=not progress):
-            rows.extend(evaluator.episode(int(seed)))
+        if parallel.serial:
+            for evaluator in evaluators:
+                adopt(evaluator, env_cfg)
+        else:
+            for evaluator in evaluators:
+                evaluator.close()
+        tasks = [EpisodeTask(spec, env_cfg, budgets, paper_protocol, int(seed)) for spec in specs for seed in seeds]
+        bar = tqdm(total=len(tasks), desc="episodes", unit="episode", disable=not progress)
+        rows: dict[str, list[EpisodeRow]] = {spec.name: [] for spec in specs}
+        for task, episode_rows in zip(tasks, imap_ordered(run_episode, tasks, parallel), strict=True):
+            rows[task.spec.name].extend(episode_rows)
+            bar.set_postfix_str(f"{task.spec.name}, sensor {task.seed}")
+            bar.update(1)
+        bar.close()
     finally:
-        evaluator.close()
-    return Evaluation(rows, summarize(evaluator.spec.name, rows))
+        release_evaluators()
+    return [Evaluation(rows[spec.name], summarize(spec.name, rows[spec.name])) for spec in specs]
 
 
 def evaluate_policy(
@@ -415,5 +506,5 @@ def evaluate_policy(
     budgets: Sequence[float] = (),
     paper_protocol: bool = False,
 ) -> Evaluation:
-    """Evaluate ``spec`` on the task of ``env_cfg`` for every sensor seed; rows and the table summary."""
-    return run_evaluator(PolicyEvaluator(spec, env_cfg, budgets, paper_protocol), seeds, progress)
+    """Evaluate ``spec`` on the task of ``env_cfg`` for every sensor seed (in this process); rows and the summary."""
+    return evaluate_policies([spec], env_cfg, seeds, budgets, paper_protocol, progress=progress)[0]

@@ -25,6 +25,10 @@ RESUMABLE_KEYS = frozenset(
         "train.plot_every_episodes",
         "train.checkpoint_every",
         "train.info_prefixes",
+        # Where the env workers run changes no number of the run (train.num_envs does, and is not here).
+        "parallel.workers",
+        "parallel.backend",
+        "parallel.ray_address",
     }
 )
 
@@ -59,9 +63,13 @@ def flatten(cfg: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return flat
 
 
+# Settings added after runs were written with the value those runs had: such a run still resumes.
+ADDED_KEYS = {"train.num_envs": 1}
+
+
 def config_differences(saved: Mapping[str, Any], current: Mapping[str, Any]) -> list[str]:
     """Lines ``key: saved -> current`` for every setting outside ``RESUMABLE_KEYS`` that differs."""
-    old, new = flatten(saved), flatten(current)
+    old, new = {**ADDED_KEYS, **flatten(saved)}, flatten(current)
     keys = sorted((set(old) | set(new)) - RESUMABLE_KEYS)
     missing = "<absent>"
     return [

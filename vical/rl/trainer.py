@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from vical.config import ConfigError, from_mapping, require, require_range
 from vical.io.atomic import write_text_atomic
+from vical.parallel import MAX_WORKERS, ParallelConfig
 from vical.rl.buffer import ReplayBuffer
 from vical.rl.checkpoint import flatten, load_checkpoint, require_compatible, save_checkpoint
 from vical.rl.logger import TrainLogger
@@ -45,7 +46,8 @@ class TrainConfig:
 
     total_steps: int = 10_000
     warmup_steps: int = 1_000  # uniform random actions and no updates before this many steps
-    updates_per_step: int = 1
+    updates_per_step: int = 1  # gradient updates per collected transition (num_envs of them per vector step)
+    num_envs: int = 1  # environments, each in a worker process when > 1 (vical.rl.vector)
     buffer_size: int = 1_000_000
     eval_every: int = 2_000
     eval_episodes: int = 5
@@ -59,6 +61,10 @@ class TrainConfig:
     def __post_init__(self) -> None:
         for name in ("total_steps", "updates_per_step", "buffer_size", "eval_episodes", "eval_max_episode_steps"):
             _require_int(f"train.{name}", getattr(self, name), 1)
+        _require_int("train.num_envs", self.num_envs, 1)
+        require(
+            self.num_envs <= MAX_WORKERS, "train.num_envs", f"at most {MAX_WORKERS} (worker processes)", self.num_envs
+        )
         for name in ("warmup_steps", "eval_every", "log_every", "plot_every_episodes", "checkpoint_every"):
             _require_int(f"train.{name}", getattr(self, name), 0)
         self.info_prefixes = list(self.info_prefixes)
@@ -80,6 +86,7 @@ class RunSettings:
     agent: SACConfig
     train: TrainConfig
     env: dict
+    parallel: ParallelConfig = field(default_factory=ParallelConfig)
 
     def effective_config(self) -> dict:
         """Every setting with defaults filled in, as plain containers (the run's config.yaml)."""
@@ -91,6 +98,7 @@ class RunSettings:
             "agent": asdict(self.agent),
             "train": asdict(self.train),
             "env": self.env,
+            "parallel": asdict(self.parallel),
         }
 
 
@@ -111,6 +119,7 @@ def parse_settings(cfg: Mapping[str, Any]) -> RunSettings:
         agent=from_mapping(SACConfig, cfg.get("agent", {}), "agent"),
         train=from_mapping(TrainConfig, cfg.get("train", {}), "train"),
         env=dict(env),
+        parallel=ParallelConfig.from_config(cfg.get("parallel")),
     )
 
 
@@ -255,32 +264,45 @@ class Trainer:
         t = self.settings.train
         if self.step > t.warmup_steps:  # as stable-baselines3: the first update follows warm-up step + 1
             for _ in range(t.updates_per_step):
-                try:
-                    self._stats = self.agent.update(self.buffer.sample(self.agent.config.batch_size, self.rng))
-                except NonFiniteLossError as err:
-                    self._diverged(err.term, err.value, self.step)
-                self.updates += 1
+                self._update()
         if t.log_every and self.step % t.log_every == 0:
             self._log_progress()
         if t.eval_every and self.step % t.eval_every == 0:
             self._evaluate()
 
+    def _update(self) -> None:
+        """One gradient update of every network on a batch sampled with the trainer's generator."""
+        try:
+            self._stats = self.agent.update(self.buffer.sample(self.agent.config.batch_size, self.rng))
+        except NonFiniteLossError as err:
+            self._diverged(err.term, err.value, self.step)
+        self.updates += 1
+
     def _end_episode(self, episode: Episode, bar: tqdm) -> None:
+        t = self.settings.train
+        self._log_episode(episode, bar)
+        if t.checkpoint_every and self.step - self.last_checkpoint_step >= t.checkpoint_every:
+            self.last_checkpoint_step = self.step
+            save_checkpoint(self._state(), self.settings.run_dir / CHECKPOINT)
+
+    def _log_episode(self, episode: Episode, bar: tqdm) -> None:
         t = self.settings.train
         self.episode += 1
         charts = {"charts/episodic_return": episode.total_reward, "charts/episodic_length": len(episode.actions)}
         self.logger.scalars(charts, self.step)
         if t.plot_every_episodes and self.episode % t.plot_every_episodes == 0:
-            self.logger.trajectory(self.env, np.stack(episode.observations), np.stack(episode.actions), self.step)
+            observations, actions = np.stack(episode.observations), np.stack(episode.actions)
+            self.logger.trajectory(self._plot_env(), observations, actions, self.step)
         bar.set_postfix(
             episode=self.episode,
             ret=f"{episode.total_reward:.1f}",
             eval="-" if self.last_eval_return is None else f"{self.last_eval_return:.1f}",
             upd_s=f"{self._rates()[1]:.0f}",
         )
-        if t.checkpoint_every and self.step - self.last_checkpoint_step >= t.checkpoint_every:
-            self.last_checkpoint_step = self.step
-            save_checkpoint(self._state(), self.settings.run_dir / CHECKPOINT)
+
+    def _plot_env(self) -> gym.Env:
+        """The env whose ``trajectory_figure`` draws the episodes (the training env)."""
+        return self.env
 
     # ---- evaluation and logging -----------------------------------------------------------------
     def _evaluate(self) -> None:
@@ -370,5 +392,13 @@ class Trainer:
 
 
 def train(cfg: Mapping[str, Any]) -> TrainResult:
-    """Train SAC on the configured env (a Hydra ``DictConfig`` or a plain mapping; see ``conf/train.yaml``)."""
-    return Trainer(cfg).run()
+    """Train SAC on the configured env (a Hydra ``DictConfig`` or a plain mapping; see ``conf/train.yaml``).
+
+    ``train.num_envs > 1`` collects experience from that many env workers (``vical.rl.vector_trainer``).
+    """
+    raw = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
+    if parse_settings(raw).train.num_envs > 1:
+        from vical.rl.vector_trainer import VectorTrainer  # imported here: it subclasses Trainer
+
+        return VectorTrainer(raw).run()
+    return Trainer(raw).run()

@@ -1,0 +1,105 @@
+"""Worker pools: task order kept, errors and crashed workers reported (never a hang), bad settings refused."""
+
+import os
+import time
+
+import pytest
+
+from vical.config import ConfigError
+from vical.parallel import MAX_WORKERS, ParallelConfig, WorkerCrashed, imap_ordered
+
+TWO = ParallelConfig(workers=2)
+
+
+def square_after(task: tuple[int, float]) -> tuple[int, int]:
+    """(the task, its square, the worker's pid), the first tasks slower: later tasks finish first."""
+    value, delay = task
+    time.sleep(delay)
+    return value, value * value, os.getpid()
+
+
+def fail_on_three(value: int) -> int:
+    if value == 3:
+        raise ValueError(f"task {value} cannot be done")
+    return value
+
+
+def die_on_two(value: int) -> int:
+    if value == 2:
+        os._exit(9)  # as a kill -9 or the OOM killer would end it
+    return value
+
+
+def test_results_come_in_task_order_from_several_processes():
+    tasks = [(k, 0.3 if k < 2 else 0.0) for k in range(8)]
+    results = list(imap_ordered(square_after, tasks, TWO))
+    assert [(v, s) for v, s, _ in results] == [(k, k * k) for k in range(8)]
+    assert len({pid for _, _, pid in results}) == 2 and os.getpid() not in {pid for _, _, pid in results}
+
+
+def test_one_worker_runs_in_this_process():
+    results = list(imap_ordered(square_after, [(3, 0.0)], ParallelConfig()))
+    assert results == [(3, 9, os.getpid())]
+
+
+def test_a_task_error_reaches_the_caller_with_its_message():
+    results = imap_ordered(fail_on_three, range(6), TWO)
+    assert [next(results) for _ in range(3)] == [0, 1, 2]
+    with pytest.raises(ValueError, match="task 3 cannot be done"):
+        next(results)
+
+
+def test_a_killed_worker_is_a_clear_error_not_a_hang():
+    start = time.perf_counter()
+    with pytest.raises(WorkerCrashed, match="a worker process died"):
+        list(imap_ordered(die_on_two, range(6), TWO))
+    assert time.perf_counter() - start < 60
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"workers": 0}, "parallel.workers"),
+        ({"workers": MAX_WORKERS + 1}, "parallel.workers"),
+        ({"workers": True}, "parallel.workers"),
+        ({"backend": "slurm"}, "parallel.backend"),
+        ({"ray_address": ""}, "parallel.ray_address"),
+    ],
+)
+def test_bad_settings_are_refused_by_key(kwargs, message):
+    with pytest.raises(ConfigError, match=message):
+        ParallelConfig(**kwargs)
+
+
+def test_unknown_keys_are_refused():
+    with pytest.raises(ConfigError, match="only the keys workers, backend, ray_address"):
+        ParallelConfig.from_config({"workers": 2, "nodes": 4})
+
+
+def test_an_unreachable_ray_address_is_refused_within_seconds():
+    config = ParallelConfig(workers=2, backend="ray", ray_address="127.0.0.1:9")  # the discard port: closed
+    start = time.perf_counter()
+    with pytest.raises(ConfigError, match=r"parallel.ray_address='127.0.0.1:9': nothing answers at 127.0.0.1:9"):
+        list(imap_ordered(fail_on_three, range(2), config))
+    assert time.perf_counter() - start < 10
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    import ray  # a dev dependency: `make test` installs it, so this test never skips
+
+    config = ParallelConfig(workers=2, backend="ray")
+    yield config
+    ray.shutdown()
+
+
+def test_tasks_run_on_a_local_ray_instance_in_order(local_ray):
+    tasks = [(k, 0.2 if k < 2 else 0.0) for k in range(6)]
+    results = list(imap_ordered(square_after, tasks, local_ray))
+    assert [(v, s) for v, s, _ in results] == [(k, k * k) for k in range(6)]
+    assert os.getpid() not in {pid for _, _, pid in results}
+
+
+def test_a_task_error_on_ray_reaches_the_caller(local_ray):
+    with pytest.raises(ValueError, match="task 3 cannot be done"):
+        list(imap_ordered(fail_on_three, range(6), local_ray))

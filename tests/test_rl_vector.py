@@ -1,0 +1,110 @@
+"""Training with env workers: bit-identical runs per seed and num_envs, exact resume, errors and dead workers."""
+
+import logging
+import os
+
+import gymnasium as gym
+import pytest
+import torch
+from test_rl_trainer import assert_same_parameters, parameters, tiny_config
+
+from vical.config import ConfigError
+from vical.rl.checkpoint import load_checkpoint
+from vical.rl.trainer import CHECKPOINT, train
+from vical.rl.vector_trainer import WorkerDiedError
+
+KILL_AFTER = "VICAL_TEST_KILL_WORKER_AFTER"  # steps after which a worker process ends itself (as kill -9 would)
+
+
+class FragilePendulum(gym.Wrapper):
+    """Pendulum-v1 (50-step episodes) that raises on a chosen step of every episode, or whose process dies."""
+
+    def __init__(self, fail_on_step: int = 0) -> None:
+        super().__init__(gym.make("Pendulum-v1", max_episode_steps=50))
+        self.fail_on_step, self.steps_in_episode, self.steps_in_process = fail_on_step, 0, 0
+
+    def reset(self, **kwargs):
+        self.steps_in_episode = 0
+        return self.env.reset(**kwargs)
+
+    def step(self, action):
+        self.steps_in_episode += 1
+        self.steps_in_process += 1
+        if os.environ.get(KILL_AFTER) and self.steps_in_process > int(os.environ[KILL_AFTER]):
+            os._exit(9)
+        if self.steps_in_episode == self.fail_on_step:
+            raise RuntimeError("the simulator lost its arm")
+        return self.env.step(action)
+
+
+FRAGILE = {"_target_": "test_rl_vector.FragilePendulum"}
+
+
+def vector_config(run_dir, env: dict = FRAGILE, **train_settings) -> dict:
+    return tiny_config(run_dir, env=env, **{"num_envs": 2, "eval_every": 0, **train_settings})
+
+
+def test_same_seed_and_num_envs_give_identical_parameters(tmp_path):
+    first = train(vector_config(tmp_path / "a"))
+    second = train(vector_config(tmp_path / "b"))
+    # 600 transitions from 2 envs of 50-step episodes; one update per transition once more than the 100 warm-up
+    # transitions are stored, run while the envs make the next ones: 2 x 249 vector steps (pre-step 102 .. 598)
+    assert (first.steps, first.episodes, first.updates) == (600, 12, 498)
+    assert_same_parameters(parameters(first.agent), parameters(second.agent))
+    other = train(vector_config(tmp_path / "c") | {"seed": 1})
+    assert not torch.equal(
+        first.agent.state_dict()["policy.mlp.weights.0"], other.agent.state_dict()["policy.mlp.weights.0"]
+    )
+
+
+def test_a_run_resumed_from_a_mid_episode_checkpoint_equals_the_uninterrupted_run(tmp_path):
+    full = train(vector_config(tmp_path / "full", checkpoint_every=130))
+    # checkpoints at 130, 260 and 390 transitions (195 steps per env: 45 into their 4th episodes); the run goes on
+    # to 400 past its last checkpoint, as a killed run would
+    part = train(vector_config(tmp_path / "part", total_steps=400, checkpoint_every=130))
+    saved = load_checkpoint(tmp_path / "part" / CHECKPOINT)
+    assert saved["counters"]["step"] == 390 and [len(e["env_actions"]) for e in saved["episodes"]] == [45, 45]
+    resumed = train(vector_config(tmp_path / "x", checkpoint_every=130) | {"resume": str(tmp_path / "part")})
+    assert part.steps == 400 and resumed.resumed_from == 390
+    assert (resumed.steps, resumed.episodes, resumed.updates) == (full.steps, full.episodes, full.updates)
+    assert_same_parameters(parameters(full.agent), parameters(resumed.agent))
+
+
+def test_a_killed_worker_stops_the_run_with_a_resumable_checkpoint_and_the_resume_is_exact(tmp_path, monkeypatch):
+    full = train(vector_config(tmp_path / "full", checkpoint_every=150))
+    monkeypatch.setenv(KILL_AFTER, "120")  # each worker dies at its 121st step: after the checkpoint at 150 + 90
+    with pytest.raises(WorkerDiedError, match=r"died .* at step 240; resume from its checkpoint at step 150"):
+        train(vector_config(tmp_path / "part", checkpoint_every=150))
+    monkeypatch.delenv(KILL_AFTER)
+    resumed = train(vector_config(tmp_path / "x", checkpoint_every=150) | {"resume": str(tmp_path / "part")})
+    assert resumed.resumed_from == 150
+    assert_same_parameters(parameters(full.agent), parameters(resumed.agent))
+
+
+def test_an_env_that_raises_ends_its_episode_with_a_warning_naming_the_seed_and_training_goes_on(tmp_path, caplog):
+    env = {**FRAGILE, "fail_on_step": 30}
+    with caplog.at_level(logging.WARNING, logger="vical.rl.vector_trainer"):
+        result = train(vector_config(tmp_path / "run", env=env, total_steps=200))
+    assert result.steps == 200 and result.episodes == 6  # every episode cut at its 30th step
+    warnings = [r.getMessage() for r in caplog.records]
+    assert len(warnings) == 6 and all("episode seed" in w and "the simulator lost its arm" in w for w in warnings)
+
+
+def test_ray_actors_give_the_local_processes_parameters(tmp_path):
+    """The same run with its env workers as Ray actors (a local Ray instance of 2 CPUs): the same numbers."""
+    import ray  # a dev dependency: `make test` installs it, so this test never skips
+
+    local = train(vector_config(tmp_path / "local", total_steps=300))
+    try:
+        on_ray = train(
+            vector_config(tmp_path / "ray", total_steps=300) | {"parallel": {"workers": 2, "backend": "ray"}}
+        )
+    finally:
+        ray.shutdown()
+    assert_same_parameters(parameters(local.agent), parameters(on_ray.agent))
+
+
+@pytest.mark.parametrize("num_envs", [0, 2000, 1.5])
+def test_bad_num_envs_is_refused_by_key(tmp_path, num_envs):
+    with pytest.raises(ConfigError, match=r"train\.num_envs"):
+        train(vector_config(tmp_path / "run", num_envs=num_envs))

@@ -1,0 +1,169 @@
+"""``imap_ordered``: a task function over a list of tasks, in this process, on local processes or on Ray."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import socket
+import sys
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
+from typing import Any
+from urllib.parse import urlparse
+
+from vical.config import ConfigError, require
+
+MAX_WORKERS = 1024  # more processes than any machine or allocation this runs on has cores
+BACKENDS = ("local", "ray")
+RAY_CONNECT_TIMEOUT_S = 3.0  # an address that does not answer within this is refused (never a hang)
+RAY_DEFAULT_PORTS = {"ray": 10001, "": 6379}  # Ray client (ray://) and GCS ports
+
+
+class WorkerCrashed(RuntimeError):
+    """A worker process died (killed, out of memory) while running a task."""
+
+
+@dataclass(frozen=True)
+class ParallelConfig:
+    """Where tasks run (``conf/parallel/``).
+
+    Attributes:
+        workers: worker processes (1: in this process, no pool).
+        backend: ``local`` (processes on this machine) or ``ray`` (a Ray cluster).
+        ray_address: the cluster (``auto``, ``host:port`` or ``ray://host:port``); None starts a local
+            Ray instance with ``workers`` CPUs.
+    """
+
+    workers: int = 1
+    backend: str = "local"
+    ray_address: str | None = None
+
+    def __post_init__(self) -> None:
+        ok = isinstance(self.workers, int) and not isinstance(self.workers, bool) and 1 <= self.workers <= MAX_WORKERS
+        require(ok, "parallel.workers", f"an integer from 1 to {MAX_WORKERS} (worker processes)", self.workers)
+        require(self.backend in BACKENDS, "parallel.backend", f"one of {list(BACKENDS)}", self.backend)
+        ok = self.ray_address is None or (isinstance(self.ray_address, str) and bool(self.ray_address))
+        require(ok, "parallel.ray_address", "null, 'auto', 'host:port' or 'ray://host:port'", self.ray_address)
+
+    @classmethod
+    def from_config(cls, cfg: Any) -> ParallelConfig:
+        """From a mapping (``cfg.parallel``); None or a missing section means serial."""
+        if cfg is None:
+            return cls()
+        require(hasattr(cfg, "get"), "parallel", "a mapping with workers, backend, ray_address", cfg)
+        unknown = set(cfg) - {"workers", "backend", "ray_address"}
+        require(not unknown, "parallel", "only the keys workers, backend, ray_address", sorted(unknown))
+        return cls(cfg.get("workers", 1), cfg.get("backend", "local"), cfg.get("ray_address"))
+
+    @property
+    def serial(self) -> bool:
+        return self.workers == 1 and self.backend == "local"
+
+
+def imap_ordered(fn: Callable[[Any], Any], tasks: Sequence[Any], config: ParallelConfig) -> Iterator[Any]:
+    """``fn(task)`` for every task, yielded in task order as soon as each (and all before it) is done.
+
+    An exception of ``fn`` is re-raised here (the remaining tasks are cancelled); a worker process
+    that dies raises ``WorkerCrashed``.
+    """
+    if config.serial:
+        return (fn(task) for task in tasks)
+    if config.backend == "ray":
+        return _ray_imap(fn, tasks, config)
+    return _process_imap(fn, tasks, config.workers)
+
+
+def _process_imap(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int) -> Iterator[Any]:
+    # spawn, not fork: a forked MuJoCo renderer or GTSAM/TBB state is not safe in the child.
+    executor = ProcessPoolExecutor(max_workers=min(workers, max(len(tasks), 1)), mp_context=_spawn())
+    try:
+        futures = [executor.submit(fn, task) for task in tasks]
+        for index, future in enumerate(futures):
+            try:
+                yield future.result()
+            except BrokenProcessPool as err:
+                raise WorkerCrashed(
+                    f"a worker process died (killed, or out of memory) while task {index} of {len(tasks)} ran; "
+                    "the results of the finished tasks are lost with this run: start it again"
+                ) from err
+    finally:
+        executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _spawn():
+    return multiprocessing.get_context("spawn")
+
+
+# ------------------------------------------------------------------------------------------------ Ray
+def _ray_imap(fn: Callable[[Any], Any], tasks: Sequence[Any], config: ParallelConfig) -> Iterator[Any]:
+    ray = connect_ray(config)
+    remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+    refs = [remote.remote(task) for task in tasks]
+    try:
+        for index, ref in enumerate(refs):
+            try:
+                yield ray.get(ref)
+            except ray.exceptions.WorkerCrashedError as err:
+                raise WorkerCrashed(
+                    f"a Ray worker died (killed, or out of memory) while task {index} of {len(tasks)} ran; "
+                    "start the run again"
+                ) from err
+    finally:
+        for ref in refs:
+            ray.cancel(ref, force=True)
+
+
+def import_ray():
+    """The ``ray`` module, or ``ConfigError`` saying how to install it."""
+    try:
+        import ray
+    except ImportError:
+        raise ConfigError(
+            "parallel.backend=ray needs Ray, which is not installed: pip install 'vical[ray]' (or pip install ray)"
+        ) from None
+    return ray
+
+
+def connect_ray(config: ParallelConfig):
+    """``ray`` connected to ``config.ray_address`` (checked to answer first) or to a new local instance."""
+    ray = import_ray()
+    if ray.is_initialized():
+        return ray
+    address = config.ray_address
+    if address is not None and address != "auto":
+        _check_reachable(address)
+    try:
+        if address is None:  # a local instance: its workers import what this process imports
+            path = {"env_vars": {"PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}}
+            ray.init(
+                num_cpus=config.workers, include_dashboard=False, log_to_driver=False, logging_level="ERROR",
+                runtime_env=path,
+            )  # fmt: skip
+        else:
+            ray.init(address=address, log_to_driver=False, logging_level="ERROR")
+    except (ConnectionError, RuntimeError, ValueError) as err:
+        raise ConfigError(f"parallel.ray_address={address!r}: Ray could not connect ({err}); start the cluster "
+                          "(ray start --head) or fix the address") from None  # fmt: skip
+    return ray
+
+
+def _check_reachable(address: str) -> None:
+    """Refuse within ``RAY_CONNECT_TIMEOUT_S`` an address where nothing listens (Ray itself would retry for long)."""
+    parsed = urlparse(address if "://" in address else f"//{address}")
+    host = parsed.hostname
+    try:
+        port = parsed.port or RAY_DEFAULT_PORTS.get(parsed.scheme, 6379)
+    except ValueError:
+        port = None
+    allowed = "'auto', 'host:port' or 'ray://host:port'"
+    require(bool(host) and port is not None, "parallel.ray_address", allowed, address)
+    try:
+        with socket.create_connection((host, port), timeout=RAY_CONNECT_TIMEOUT_S):
+            pass
+    except OSError as err:
+        raise ConfigError(
+            f"parallel.ray_address={address!r}: nothing answers at {host}:{port} ({err}); start the cluster "
+            "(ray start --head) or fix the address"
+        ) from None
