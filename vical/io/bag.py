@@ -25,6 +25,7 @@ from rosbags.typesys.store import Typestore
 from tqdm import tqdm
 
 from vical.data import NS_PER_S, CameraFrames, DataError, ImuSamples, Recording, Target
+from vical.io.atomic import remove_stale_temporaries, temporary_prefix
 from vical.io.checks import check_sampling, scale_imu, sort_and_dedupe
 from vical.io.errors import BagFormatError, FormatError
 from vical.io.images import ImageDetector, check_size, run_detector, to_gray
@@ -59,7 +60,8 @@ def write_bag(
     if final.exists() and (not overwrite or final.is_dir()):
         raise FileExistsError(f"{final} already exists; pass overwrite=True to replace it")
     final.parent.mkdir(parents=True, exist_ok=True)
-    tmp_dir = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
+    remove_stale_temporaries(final.parent, final.name)
+    tmp_dir = Path(tempfile.mkdtemp(prefix=temporary_prefix(final), dir=final.parent))
     try:
         _write_messages(recording, tmp_dir / final.name, image_topic, imu_topic)
         os.replace(tmp_dir / final.name, final)
