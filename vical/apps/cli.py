@@ -1,14 +1,20 @@
-"""What the Hydra apps share on the command line: one-line errors and reading an override early.
+"""What the apps share on the command line: one-line errors and warnings, and reading an override early.
 
-``vical-train`` and ``vical-evaluate`` check some arguments before Hydra composes (a ``resume=``
-directory must exist before Hydra creates it; an unknown ``policy=`` is one line, not Hydra's
-traceback), and report user errors as ``<app>: error: <message>`` with exit status 2.
+Every app reports a user error as one line ``<app>: error: <message>`` with exit status 2 (argparse's
+own errors included: ``ArgumentParser``), and a warning as one line ``warning: <message>``
+(``one_line_warnings``). ``vical-train`` and ``vical-evaluate`` check some arguments before Hydra
+composes (a ``resume=`` directory must exist before Hydra creates it; an unknown ``policy=`` is one
+line, not Hydra's traceback).
 """
 
 from __future__ import annotations
 
+import argparse
 import importlib.util
+import os
 import sys
+import warnings
+from pathlib import Path
 from typing import NoReturn
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -24,6 +30,30 @@ def fail(app: str, err: BaseException) -> NoReturn:
     message = " ".join(str(err).split())
     print(f"{app}: error: {message}", file=sys.stderr)
     raise SystemExit(EXIT_USER_ERROR)
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with vical's one-line errors: ``<prog>: error: <message>`` and exit status 2, no usage block."""
+
+    def error(self, message: str) -> NoReturn:
+        print(f"{self.prog}: error: {message} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(EXIT_USER_ERROR)
+
+
+def cannot_write(flag: str, out: str | os.PathLike, err: OSError) -> str:
+    """``--out X: cannot write it (read-only file system); ...``: an ``OSError`` without Python's ``[Errno N]``."""
+    what = "it" if err.filename is None or Path(err.filename) == Path(out) else str(err.filename)
+    reason = (err.strerror or str(err)).lower()
+    return f"{flag} {out}: cannot write {what} ({reason}); choose another directory"
+
+
+def _one_line(message, category, filename, lineno, line=None) -> str:
+    return f"warning: {' '.join(str(message).split())}\n"
+
+
+def one_line_warnings() -> None:
+    """Print each warning as ``warning: <message>``: users need what happened, not the Python source line."""
+    warnings.formatwarning = _one_line
 
 
 def override_value(argv: list[str], key: str) -> str | None:
