@@ -17,8 +17,10 @@ import warnings
 from pathlib import Path
 from typing import NoReturn
 
+from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
+from omegaconf.errors import OmegaConfBaseException
 
 from vical.config import ConfigError
 
@@ -70,6 +72,32 @@ def override_value(argv: list[str], key: str) -> str | None:
             value = None if override.is_sweep_override() else override.value()
             return value if isinstance(value, str) and value else None
     return None
+
+
+def check_composes(conf_dir: str | os.PathLike, config_name: str, argv: list[str]) -> None:
+    """Compose ``<conf_dir>/<config_name>.yaml`` with the command line's overrides, as Hydra is about to.
+
+    Hydra reports its own errors (an unknown key without ``+``, an unknown group choice, bad override
+    syntax) in several lines and exits with status 1; composing first turns them into one ``ConfigError``
+    line. A command line with Hydra flags (``-m``, ``--cfg``, ...) is left to Hydra.
+    """
+    if any(arg.startswith("-") for arg in argv):
+        return
+    try:
+        with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
+            compose(config_name=config_name, overrides=argv)
+    except (HydraException, OmegaConfBaseException) as err:
+        raise ConfigError(_hydra_message(err)) from None
+
+
+def _hydra_message(err: Exception) -> str:
+    """Hydra's message without its search path and links; a list of available options on the same line."""
+    text = str(err).split("\nConfig search path")[0].split("\nSee https")[0]
+    head, _, options = text.partition("\n\nAvailable options in ")
+    if not options:
+        return head
+    group, _, names = options.partition(":")
+    return f"{head.rstrip('.')}; the available options in {group} are: {', '.join(names.split())}"
 
 
 # Hydra launcher choices -> (module of the plugin, what to install).
