@@ -158,3 +158,22 @@ def test_corner_csv_bad_rows(tmp_path):
     path.write_text(header + f"{T0_NS},x,1.5,2.5\n")
     with pytest.raises(CsvFormatError, match="line 2: point id 'x' is not an integer"):
         read_corners_csv(path, target)
+
+
+@pytest.mark.parametrize("content", ["", IMU_HEADER + "\n"])
+def test_csv_files_without_rows_are_named_and_an_euroc_imu_without_samples_is_no_imu(tmp_path, content):
+    rec = make_recording()
+    write_euroc(rec, tmp_path / "seq")
+    imu_csv = tmp_path / "seq" / "mav0" / "imu0" / "data.csv"
+    imu_csv.write_text(content)
+    with pytest.raises(
+        CsvFormatError, match=f"{imu_csv} holds no IMU samples \\(the file is empty or has only a header"
+    ):
+        read_imu_csv(imu_csv)
+    corners_csv = tmp_path / "corners.csv"
+    corners_csv.write_text(content and "#timestamp [ns],point_id,u [px],v [px]\n")
+    with pytest.raises(CsvFormatError, match=f"{corners_csv} holds no corner rows"):
+        read_corners_csv(corners_csv, rec.target)
+    with pytest.warns(FormatWarning, match="holds no samples: the recording has no IMU data"):
+        back = read_euroc(tmp_path / "seq", rec.target)
+    assert len(back.imu) == 0 and len(back.frames) == len(rec.frames)

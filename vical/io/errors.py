@@ -21,6 +21,10 @@ class CsvFormatError(FormatError):
     """A CSV file (EuRoC or corner observations) with malformed rows."""
 
 
+class EmptyCsvError(CsvFormatError):
+    """A CSV file without data rows (empty, or only a header)."""
+
+
 class BagFormatError(FormatError):
     """A ROS bag that is corrupt or lacks the requested topics."""
 
