@@ -9,7 +9,7 @@ from test_io_samples import T0_NS, assert_frames_equal, make_recording
 
 from vical.io.checks import FormatWarning
 from vical.io.csvfiles import IMU_HEADER, read_corners_csv, read_imu_csv, write_corners_csv, write_imu_csv
-from vical.io.errors import CsvFormatError, FormatError
+from vical.io.errors import CsvFormatError, FormatError, UnitError
 from vical.io.euroc import read_euroc, write_euroc
 
 
@@ -119,13 +119,21 @@ def test_imu_csv_seconds_are_converted_exactly(tmp_path):
 def test_imu_csv_implausible_units(tmp_path):
     with pytest.raises(CsvFormatError, match="look like seconds"):
         read_imu_csv(_imu_csv(tmp_path, _imu_rows(t0=1403636579, step="1")))
-    with pytest.raises(CsvFormatError, match="gyro_unit='deg/s'"):
+    with pytest.raises(UnitError, match="gyro_unit='deg/s'") as err:
         read_imu_csv(_imu_csv(tmp_path, _imu_rows(gyro=120.0)))
+    assert err.value.spelled("--gyro-unit deg/s").endswith("convert to rad/s or pass --gyro-unit deg/s")
     imu = read_imu_csv(_imu_csv(tmp_path, _imu_rows(gyro=120.0)), gyro_unit="deg/s")
     assert imu.gyro[0, 0] == pytest.approx(120.0 * np.pi / 180)
+    with pytest.raises(FormatError, match="beyond any MEMS gyro's range even in deg/s"):
+        read_imu_csv(_imu_csv(tmp_path, _imu_rows(gyro=3000.0)), gyro_unit="deg/s")
+    # rad/s data declared as deg/s: 2 rad/s is a calibration motion, 2 deg/s is not
+    with pytest.raises(UnitError, match=r"peaks at 2 deg/s, too slow .* look like rad/s; pass gyro_unit='rad/s'"):
+        read_imu_csv(_imu_csv(tmp_path, _imu_rows(gyro=2.0)), gyro_unit="deg/s")
     g_rows = [r.replace(",9.81", ",1.0") for r in _imu_rows()]
-    with pytest.raises(CsvFormatError, match="accel_unit='g'"):
+    with pytest.raises(UnitError, match="accel_unit='g'"):
         read_imu_csv(_imu_csv(tmp_path, g_rows))
+    with pytest.raises(UnitError, match=r"96.2 m/s\^2 \(read as g\).*look like m/s\^2: pass accel_unit='m/s\^2'"):
+        read_imu_csv(_imu_csv(tmp_path, _imu_rows()), accel_unit="g")
 
 
 def test_imu_csv_malformed_lines(tmp_path):

@@ -42,6 +42,10 @@ class ArgumentParser(argparse.ArgumentParser):
         raise SystemExit(EXIT_USER_ERROR)
 
 
+class OutputError(Exception):
+    """An output path that cannot be used or written; the message names the flag or key and the reason."""
+
+
 def cannot_write(flag: str, out: str | os.PathLike, err: OSError) -> str:
     """``--out X: cannot write it (read-only file system); ...``: an ``OSError`` without Python's ``[Errno N]``."""
     what = "it" if err.filename is None or Path(err.filename) == Path(out) else str(err.filename)

@@ -98,7 +98,10 @@ def export(rec: Recording, out: Path, image_topic: str, imu_topic: str, overwrit
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the exit status (0 ok, 2 bad input)."""
     one_line_warnings()
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as done:  # --help (0), or a bad argument whose line argparse printed (2)
+        return int(done.code or 0)
     out = Path(args.out)
     try:
         check_out(out, args.overwrite)  # before reading the recording: a wrong --out fails at once

@@ -99,8 +99,8 @@ def read_imu_csv(path: str | os.PathLike, gyro_unit: str = "rad/s", accel_unit: 
     """IMU samples from an EuRoC-style CSV (timestamp ns, gyro xyz, accel xyz).
 
     Unsorted rows are sorted and exact duplicates dropped (with a warning); conflicting
-    duplicates, timestamps that are not ns and readings that look like deg/s or g raise
-    ``CsvFormatError`` naming the file and line; a file without samples raises ``EmptyCsvError``.
+    duplicates and timestamps that are not ns raise ``CsvFormatError`` naming the file and line, a
+    file without samples ``EmptyCsvError``, readings that fit another unit ``UnitError``.
     """
     path = Path(path)
     rows, lines = read_rows(path, 7)
@@ -113,10 +113,10 @@ def read_imu_csv(path: str | os.PathLike, gyro_unit: str = "rad/s", accel_unit: 
     try:
         order = sort_and_dedupe(t, values, str(path), np.asarray(lines))
         check_sampling(t[order], str(path))
-        gyro, accel = scale_imu(values[order, :3], values[order, 3:], gyro_unit, accel_unit, str(path))
-        return ImuSamples(t[order], gyro, accel)
     except (FormatError, DataError) as exc:
         raise CsvFormatError(str(exc)) from exc
+    gyro, accel = scale_imu(values[order, :3], values[order, 3:], gyro_unit, accel_unit, str(path))
+    return ImuSamples(t[order], gyro, accel)
 
 
 def write_imu_csv(imu: ImuSamples, path: str | os.PathLike) -> None:
