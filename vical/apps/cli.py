@@ -20,6 +20,7 @@ from typing import NoReturn
 from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
 from hydra.errors import HydraException
+from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
 from vical.config import ConfigError
@@ -78,18 +79,19 @@ def override_value(argv: list[str], key: str) -> str | None:
     return None
 
 
-def check_composes(conf_dir: str | os.PathLike, config_name: str, argv: list[str]) -> None:
+def check_composes(conf_dir: str | os.PathLike, config_name: str, argv: list[str]) -> DictConfig | None:
     """Compose ``<conf_dir>/<config_name>.yaml`` with the command line's overrides, as Hydra is about to.
 
     Hydra reports its own errors (an unknown key without ``+``, an unknown group choice, bad override
     syntax) in several lines and exits with status 1; composing first turns them into one ``ConfigError``
-    line. A command line with Hydra flags (``-m``, ``--cfg``, ...) is left to Hydra.
+    line. Returns the composed config (without the ``hydra`` node), or None for a command line with Hydra
+    flags (``-m``, ``--cfg``, ...): those are left to Hydra.
     """
     if any(arg.startswith("-") for arg in argv):
-        return
+        return None
     try:
         with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
-            compose(config_name=config_name, overrides=argv)
+            return compose(config_name=config_name, overrides=argv)
     except (HydraException, OmegaConfBaseException) as err:
         raise ConfigError(_hydra_message(err)) from None
 
