@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import logging
 import os
 import sys
 import warnings
@@ -61,6 +62,11 @@ def _one_line(message, category, filename, lineno, line=None) -> str:
 def one_line_warnings() -> None:
     """Print each warning as ``warning: <message>``: users need what happened, not the Python source line."""
     warnings.formatwarning = _one_line
+
+
+def quiet_library_logs() -> None:
+    """Keep libraries' INFO records out of the Hydra apps' console log (PyOpenGL announces an optional module)."""
+    logging.getLogger("OpenGL").setLevel(logging.WARNING)
 
 
 def override_value(argv: list[str], key: str) -> str | None:

@@ -18,7 +18,6 @@ directory that an error left empty is removed. Ctrl-C stops the run with one lin
 
 from __future__ import annotations
 
-import logging
 import shutil
 import sys
 from pathlib import Path
@@ -30,7 +29,14 @@ from hydra.core.override_parser.types import Override, OverrideType
 from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf
 
-from vical.apps.cli import check_composes, check_launcher, fail, one_line_warnings, override_value
+from vical.apps.cli import (
+    check_composes,
+    check_launcher,
+    fail,
+    one_line_warnings,
+    override_value,
+    quiet_library_logs,
+)
 from vical.config import ConfigError
 from vical.rl.checkpoint import IncompatibleCheckpointError, UnreadableCheckpointError
 from vical.rl.trainer import CHECKPOINT, TrainingDivergedError, checkpoint_step, parse_settings, resume_status, train
@@ -197,7 +203,7 @@ def hydra_main(cfg: DictConfig) -> None:
 def main() -> None:
     """Console entry point: check the command line before Hydra starts, then run."""
     one_line_warnings()
-    logging.getLogger("OpenGL").setLevel(logging.WARNING)  # PyOpenGL's INFO line about an optional module
+    quiet_library_logs()
     try:
         complete = check_command_line(sys.argv[1:])
     except USER_ERRORS as err:
