@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vical.apps.cli import ArgumentParser, OutputError, cannot_write, one_line_warnings
+from vical.apps.cli import ArgumentParser, OutputError, cannot_write, one_line_warnings, report_error
 from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
 from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
 from vical.calib.detection import detect_checkerboard
@@ -55,6 +55,7 @@ from vical.io.errors import FormatError
 from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_camchain_imucam, write_imu_yaml
 from vical.io.sources import detect_source, open_recording
 
+APP = "vical-calibrate"
 TASKS = ("intrinsic", "extrinsic", "joint", "two_stage")
 # The command line's spelling of the calibrator's and readers' arguments that error messages name.
 FLAGS = {"gyro_unit": "--gyro-unit", "accel_unit": "--accel-unit", "image_size_px": "--image-size"}
@@ -78,7 +79,7 @@ def _number(low: float, kind: type = float, closed: bool = True):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = ArgumentParser(prog="vical-calibrate", description=__doc__.split("\n\n")[0])
+    p = ArgumentParser(prog=APP, description=__doc__.split("\n\n")[0])
     p.add_argument("recording", help="recording directory, EuRoC folder, ROS1 bag, image folder or corner CSV")
     p.add_argument("--task", choices=TASKS, default="joint", help="what to calibrate (default: joint)")
     p.add_argument("--model", choices=("radtan", "equidistant"), default="radtan", help="lens distortion model")
@@ -364,11 +365,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         run(args)
     except (CalibrationError, FormatError, DataError, TargetError, CameraModelError, OutputError) as exc:
-        print(f"vical-calibrate: error: {_message(exc)}", file=sys.stderr)
-        return 2
+        return report_error(APP, _message(exc))
     except OSError as exc:  # a file the readers could not open: the path and the reason, without [Errno N]
-        print(f"vical-calibrate: error: {exc.filename}: {(exc.strerror or str(exc)).lower()}", file=sys.stderr)
-        return 2
+        return report_error(APP, f"{exc.filename}: {(exc.strerror or str(exc)).lower()}")
     return 0
 
 

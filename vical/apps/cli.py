@@ -29,19 +29,22 @@ from vical.config import ConfigError
 EXIT_USER_ERROR = 2
 
 
+def report_error(app: str, message: object) -> int:
+    """Print ``<app>: error: <message>`` on one line to stderr (a multi-line message joined); return status 2."""
+    print(f"{app}: error: {' '.join(str(message).split())}", file=sys.stderr)
+    return EXIT_USER_ERROR
+
+
 def fail(app: str, err: BaseException) -> NoReturn:
     """Print ``<app>: error: <message>`` on one line to stderr and exit with status 2."""
-    message = " ".join(str(err).split())
-    print(f"{app}: error: {message}", file=sys.stderr)
-    raise SystemExit(EXIT_USER_ERROR)
+    raise SystemExit(report_error(app, err))
 
 
 class ArgumentParser(argparse.ArgumentParser):
     """argparse with vical's one-line errors: ``<prog>: error: <message>`` and exit status 2, no usage block."""
 
     def error(self, message: str) -> NoReturn:
-        print(f"{self.prog}: error: {message} (see {self.prog} --help)", file=sys.stderr)
-        raise SystemExit(EXIT_USER_ERROR)
+        raise SystemExit(report_error(self.prog, f"{message} (see {self.prog} --help)"))
 
 
 class OutputError(Exception):

@@ -19,7 +19,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from vical.apps.cli import ArgumentParser, cannot_write, one_line_warnings
+from vical.apps.cli import ArgumentParser, cannot_write, one_line_warnings, report_error
 from vical.data import DataError, ImuNoise, Recording
 from vical.io.atomic import remove_stale_temporaries
 from vical.io.bag import write_bag
@@ -110,9 +110,9 @@ def main(argv: list[str] | None = None) -> int:
         rec = load_recording(args.recording)
         written = export(rec, out, args.image_topic, args.imu_topic, args.overwrite)
     except (FormatError, DataError) as exc:
-        return _error(str(exc))
+        return report_error("vical-export", str(exc))
     except OSError as exc:  # vical's refusals carry their message; the system's name the path and the reason
-        return _error(str(exc) if exc.filename is None else cannot_write("--out", out, exc))
+        return report_error("vical-export", str(exc) if exc.filename is None else cannot_write("--out", out, exc))
     if rec.truth is None:
         print("note: no truth in the recording: imu.yaml holds the paper's noise densities, no camchain.yaml")
     for path in written:
@@ -122,11 +122,6 @@ def main(argv: list[str] | None = None) -> int:
     for command in kalibr_commands(out, rec.truth is not None, args.image_topic, distortion):
         print(f"  {command}")
     return 0
-
-
-def _error(message: str) -> int:
-    print(f"vical-export: error: {message}", file=sys.stderr)
-    return 2
 
 
 if __name__ == "__main__":
