@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import sys
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import hydra
@@ -115,43 +116,70 @@ def write_images(recording: Recording, folder: Path) -> None:
         write_png(folder / f"{int(t)}.png", image)
 
 
-def record(cfg: DictConfig) -> Path:
-    """Run the motion of ``cfg`` with a sampled sensor and write the recording; return its directory.
+@dataclass(frozen=True)
+class RecordSettings:
+    """The checked settings of one recording (``conf/record.yaml``)."""
 
-    Every setting is checked before the simulator starts.
-    """
-    steps = parse_steps(_plain(cfg.get("steps")))
-    seed = _seed(cfg.get("seed"))
+    steps: np.ndarray  # (S, 6) pose steps
+    seed: int
+    out: Path
+    overwrite: bool
+    images: bool
+    progress: bool
+    render_size: tuple[int, int]
+    settle_time: float
+    sampling: SensorSampling
+    sim: SimConfig
+    asymmetric_distortion: bool
+
+
+def check_settings(cfg: DictConfig) -> RecordSettings:
+    """Every setting of ``cfg`` checked, so that a bad one stops the run before the simulator starts."""
     overwrite, images, progress = (_require_bool(cfg, key) for key in ("overwrite", "images", "progress"))
-    out = check_out(cfg.get("out"), overwrite)
-    size = _render_size(_plain(cfg.get("render_size")))
     settle_time = cfg.get("settle_time")
     require_range("settle_time", settle_time, 0.0, 60.0)
-    sampling = SensorSampling.from_config(OmegaConf.to_container(cfg.sensor, resolve=True))
-    sim = PandaSim(SimConfig.from_mapping(cfg.sim))
-    rng = np.random.default_rng(seed)
-    truth = sample_sensor(sampling, rng, asymmetric=bool(cfg.task.asymmetric_distortion))
+    return RecordSettings(
+        steps=parse_steps(_plain(cfg.get("steps"))),
+        seed=_seed(cfg.get("seed")),
+        out=check_out(cfg.get("out"), overwrite),
+        overwrite=overwrite,
+        images=images,
+        progress=progress,
+        render_size=_render_size(_plain(cfg.get("render_size"))),
+        settle_time=float(settle_time),
+        sampling=SensorSampling.from_config(OmegaConf.to_container(cfg.sensor, resolve=True)),
+        sim=SimConfig.from_mapping(cfg.sim),
+        asymmetric_distortion=bool(cfg.task.asymmetric_distortion),
+    )
+
+
+def record(cfg: DictConfig) -> Path:
+    """Run the motion of ``cfg`` with a sampled sensor and write the recording; return its directory."""
+    s = check_settings(cfg)
+    sim = PandaSim(s.sim)
+    rng = np.random.default_rng(s.seed)
+    truth = sample_sensor(s.sampling, rng, asymmetric=s.asymmetric_distortion)
     detector = detect_aprilgrid if sim.cfg.board.kind == "aprilgrid" else detect_checkerboard
-    detector = detector if sampling.backend == "render" else None
-    recorder = SensorRecorder(sim, sim.cfg.board.target, sampling, detector, images, render_size=size)
+    detector = detector if s.sampling.backend == "render" else None
+    recorder = SensorRecorder(sim, sim.cfg.board.target, s.sampling, detector, s.images, render_size=s.render_size)
     try:
         recorder.start(truth, rng)
-        for i, step in enumerate(tqdm(steps, desc=APP, unit="step", disable=not progress)):
+        for i, step in enumerate(tqdm(s.steps, desc=APP, unit="step", disable=not s.progress)):
             T_start = sim.ee_pose()
             T_goal = step_pose(T_start, step[:3], step[3:])
-            result = sim.move_to(T_goal, on_step=recorder.on_step, settle_time=float(settle_time))
+            result = sim.move_to(T_goal, on_step=recorder.on_step, settle_time=s.settle_time)
             recorder.add_motion(result)
             if result.clamped:
                 warnings.warn(clamp_warning(i, T_start, result), ClampedStepWarning, stacklevel=2)
-        metadata = {"seed": seed, "config": OmegaConf.to_container(cfg, resolve=True)}
+        metadata = {"seed": s.seed, "config": OmegaConf.to_container(cfg, resolve=True)}
         recording = recorder.recording(metadata)
     finally:
         recorder.close()
-    with atomic_directory(out, overwrite=overwrite) as tmp:
+    with atomic_directory(s.out, overwrite=s.overwrite) as tmp:
         write_recording_files(recording, tmp)
-        if images:
+        if s.images:
             write_images(recording, tmp / "images")
-    return out
+    return s.out
 
 
 # An absolute path: the console script imports this module, and Hydra would read a relative
@@ -169,11 +197,13 @@ def hydra_main(cfg: DictConfig) -> None:
 
 
 def main() -> None:
-    """Console entry point: Hydra's own errors are one line too (composed before Hydra runs)."""
+    """Console entry point: the settings, and Hydra's own override errors, are checked before Hydra runs."""
     one_line_warnings()
     try:
-        check_composes(CONF_DIR, "record", sys.argv[1:])
-    except ConfigError as err:
+        cfg = check_composes(CONF_DIR, "record", sys.argv[1:])
+        if cfg is not None:  # None with Hydra flags (-m, --cfg, ...): record() checks under Hydra
+            check_settings(cfg)
+    except USER_ERRORS as err:
         fail(APP, err)
     hydra_main()
 
