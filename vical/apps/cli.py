@@ -20,7 +20,7 @@ from typing import NoReturn
 
 from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
-from hydra.errors import HydraException
+from hydra.errors import HydraException, OverrideParseException
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
@@ -108,6 +108,8 @@ def check_composes(conf_dir: str | os.PathLike, config_name: str, argv: list[str
 def _hydra_message(err: Exception) -> str:
     """Hydra's message without its search path and links; a list of available options on the same line."""
     text = str(err).split("\nConfig search path")[0].split("\nSee https")[0]
+    if isinstance(err, OverrideParseException):
+        return f"cannot parse the override {err.override!r}: {text}"
     head, _, options = text.partition("\n\nAvailable options in ")
     if not options:
         return head
