@@ -243,6 +243,11 @@ CASES = [
     # vical-record: checked before Hydra starts
     Case("vical-record", "out={inputs}/full", "out={inputs}/full already exists"),
     Case("vical-record", "out={inputs}/a_file overwrite=true", "out={inputs}/a_file is a file"),
+    Case(
+        "vical-record",
+        "out={inputs}/a_file/rec",
+        "out={inputs}/a_file/rec cannot be created: {inputs}/a_file is a file",
+    ),
     Case("vical-record", "steps=foo", "steps must be a non-empty list"),
     Case("vical-record", "steps=[[0.1,0.0]]", "steps[0] must be 6 finite numbers"),
     Case("vical-record", "seed=abc", "seed must be an integer >= 0, got 'abc'"),

@@ -14,6 +14,7 @@ User errors (a bad value, an existing ``out``, Hydra's own override errors) prin
 
 from __future__ import annotations
 
+import os
 import sys
 import warnings
 from dataclasses import dataclass
@@ -61,13 +62,18 @@ def parse_steps(steps) -> np.ndarray:
 
 
 def check_out(out, overwrite: bool) -> Path:
-    """``out`` as a Path; refused when it is a file, or exists and ``overwrite`` is false."""
+    """``out`` as a Path; refused when it is a file, lies below one, or exists and ``overwrite`` is false."""
     require(isinstance(out, str) and bool(out), "out", "a directory path", out)
     path = Path(out)
     if path.exists() and not path.is_dir():
         raise FileExistsError(f"out={out} is a file; choose a directory path")
     if path.exists() and not overwrite:
         raise FileExistsError(f"out={out} already exists; choose another directory or pass overwrite=true")
+    existing = next(d for d in path.absolute().parents if d.exists())
+    if not existing.is_dir():
+        raise FileExistsError(f"out={out} cannot be created: {existing} is a file")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise FileExistsError(f"out={out} cannot be created: {existing} is not writable")
     return path
 
 

@@ -153,8 +153,7 @@ def check_command_line(argv: list[str]) -> str | None:
 def _remove_unused(run_dir: Path) -> None:
     """Remove a run directory that holds nothing but Hydra's empty log (the run stopped before it began), and
     the parents below the working directory that it leaves empty."""
-    entries = list(run_dir.iterdir()) if run_dir.is_dir() else [run_dir]
-    if any(e.suffix != ".log" or e.stat().st_size for e in entries):
+    if not run_dir.is_dir() or any(e.suffix != ".log" or e.stat().st_size for e in run_dir.iterdir()):
         return
     shutil.rmtree(run_dir)
     cwd = Path.cwd().resolve()
@@ -195,7 +194,7 @@ def hydra_main(cfg: DictConfig) -> None:
         _remove_unused(output_dir)
         fail(APP, err)
     except KeyboardInterrupt:
-        print(interrupted_message(Path(cfg.run_dir)), file=sys.stderr)
+        print(interrupted_message(Path(cfg.run_dir or output_dir)), file=sys.stderr)
         raise SystemExit(INTERRUPTED) from None
     print(f"trained {result.steps} steps, {result.episodes} episodes; run directory: {result.run_dir}")
 
