@@ -12,7 +12,6 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -290,7 +289,6 @@ def _refuse_hydra() -> None:
 
 def run_in_process(case: Case, argv: list[str], monkeypatch, capsys) -> tuple[int, str]:
     """Exit status and all output of the app's console entry point run in this process."""
-    monkeypatch.setattr(warnings, "formatwarning", warnings.formatwarning)  # the apps make warnings one line
     if case.app in IN_PROCESS:
         status = IN_PROCESS[case.app].main(argv)
     else:
