@@ -2,9 +2,10 @@
 
 Every app reports a user error as one line ``<app>: error: <message>`` with exit status 2 (argparse's
 own errors included: ``ArgumentParser``), and a warning as one line ``warning: <message>``
-(``one_line_warnings``). ``vical-train`` and ``vical-evaluate`` check some arguments before Hydra
-composes (a ``resume=`` directory must exist before Hydra creates it; an unknown ``policy=`` is one
-line, not Hydra's traceback).
+(``one_line_warnings``). The Hydra apps (``vical-train``, ``vical-evaluate``, ``vical-record``) check
+the command line before Hydra starts: ``check_composes`` turns Hydra's own override errors into one
+line, and each app checks what it can (a ``resume=`` directory must exist before Hydra creates it; an
+unknown ``policy=`` is one line, not Hydra's traceback).
 """
 
 from __future__ import annotations
