@@ -11,6 +11,9 @@ from vical.data import CameraFrames, Target
 from vical.geometry import CameraModel
 
 MIN_CORNERS = 4  # a frame needs at least 4 corners to constrain its 6-DoF pose
+# Corners just outside the image (pixel noise, a rolling shutter's shift in simulated data) are not a wrong
+# image size; corners beyond this fraction of it are.
+OUTSIDE_TOLERANCE = 0.02
 
 
 @dataclass(frozen=True)
@@ -93,7 +96,7 @@ def _check_corners_inside(frames: CameraFrames, width: int, height: int) -> None
     if not corners:
         return
     u, v = np.concatenate(corners).max(axis=0)
-    if u > width or v > height:
+    if u > (1 + OUTSIDE_TOLERANCE) * width or v > (1 + OUTSIDE_TOLERANCE) * height:
         raise CalibrationSettingError(
             f"corners were detected up to u = {u:.0f} px, v = {v:.0f} px, outside the image size {width} x {height} px "
             "given as {fix}; give the size of the images the corners were detected in",
