@@ -55,3 +55,33 @@ def test_unobservable_directions_become_nan_and_the_rest_keeps_its_covariance():
     covariance = covariance_or_unobservable(linear, values, [2, 1])
     assert np.allclose(covariance[:3, :3], 0.25 * np.eye(3), rtol=1e-5)  # the prior's variance, undamped
     assert np.all(np.isnan(covariance[3:, :])) and np.all(np.isnan(covariance[:, 3:]))
+
+
+def test_a_result_with_unobservable_parameters_keeps_its_estimates_and_writes_every_file(tmp_path):
+    """What a singular information leaves (NaN rows for the free parameters, a warning naming them) is written."""
+    from dataclasses import replace
+
+    from vical.calib.calibrate import calibrate_joint
+    from vical.calib.report import summary_table, write_report, write_results_text
+    from vical.calib.uncertainty import unobservable_warnings
+    from vical.data import ImuNoise
+    from vical.io.kalibr import read_camchain, write_camchain_imucam
+
+    rec = make_recording(duration=8.0, pixel_sigma=0.3, seed=9, imu_noise=ImuNoise())
+    result = calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", (640, 480), rec.truth.imu_noise)
+    covariance = result.covariance.copy()
+    free = [result.parameter_names.index(n) for n in ("t_z", "time_offset")]
+    covariance[free, :] = np.nan
+    covariance[:, free] = np.nan
+    warnings = unobservable_warnings(result.parameter_names, covariance)
+    assert len(warnings) == 1 and "t_z, time_offset" in warnings[0]
+    broken = replace(result, covariance=covariance, warnings=result.warnings + warnings)
+    write_results_text(tmp_path / "results.txt", broken)
+    written = write_report(tmp_path, broken)
+    write_camchain_imucam(tmp_path / "camchain-imucam.yaml", broken.camera, broken.T_cam_imu, broken.time_offset)
+    text = (tmp_path / "results.txt").read_text()
+    assert "the data do not determine t_z, time_offset" in text and "nan" in text
+    assert all(p.stat().st_size > 0 for p in written)
+    camera, T_cam_imu, _ = read_camchain(tmp_path / "camchain-imucam.yaml")
+    assert np.allclose(T_cam_imu, result.T_cam_imu) and camera.intrinsics == pytest.approx(result.camera.intrinsics)
+    assert "+- nan" in summary_table(broken)  # the printed summary shows the unknown 1-sigma as such
