@@ -215,7 +215,7 @@ class Trajectory:
 
 
 def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
-    """The calibration env of ``env_cfg`` with ``policy``'s step limit and coverage termination.
+    """The calibration env of ``env_cfg`` with ``policy``'s MDP settings, step limit and termination.
 
     The env never calibrates on its own: the evaluation calibrates every episode once per budget.
     """
@@ -226,7 +226,7 @@ def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
     }
     if policy.max_steps is not None:
         overrides["max_steps"] = policy.max_steps
-    env = hydra.utils.instantiate({**dict(env_cfg), **overrides})
+    env = hydra.utils.instantiate({**dict(env_cfg), **dict(policy.env_settings), **overrides})
     if not isinstance(env, CalibrationEnv):
         raise ConfigError(f"env must be the calibration env (env=calibration), got {type(env).__name__}")
     return env
