@@ -144,13 +144,12 @@ class CalibrationEnv(gym.Env):
     def _information_step(self, excess_before: float, motion: MotionResult) -> tuple[dict[str, float], bool]:
         """Reward terms and termination of the information state (the new frames already added)."""
         s = self.config.information
-        done = all(r <= 1.0 for r in self._ratios.values())
         terms = {
             "information": s.information_weight * (excess_before - excess(self._ratios)),
             "path": -self.config.reward.path_weight * float(motion.path_length),
             "time": -s.time_weight * float(motion.duration),
         }
-        terminated = self.config.terminate_on_coverage and done
+        terminated = self.config.terminate_on_coverage and self.goal_reached
         if terminated:
             terms["terminal"] = self.config.reward.terminal_bonus
         return terms, terminated
@@ -182,6 +181,13 @@ class CalibrationEnv(gym.Env):
             if value is not None:
                 info[f"calib/{key}"] = float(value)
         return info
+
+    @property
+    def goal_reached(self) -> bool:
+        """The MDP's terminal condition holds: the coverage is complete, or (information state) every group is done."""
+        if self.config.state == "information":
+            return all(r <= 1.0 for r in self._ratios.values())
+        return self.coverage.complete()
 
     @property
     def steps(self) -> int:

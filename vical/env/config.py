@@ -168,9 +168,10 @@ class InformationSettings:
 
     Attributes:
         tolerances: the error each group may keep (``Tolerances``).
-        confidence: the probability with which a stopped episode's errors should be within their
-            tolerances: a group is done when its predicted error quantile at this level (the
-            1-sigma times the chi quantile of the group's dimension) is below its tolerance.
+        confidence: the probability with which a stopped episode's errors should all be within
+            their tolerances: a group is done when its predicted error quantile (the 1-sigma times
+            the chi quantile of the group's dimension, at ``1 - (1 - confidence) / groups``) is
+            below its tolerance.
         pixel_sigma: [px] corner noise the frames are weighted with; null measures it from the
             PnP residuals (biased upwards before the lens is known).
         information_weight: reward per e-fold of every group's predicted error above its tolerance.

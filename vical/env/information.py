@@ -319,8 +319,15 @@ def quantile_factor(group: str, confidence: float) -> float:
 
 
 def tolerance_ratios(sigmas: dict[str, float], tolerances, confidence: float) -> dict[str, float]:
-    """Per group: its predicted error quantile over its tolerance (<= 1: the group is done)."""
-    return {g: quantile_factor(g, confidence) * s / tolerances.of(g) for g, s in sigmas.items()}
+    """Per group: its predicted error quantile over its tolerance (<= 1: the group is done).
+
+    Every group must be within tolerance at once with probability ``confidence``, so each group's
+    quantile is taken at ``1 - (1 - confidence) / groups`` (Bonferroni): measured on 50 sensors of
+    the intrinsic task, per-group quantiles at 0.9 left 23 of 31 stopped episodes within every
+    tolerance, 74 %.
+    """
+    per_group = 1.0 - (1.0 - confidence) / max(len(sigmas), 1)
+    return {g: quantile_factor(g, per_group) * s / tolerances.of(g) for g, s in sigmas.items()}
 
 
 def features(ratios: dict[str, float]) -> np.ndarray:

@@ -135,7 +135,8 @@ class EpisodeRow:
         calib_time_s: calibrator wall time [s] (until the failure for a failed calibration).
         steps: env steps of the episode (both trajectories).
         frames: camera frames the calibration was given.
-        coverage_reached: every trajectory of the episode completed the MDP's coverage.
+        coverage_reached: every trajectory of the episode reached the MDP's terminal condition (the
+            coverage; for a policy of the information state: every parameter group within tolerance).
         failed: the calibration raised ``CalibrationError``; ``error`` holds its message.
     """
 
@@ -247,7 +248,7 @@ def run_trajectory(env: CalibrationEnv, policy: Policy, seed: int, noise_stream:
         obs, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
             break
-    return Trajectory(env.recording(), env.steps, env.coverage.complete())
+    return Trajectory(env.recording(), env.steps, env.goal_reached)
 
 
 def _optional(value: float | None) -> float | None:
