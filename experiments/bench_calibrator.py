@@ -36,7 +36,9 @@ from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint, calibra
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
 from vical.calib.synthetic import make_recording
+from vical.calib.visual_inertial import ViOptions
 from vical.data import ImuNoise, Recording, Target
+from vical.geometry import so3_log
 
 SIZE = (640, 480)
 BIASES = {"gyro_bias": [0.01, -0.02, 0.005], "accel_bias": [0.05, -0.1, 0.08]}  # [rad/s], [m/s^2]
@@ -189,6 +191,36 @@ def versus_opencv(repeats: int) -> list[str]:
     return lines
 
 
+def stride_cost() -> list[str]:
+    """Every 2nd and 3rd frame against all of them (30 s aprilgrid, 20 Hz): time and shift in units of sigma."""
+    rec = make_recording(duration=30.0, camera_rate_hz=20.0, target=REAL_TARGETS["aprilgrid 6x6"], seed=5, **_common())
+    f, imu, noise = rec.frames, rec.imu, rec.truth.imu_noise
+    lines = [
+        "frame stride (joint, 30 s aprilgrid at 20 Hz): time, and the largest shift of an extrinsic, time-offset "
+        "or camera estimate from the full solve in its sigma",
+        f"  {'stride':>6} {'time[s]':>8} {'max |shift| / sigma':>20} {'worst':>12} {'sigma t_x [mm]':>15}",
+    ]
+    full = None
+    for stride in (1, 2, 3):
+        options = ViOptions(frame_stride=stride)
+        start = time.perf_counter()
+        result = calibrate_joint(f, imu, rec.target, "radtan", SIZE, noise, options=options)
+        seconds = time.perf_counter() - start
+        full = full or result
+        names = full.parameter_names[:15]
+        shift = np.abs(_stacked(result) - _stacked(full)) / np.array([full.sigma(n) for n in names])
+        worst = names[int(np.argmax(shift))]
+        lines.append(f"  {stride:6d} {seconds:8.2f} {shift.max():20.3f} {worst:>12} {1e3 * result.sigma('t_x'):15.3f}")
+    return lines
+
+
+def _stacked(result) -> np.ndarray:
+    """Camera parameters, extrinsic rotation (vector w.r.t. the identity), translation, time offset."""
+    return np.concatenate(
+        [result.camera.parameters, so3_log(result.T_cam_imu[:3, :3]), result.T_cam_imu[:3, 3], [result.time_offset]]
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--repeats", type=int, default=5)
@@ -204,6 +236,7 @@ def main() -> None:
         print("\n".join(bench(label, rec, args.repeats)))
     print("\n".join(versus_opencv(args.repeats)))
     print("\n".join(real_size(REAL_DURATIONS[:2] if args.quick else REAL_DURATIONS)))
+    print("\n".join(stride_cost()))
     print(f"load average after: {' '.join(f'{v:.2f}' for v in os.getloadavg())}")
     print(
         "targets: intrinsic <= 1.5x OpenCV (20 and 600 frames); extrinsic and joint <= 2.5 s and <= 500 MB at "

@@ -1,13 +1,16 @@
-"""vical-calibrate end to end on saved synthetic recordings: files written, numbers right, errors clear."""
+"""vical-calibrate end to end on saved synthetic recordings: files written, numbers right, errors clear; a result
+the data do not support (a gyro logged in deg/s) fails with its cause; --out is never overwritten silently."""
 
 import numpy as np
 import pytest
 
 from vical.apps.calibrate import main
-from vical.calib.synthetic import make_recording
-from vical.data import ImuNoise
-from vical.geometry import transform_error
-from vical.io.kalibr import read_camchain, read_imu_yaml, write_camchain_imucam
+from vical.calib.synthetic import Excitation, make_recording
+from vical.data import ImuNoise, ImuSamples
+from vical.geometry import CameraModel, transform_error
+from vical.io.checks import MAX_GYRO_RAD_S
+from vical.io.csvfiles import write_corners_csv, write_imu_csv
+from vical.io.kalibr import read_camchain, read_imu_yaml, write_camchain_imucam, write_imu_yaml, write_target_yaml
 from vical.io.recording import save_recording
 
 
@@ -60,7 +63,73 @@ def test_errors_exit_with_status_2_and_a_message(recording_dir, tmp_path, capsys
     assert main([str(path), "--task", "extrinsic", "--out", str(tmp_path / "y")]) == 2
     assert "--intrinsics" in capsys.readouterr().err
     assert main([str(path), "--max-time-offset", "-0.1", "--out", str(tmp_path / "z")]) == 2
-    assert "max_time_offset must be a number >= 0" in capsys.readouterr().err
+    assert "argument --max-time-offset: must be a number >= 0, got '-0.1'" in capsys.readouterr().err
     (tmp_path / "taken").write_text("a file where the output folder should go")
     assert main([str(path), "--task", "intrinsic", "--out", str(tmp_path / "taken")]) == 2
     assert "vical-calibrate: error:" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def slow_deg_per_s_csvs(tmp_path_factory):
+    """Corner and IMU CSVs of a slow motion whose gyro is logged in deg/s (peak under the readers' 35 rad/s)."""
+    rec = make_recording(
+        duration=5.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=3, excitation=Excitation().scaled(rotation=0.3)
+    )
+    folder = tmp_path_factory.mktemp("deg")
+    imu = ImuSamples(rec.imu.t, np.degrees(rec.imu.gyro), rec.imu.accel)
+    assert 10.0 < np.abs(imu.gyro).max() < MAX_GYRO_RAD_S
+    write_imu_csv(imu, folder / "imu.csv")
+    write_corners_csv(rec.frames, folder / "corners.csv")
+    write_target_yaml(folder / "target.yaml", rec.target)
+    write_imu_yaml(folder / "imu.yaml", rec.truth.imu_noise)
+    args = ["corners.csv", "--imu-csv", "imu.csv", "--target", "target.yaml", "--imu-yaml", "imu.yaml"]
+    return folder, [str(folder / a) if a.endswith((".csv", ".yaml")) else a for a in args], rec
+
+
+def test_a_gyro_logged_in_deg_per_s_fails_naming_the_flag_and_keeps_its_files_marked(
+    slow_deg_per_s_csvs, tmp_path, capsys
+):
+    _, args, rec = slow_deg_per_s_csvs
+    out = tmp_path / "out"
+    assert main([*args, "--image-size", "640", "480", "--out", str(out), "--no-report"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("vical-calibrate: error: the calibration failed: the IMU residuals")
+    assert (
+        "the gyro reads 5" in line and "x the rotation the camera sees: it logs deg/s; pass --gyro-unit deg/s" in line
+    )
+    assert sorted(p.name for p in out.iterdir()) == ["camchain-imucam.failed.yaml", "imu.yaml", "results.txt"]
+    assert (out / "results.txt").read_text().startswith("FAILED: the calibration failed: the IMU residuals")
+
+    fixed = tmp_path / "fixed"
+    argv = [*args, "--image-size", "640", "480", "--gyro-unit", "deg/s", "--out", str(fixed), "--no-report"]
+    assert main(argv) == 0
+    _, T_cam_imu, shift = read_camchain(fixed / "camchain-imucam.yaml")
+    assert np.rad2deg(transform_error(T_cam_imu, rec.truth.T_cam_imu)[0]) < 1.0 and abs(shift) < 0.002
+
+
+def test_an_out_with_files_is_refused_and_replaced_whole_with_overwrite(recording_dir, tmp_path, capsys):
+    path, _ = recording_dir
+    out = tmp_path / "calib"
+    assert main([str(path), "--task", "intrinsic", "--out", str(out)]) == 0
+    (out / "mine.txt").write_text("another run's file")
+    argv = [str(path), "--task", "intrinsic", "--out", str(out), "--no-report"]
+    assert main(argv) == 2
+    assert f"--out {out} already holds files; choose another directory or pass --overwrite" in capsys.readouterr().err
+    assert (out / "reprojection.png").exists() and (out / "mine.txt").exists()
+    assert main([*argv, "--overwrite"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["camchain.yaml", "results.txt"]  # no plots of the first run
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["calib"]  # no temporary left beside it
+    assert main([*argv, "--overwrite", "--out", str(path.parent)]) == 2  # never replaces its input
+    assert "holds the input" in capsys.readouterr().err and path.is_dir()
+
+
+def test_intrinsics_of_another_resolution_are_refused(recording_dir, tmp_path, capsys):
+    path, rec = recording_dir
+    camera = rec.truth.camera
+    doubled = CameraModel(camera.distortion, 2 * camera.width, 2 * camera.height, *(2 * camera.intrinsics), camera.dist)
+    write_camchain_imucam(tmp_path / "big.yaml", doubled, None, None)
+    argv = [str(path), "--task", "extrinsic", "--intrinsics", str(tmp_path / "big.yaml"), "--out", str(tmp_path / "o")]
+    assert main(argv) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert f"--intrinsics {tmp_path / 'big.yaml'} calibrates 1280 x 960 px images, but the images are 640 x 480" in line
+    assert not (tmp_path / "o").exists()

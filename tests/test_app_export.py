@@ -1,9 +1,19 @@
-"""vical-export: a recording with images becomes Kalibr's inputs that read back to the same data."""
+"""vical-export: a recording with images becomes Kalibr's inputs that read back to the same data; an export
+killed mid-write (SIGKILL of a real subprocess) does not block the next one."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 from test_io_samples import make_recording
 
 from vical.apps.export import kalibr_commands, main
+from vical.data import CameraFrames
 from vical.io import open_recording, read_camchain, read_imu_yaml, read_target_yaml, save_recording
 
 
@@ -48,3 +58,29 @@ def test_kalibr_commands_follow_the_topic_and_the_lens_model(tmp_path):
     commands = kalibr_commands(tmp_path, True, "/camera/image", "equidistant")
     assert "--topics /camera/image " in commands[0] and "--models pinhole-equi " in commands[0]
     assert "--models pinhole-radtan " in kalibr_commands(tmp_path, True)[0]
+
+
+def test_an_export_killed_mid_write_leaves_nothing_that_blocks_the_next_one(tmp_path):
+    rec = make_recording(n_frames=150)
+    rng = np.random.default_rng(0)
+    images = rng.integers(0, 256, (150, 480, 640), dtype=np.uint8)  # slow to encode: the kill lands mid-write
+    save_recording(
+        replace(rec, frames=CameraFrames(rec.frames.t, rec.frames.corners, rec.frames.ids, images)), tmp_path / "rec"
+    )
+    out = tmp_path / "kalibr_in"
+    command = [str(Path(sys.executable).parent / "vical-export"), str(tmp_path / "rec"), "--out", str(out)]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 60
+    while not (out.is_dir() and any(".tmp-" in p.name for p in out.iterdir())):
+        assert proc.poll() is None, "the export ended before it was killed"
+        assert time.monotonic() < deadline
+        time.sleep(0.001)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert any(".tmp-" in p.name for p in out.iterdir())  # killed mid-write: a hidden temporary is left
+
+    again = subprocess.run([*command, "--overwrite"], capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0, again.stderr
+    assert not [p for p in out.rglob("*") if ".tmp-" in p.name]
+    back = open_recording(out / "data.bag", rec.target, keep_images=True)
+    assert np.array_equal(back.frames.images, images)

@@ -1,9 +1,15 @@
-"""vical-record: composes from conf/record.yaml, writes a loadable recording and PNG frames, refuses bad input."""
+"""vical-record: composes from conf/record.yaml, writes a loadable recording and PNG frames, refuses bad input,
+warns about a step the arm cannot execute, and a run killed while writing (SIGKILL of a real subprocess) leaves
+nothing that blocks the next one."""
 
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import cv2
@@ -11,7 +17,7 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from vical.apps.record import record
+from vical.apps.record import ClampedStepWarning, record
 from vical.config import ConfigError
 from vical.io.recording import load_recording
 
@@ -65,3 +71,35 @@ def test_bad_config_names_the_key(tmp_path, override, match):
     with pytest.raises(ConfigError, match=match):
         record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, override))
     assert not (tmp_path / "rec").exists()
+
+
+def test_an_unreachable_step_is_executed_as_far_as_it_goes_with_a_warning(tmp_path):
+    unreachable = "steps=[[0.0,0.04,0.0,0.0,0.0,0.1],[0.0,0.0,2.0,0.0,0.0,0.0]]"
+    with pytest.warns(ClampedStepWarning) as caught:
+        record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, unreachable))
+    (warning,) = caught
+    message = str(warning.message)
+    assert message.startswith("steps[1] was not executed as requested (target unreachable")
+    asked, moved = (float(part.split(" m,")[0]) for part in message.split("asked for ")[1].split("the arm moved "))
+    assert asked == pytest.approx(2.0) and 0.0 < moved < 1.0
+    assert load_recording(tmp_path / "rec").path_length < 1.0  # the executed motion, not the requested one
+
+
+def test_a_recording_killed_while_written_leaves_nothing_that_blocks_the_next_one(tmp_path):
+    out = tmp_path / "rec"
+    command = [str(Path(sys.executable).parent / "vical-record"), f"out={out}", "images=true", "progress=false"]
+    proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while not any(p.name.startswith(".rec.tmp-") for p in tmp_path.iterdir()):
+        assert proc.poll() is None, "vical-record ended before it was killed"
+        assert time.monotonic() < deadline
+        time.sleep(0.001)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not out.exists() and [p.name for p in tmp_path.iterdir() if p.name.startswith(".rec.tmp-")]
+
+    again = subprocess.run([*command, "overwrite=true"], capture_output=True, text=True, timeout=120)
+    assert again.returncode == 0, again.stderr
+    assert [p.name for p in tmp_path.iterdir()] == ["rec"]
+    rec = load_recording(out)
+    assert sorted(int(p.stem) for p in (out / "images").glob("*.png")) == rec.frames.t.tolist()

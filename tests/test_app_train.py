@@ -1,8 +1,10 @@
 """vical-train: every config composes and validates; a killed run resumed from its directory ends exactly as an
-uninterrupted run (SIGKILL of a real subprocess mid-run); user errors are one line and exit status 2; resume
+uninterrupted run (SIGKILL of a real subprocess mid-run); Ctrl-C says how to resume; a finished run is complete,
+never shortened, and goes on exactly when resumed longer; user errors are one line and exit status 2; resume
 overrides other than key=value changes of existing keys are refused by name."""
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -15,7 +17,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from vical.apps.train import resumed_config
+from vical.apps.train import check_command_line, resumed_config
 from vical.config import ConfigError
 from vical.rl.checkpoint import load_checkpoint
 from vical.rl.trainer import AGENT, CHECKPOINT, make_env, parse_settings, train
@@ -163,3 +165,61 @@ def test_resume_lists_every_refused_override(saved_run):
     with pytest.raises(ConfigError) as err:
         resumed_config(str(saved_run), ["agent=sac_authors", "~train.total_steps", "+foo=1"])
     assert all(name in str(err.value) for name in ("agent=sac_authors (", "~train.total_steps (", "+foo=1 ("))
+
+
+def test_ctrl_c_says_where_the_last_checkpoint_is_and_how_to_resume(tmp_path):
+    run = tmp_path / "run"
+    proc = run_app(*TINY, "train.total_steps=100000", f"run_dir={run}", cwd=tmp_path)
+    deadline = time.monotonic() + 120
+    while not (run / CHECKPOINT).exists():
+        assert proc.poll() is None and time.monotonic() < deadline, proc.stdout.read()
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGINT)
+    out = proc.communicate(timeout=60)[0]
+    assert proc.returncode == 130, out
+    step = load_checkpoint(run / CHECKPOINT)["counters"]["step"]
+    assert out.splitlines()[-1] == (
+        f"vical-train: interrupted; the last checkpoint (step {step}) is {run / CHECKPOINT}; "
+        f"continue with: vical-train resume={run}"
+    )
+    assert "Traceback" not in out and "KeyboardInterrupt" not in out
+    assert [p.name for p in tmp_path.iterdir()] == ["run"] and (run / "train.log").is_file()  # no runs/<time>/
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory) -> Path:
+    """A run of TINY trained to its end (600 steps, checkpoints every 100)."""
+    run = tmp_path_factory.mktemp("finished") / "run"
+    train(composed([*TINY, f"run_dir={run}"]))
+    return run
+
+
+def test_a_finished_run_resumed_at_its_length_is_complete_and_never_shortened(finished_run):
+    agent = (finished_run / AGENT).read_bytes()
+    done = check_command_line([f"resume={finished_run}"])
+    assert (
+        done == f"run {finished_run} is complete: it trained 600 steps and wrote {finished_run / AGENT}; nothing to do"
+    )
+    shorter = r"train.total_steps=300 is below the 600 steps run .* finished with: a run cannot be shortened"
+    with pytest.raises(ConfigError, match=shorter):
+        check_command_line([f"resume={finished_run}", "train.total_steps=300"])
+    assert (finished_run / AGENT).read_bytes() == agent
+
+
+def test_a_finished_run_resumed_longer_equals_a_run_of_that_length(finished_run, tmp_path):
+    longer = tmp_path / "longer"
+    shutil.copytree(finished_run, longer)
+    assert check_command_line([f"resume={longer}", "train.total_steps=800"]) is None
+    resumed = train(resumed_config(str(longer), [f"resume={longer}", "train.total_steps=800"]))
+    full = train(composed([*TINY, "train.total_steps=800", f"run_dir={tmp_path / 'full'}"]))
+    assert resumed.steps == full.steps == 800
+    for key, value in full.agent.state_dict().items():
+        assert torch.equal(resumed.agent.state_dict()[key], value), key
+
+
+def test_a_finished_run_without_checkpoint_is_complete_but_cannot_go_on(tmp_path):
+    run = tmp_path / "run"
+    train(composed([*TINY, "train.total_steps=150", "train.checkpoint_every=0", f"run_dir={run}"]))
+    assert "is complete: it trained 150 steps" in check_command_line([f"resume={run}"])
+    with pytest.raises(ConfigError, match="finished at 150 steps without a checkpoint to go on from"):
+        check_command_line([f"resume={run}", "train.total_steps=300"])

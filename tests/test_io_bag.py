@@ -9,7 +9,7 @@ from test_io_samples import make_recording
 
 from vical.io.bag import IMAGE_TYPE, IMU_TYPE, _image_msg, _imu_msg, read_bag, ros1_typestore, write_bag
 from vical.io.checks import FormatWarning
-from vical.io.errors import BagFormatError, FormatError
+from vical.io.errors import BagFormatError, FormatError, UnitError
 
 
 @pytest.fixture(scope="module")
@@ -119,5 +119,5 @@ def test_bag_flaws_are_fixed_or_named(tmp_path):
     sizes = [*images, (200_000_000, np.zeros((9, 10), np.uint8))]
     with pytest.raises(FormatError, match=r"/cam0/image_raw message \d+: image is 10 x 9 px"):
         read_bag(_custom_bag(tmp_path / "c.bag", sizes, _imu_stream()), target, keep_images=False)
-    with pytest.raises(BagFormatError, match=r"d\.bag topic /imu0: gyro reads up to 120\.0 rad/s.*deg/s"):
+    with pytest.raises(UnitError, match=r"d\.bag topic /imu0: gyro reads up to 120\.0 rad/s.*deg/s"):
         read_bag(_custom_bag(tmp_path / "d.bag", images, _imu_stream(gyro=120.0)), target)

@@ -9,7 +9,7 @@ from test_io_samples import T0_NS, assert_frames_equal, make_recording
 
 from vical.io.checks import FormatWarning
 from vical.io.csvfiles import IMU_HEADER, read_corners_csv, read_imu_csv, write_corners_csv, write_imu_csv
-from vical.io.errors import CsvFormatError, FormatError
+from vical.io.errors import CsvFormatError, FormatError, UnitError
 from vical.io.euroc import read_euroc, write_euroc
 
 
@@ -119,13 +119,21 @@ def test_imu_csv_seconds_are_converted_exactly(tmp_path):
 def test_imu_csv_implausible_units(tmp_path):
     with pytest.raises(CsvFormatError, match="look like seconds"):
         read_imu_csv(_imu_csv(tmp_path, _imu_rows(t0=1403636579, step="1")))
-    with pytest.raises(CsvFormatError, match="gyro_unit='deg/s'"):
+    with pytest.raises(UnitError, match="gyro_unit='deg/s'") as err:
         read_imu_csv(_imu_csv(tmp_path, _imu_rows(gyro=120.0)))
+    assert err.value.spelled("--gyro-unit deg/s").endswith("convert to rad/s or pass --gyro-unit deg/s")
     imu = read_imu_csv(_imu_csv(tmp_path, _imu_rows(gyro=120.0)), gyro_unit="deg/s")
     assert imu.gyro[0, 0] == pytest.approx(120.0 * np.pi / 180)
+    with pytest.raises(FormatError, match="beyond any MEMS gyro's range even in deg/s"):
+        read_imu_csv(_imu_csv(tmp_path, _imu_rows(gyro=3000.0)), gyro_unit="deg/s")
+    # rad/s data declared as deg/s: 2 rad/s is a calibration motion, 2 deg/s is not
+    with pytest.raises(UnitError, match=r"peaks at 2 deg/s, too slow .* look like rad/s; pass gyro_unit='rad/s'"):
+        read_imu_csv(_imu_csv(tmp_path, _imu_rows(gyro=2.0)), gyro_unit="deg/s")
     g_rows = [r.replace(",9.81", ",1.0") for r in _imu_rows()]
-    with pytest.raises(CsvFormatError, match="accel_unit='g'"):
+    with pytest.raises(UnitError, match="accel_unit='g'"):
         read_imu_csv(_imu_csv(tmp_path, g_rows))
+    with pytest.raises(UnitError, match=r"96.2 m/s\^2 \(read as g\).*look like m/s\^2: pass accel_unit='m/s\^2'"):
+        read_imu_csv(_imu_csv(tmp_path, _imu_rows()), accel_unit="g")
 
 
 def test_imu_csv_malformed_lines(tmp_path):
@@ -158,3 +166,22 @@ def test_corner_csv_bad_rows(tmp_path):
     path.write_text(header + f"{T0_NS},x,1.5,2.5\n")
     with pytest.raises(CsvFormatError, match="line 2: point id 'x' is not an integer"):
         read_corners_csv(path, target)
+
+
+@pytest.mark.parametrize("content", ["", IMU_HEADER + "\n"])
+def test_csv_files_without_rows_are_named_and_an_euroc_imu_without_samples_is_no_imu(tmp_path, content):
+    rec = make_recording()
+    write_euroc(rec, tmp_path / "seq")
+    imu_csv = tmp_path / "seq" / "mav0" / "imu0" / "data.csv"
+    imu_csv.write_text(content)
+    with pytest.raises(
+        CsvFormatError, match=f"{imu_csv} holds no IMU samples \\(the file is empty or has only a header"
+    ):
+        read_imu_csv(imu_csv)
+    corners_csv = tmp_path / "corners.csv"
+    corners_csv.write_text(content and "#timestamp [ns],point_id,u [px],v [px]\n")
+    with pytest.raises(CsvFormatError, match=f"{corners_csv} holds no corner rows"):
+        read_corners_csv(corners_csv, rec.target)
+    with pytest.warns(FormatWarning, match="holds no samples: the recording has no IMU data"):
+        back = read_euroc(tmp_path / "seq", rec.target)
+    assert len(back.imu) == 0 and len(back.frames) == len(rec.frames)

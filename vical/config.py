@@ -12,6 +12,27 @@ class ConfigError(ValueError):
     """A config value that is missing, malformed or out of range."""
 
 
+class SettingError(ValueError):
+    """A problem that changing one setting fixes; the message spells the setting as its caller wrote it.
+
+    ``str(err)`` spells the fix as a Python argument (``gyro_unit='deg/s'``); a command-line app
+    spells it as its own flag: ``err.spelled(f"--gyro-unit {err.cli_value}")``. Subclasses add the
+    error family (``vical.io.errors.UnitError`` is also a ``FormatError``).
+
+    Attributes:
+        setting: the Python argument (``gyro_unit``); cli_value: the suggested value as a command line
+            writes it (``deg/s``, ``640 480``).
+    """
+
+    def __init__(self, template: str, setting: str, python_value: str, cli_value: str) -> None:
+        self.template, self.setting, self.cli_value = template, setting, cli_value
+        super().__init__(self.spelled(f"{setting}={python_value}"))
+
+    def spelled(self, fix: str) -> str:
+        """The message with the fix written as ``fix`` (where the template says ``{fix}``)."""
+        return self.template.replace("{fix}", fix)
+
+
 def require(ok: bool, key: str, allowed: str, value: Any) -> None:
     """Raise ``ConfigError`` ``"<key> must be <allowed>, got <value>"`` unless ``ok``."""
     if not ok:

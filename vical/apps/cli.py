@@ -1,29 +1,76 @@
-"""What the Hydra apps share on the command line: one-line errors and reading an override early.
+"""What the apps share on the command line: one-line errors and warnings, and reading an override early.
 
-``vical-train`` and ``vical-evaluate`` check some arguments before Hydra composes (a ``resume=``
-directory must exist before Hydra creates it; an unknown ``policy=`` is one line, not Hydra's
-traceback), and report user errors as ``<app>: error: <message>`` with exit status 2.
+Every app reports a user error as one line ``<app>: error: <message>`` with exit status 2 (argparse's
+own errors included: ``ArgumentParser``), and a warning as one line ``warning: <message>``
+(``one_line_warnings``). The Hydra apps (``vical-train``, ``vical-evaluate``, ``vical-record``) check
+the command line before Hydra starts: ``check_composes`` turns Hydra's own override errors into one
+line, and each app checks what it can (a ``resume=`` directory must exist before Hydra creates it; an
+unknown ``policy=`` is one line, not Hydra's traceback).
 """
 
 from __future__ import annotations
 
+import argparse
 import importlib.util
+import logging
+import os
 import sys
+import warnings
+from pathlib import Path
 from typing import NoReturn
 
+from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
-from hydra.errors import HydraException
+from hydra.errors import HydraException, OverrideParseException
+from omegaconf import DictConfig
+from omegaconf.errors import OmegaConfBaseException
 
 from vical.config import ConfigError
 
 EXIT_USER_ERROR = 2
 
 
+def report_error(app: str, message: object) -> int:
+    """Print ``<app>: error: <message>`` on one line to stderr (a multi-line message joined); return status 2."""
+    print(f"{app}: error: {' '.join(str(message).split())}", file=sys.stderr)
+    return EXIT_USER_ERROR
+
+
 def fail(app: str, err: BaseException) -> NoReturn:
     """Print ``<app>: error: <message>`` on one line to stderr and exit with status 2."""
-    message = " ".join(str(err).split())
-    print(f"{app}: error: {message}", file=sys.stderr)
-    raise SystemExit(EXIT_USER_ERROR)
+    raise SystemExit(report_error(app, err))
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse with vical's one-line errors: ``<prog>: error: <message>`` and exit status 2, no usage block."""
+
+    def error(self, message: str) -> NoReturn:
+        raise SystemExit(report_error(self.prog, f"{message} (see {self.prog} --help)"))
+
+
+class OutputError(Exception):
+    """An output path that cannot be used or written; the message names the flag or key and the reason."""
+
+
+def cannot_write(flag: str, out: str | os.PathLike, err: OSError) -> str:
+    """``--out X: cannot write it (read-only file system); ...``: an ``OSError`` without Python's ``[Errno N]``."""
+    what = "it" if err.filename is None or Path(err.filename) == Path(out) else str(err.filename)
+    reason = (err.strerror or str(err)).lower()
+    return f"{flag} {out}: cannot write {what} ({reason}); choose another directory"
+
+
+def _one_line(message, category, filename, lineno, line=None) -> str:
+    return f"warning: {' '.join(str(message).split())}\n"
+
+
+def one_line_warnings() -> None:
+    """Print each warning as ``warning: <message>``: users need what happened, not the Python source line."""
+    warnings.formatwarning = _one_line
+
+
+def quiet_library_logs() -> None:
+    """Keep libraries' INFO records out of the Hydra apps' console log (PyOpenGL announces an optional module)."""
+    logging.getLogger("OpenGL").setLevel(logging.WARNING)
 
 
 def override_value(argv: list[str], key: str) -> str | None:
@@ -40,6 +87,35 @@ def override_value(argv: list[str], key: str) -> str | None:
             value = None if override.is_sweep_override() else override.value()
             return value if isinstance(value, str) and value else None
     return None
+
+
+def check_composes(conf_dir: str | os.PathLike, config_name: str, argv: list[str]) -> DictConfig | None:
+    """Compose ``<conf_dir>/<config_name>.yaml`` with the command line's overrides, as Hydra is about to.
+
+    Hydra reports its own errors (an unknown key without ``+``, an unknown group choice, bad override
+    syntax) in several lines and exits with status 1; composing first turns them into one ``ConfigError``
+    line. Returns the composed config (without the ``hydra`` node), or None for a command line with Hydra
+    flags (``-m``, ``--cfg``, ...): those are left to Hydra.
+    """
+    if any(arg.startswith("-") for arg in argv):
+        return None
+    try:
+        with initialize_config_dir(config_dir=str(conf_dir), version_base="1.3"):
+            return compose(config_name=config_name, overrides=argv)
+    except (HydraException, OmegaConfBaseException) as err:
+        raise ConfigError(_hydra_message(err)) from None
+
+
+def _hydra_message(err: Exception) -> str:
+    """Hydra's message without its search path and links; a list of available options on the same line."""
+    text = str(err).split("\nConfig search path")[0].split("\nSee https")[0]
+    if isinstance(err, OverrideParseException):
+        return f"cannot parse the override {err.override!r}: {text}"
+    head, _, options = text.partition("\n\nAvailable options in ")
+    if not options:
+        return head
+    group, _, names = options.partition(":")
+    return f"{head.rstrip('.')}; the available options in {group} are: {', '.join(names.split())}"
 
 
 # Hydra launcher choices -> (module of the plugin, what to install).

@@ -26,7 +26,14 @@ from hydra.core.hydra_config import HydraConfig
 from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
-from vical.apps.cli import check_launcher, fail, override_value
+from vical.apps.cli import (
+    check_composes,
+    check_launcher,
+    fail,
+    one_line_warnings,
+    override_value,
+    quiet_library_logs,
+)
 from vical.config import ConfigError, require
 from vical.io.atomic import write_text_atomic
 from vical.parallel import ParallelConfig, WorkerCrashed
@@ -130,6 +137,8 @@ def output_dir(cfg: DictConfig) -> Path:
     if not cfg.overwrite and any((out / f).exists() for f in (RESULTS, SUMMARY, FIGURE)):
         raise FileExistsError(f"out={out} already holds results; choose another directory or pass overwrite=true")
     existing = next((d for d in (out, *out.parents) if d.exists()), Path("."))
+    if not existing.is_dir():
+        raise FileExistsError(f"out={out} cannot be created: {existing} is a file; choose another directory")
     if not os.access(existing, os.W_OK | os.X_OK):
         raise FileExistsError(f"out={out}: {existing} is not writable; choose another directory")
     return out
@@ -291,12 +300,16 @@ def hydra_main(cfg: DictConfig) -> None:
 
 
 def main() -> None:
-    """Console entry point: an unknown ``policy=`` or a missing launcher plugin is one line before Hydra composes."""
+    """Console entry point: an unknown ``policy=``, a missing launcher plugin and Hydra's own override errors are
+    one line before Hydra starts."""
+    one_line_warnings()
+    quiet_library_logs()
     name = override_value(sys.argv[1:], "policy")
     try:
         check_launcher(sys.argv[1:])
         if name is not None:
             check_policy_name(name)
+        check_composes(CONF_DIR, "evaluate", sys.argv[1:])
     except ConfigError as err:
         fail(APP, err)
     hydra_main()

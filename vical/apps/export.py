@@ -9,15 +9,19 @@ Writes into ``--out``: ``euroc/mav0/...`` (EuRoC/ASL folder), ``data.bag`` (ROS1
 its truth (simulator), ``camchain.yaml`` (the true intrinsics, the input of
 ``kalibr_calibrate_imu_camera --cams``) and ``camchain-imucam-truth.yaml`` (the true extrinsic and
 time offset, to compare Kalibr's result with). It prints the Kalibr commands to run on them.
+
+Every output is written atomically; a killed export leaves at most hidden temporary siblings, which the
+next export into the same ``--out`` removes.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
+from vical.apps.cli import ArgumentParser, cannot_write, one_line_warnings, report_error
 from vical.data import DataError, ImuNoise, Recording
+from vical.io.atomic import remove_stale_temporaries
 from vical.io.bag import write_bag
 from vical.io.errors import FormatError
 from vical.io.euroc import write_euroc
@@ -25,8 +29,8 @@ from vical.io.kalibr import write_camchain_imucam, write_imu_yaml, write_target_
 from vical.io.recording import is_recording_dir, load_recording
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="vical-export", description=__doc__.split("\n\n")[0])
+def build_parser() -> ArgumentParser:
+    p = ArgumentParser(prog="vical-export", description=__doc__.split("\n\n")[0])
     p.add_argument("recording", help="vical recording directory with images (vical-record images=true)")
     p.add_argument("--out", required=True, help="output directory (must not exist unless --overwrite)")
     p.add_argument("--image-topic", default="/cam0/image_raw", help="bag image topic (default: /cam0/image_raw)")
@@ -60,14 +64,21 @@ def kalibr_commands(
     ]
 
 
+def check_out(out: Path, overwrite: bool) -> None:
+    """Refuse an ``--out`` that is a file, or that holds files unless ``overwrite`` (after removing what a killed
+    export left)."""
+    if out.exists() and not out.is_dir():
+        raise FileExistsError(f"--out {out} is a file; give a directory")
+    remove_stale_temporaries(out)
+    if out.exists() and not overwrite and any(out.iterdir()):
+        raise FileExistsError(f"--out {out} exists and is not empty; pass --overwrite to replace its files")
+
+
 def export(rec: Recording, out: Path, image_topic: str, imu_topic: str, overwrite: bool) -> list[Path]:
     """Write the Kalibr inputs of ``rec`` into ``out``; return the written paths."""
     if rec.frames.images is None:
         raise FormatError("the recording has no images; record it with images (vical-record images=true)")
-    if out.exists() and not out.is_dir():
-        raise FileExistsError(f"--out {out} is a file; give a directory")
-    if out.exists() and not overwrite and any(out.iterdir()):
-        raise FileExistsError(f"{out} exists and is not empty; pass --overwrite to replace its files")
+    check_out(out, overwrite)
     out.mkdir(parents=True, exist_ok=True)
     written = [write_euroc(rec, out / "euroc", overwrite=overwrite)]
     written.append(write_bag(rec, out / "data.bag", image_topic, imu_topic, overwrite=overwrite))
@@ -86,16 +97,22 @@ def export(rec: Recording, out: Path, image_topic: str, imu_topic: str, overwrit
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the exit status (0 ok, 2 bad input)."""
-    args = build_parser().parse_args(argv)
+    one_line_warnings()
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as done:  # --help (0), or a bad argument whose line argparse printed (2)
+        return int(done.code or 0)
     out = Path(args.out)
     try:
+        check_out(out, args.overwrite)  # before reading the recording: a wrong --out fails at once
         if not is_recording_dir(args.recording):
             raise FormatError(f"{args.recording} is not a vical recording directory (no recording.yaml)")
         rec = load_recording(args.recording)
         written = export(rec, out, args.image_topic, args.imu_topic, args.overwrite)
-    except (FormatError, DataError, FileExistsError, FileNotFoundError) as exc:
-        print(f"vical-export: error: {exc}", file=sys.stderr)
-        return 2
+    except (FormatError, DataError) as exc:
+        return report_error("vical-export", str(exc))
+    except OSError as exc:  # vical's refusals carry their message; the system's name the path and the reason
+        return report_error("vical-export", str(exc) if exc.filename is None else cannot_write("--out", out, exc))
     if rec.truth is None:
         print("note: no truth in the recording: imu.yaml holds the paper's noise densities, no camchain.yaml")
     for path in written:

@@ -2,12 +2,22 @@
 
 The sensor is drawn from the ``sensor`` group with the run's seed (the distortion centre only
 where ``task.asymmetric_distortion`` says so); the arm executes ``steps`` in MuJoCo physics while
-the IMU and camera record; the result is saved with ``vical.io.save_recording`` (atomically), and
-with ``images=true`` the rendered frames are also written as ``<out>/images/<t_ns>.png``.
+the IMU and camera record; the result is written atomically as a ``vical.io.save_recording``
+directory, with ``images=true`` also the rendered frames as ``<out>/images/<t_ns>.png`` (the same
+directory, so a killed run leaves no recording without its images). A step the arm cannot execute
+as requested (unreachable, or stopped short of a contact) is executed as far as it goes, with a
+warning that compares it with the request.
+
+User errors (a bad value, an existing ``out``, Hydra's own override errors) print one line
+``vical-record: error: ...`` and exit with status 2, checked before the simulator starts.
 """
 
 from __future__ import annotations
 
+import os
+import sys
+import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import hydra
@@ -15,24 +25,31 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
+from vical.apps.cli import check_composes, fail, one_line_warnings
 from vical.calib.aprilgrid import detect_aprilgrid
 from vical.calib.detection import detect_checkerboard
-from vical.config import ConfigError, require
+from vical.config import ConfigError, require, require_range
 from vical.data import Recording
-from vical.geometry import step_pose
+from vical.geometry import matrix_to_euler, step_pose
 from vical.io.atomic import atomic_directory
 from vical.io.images import write_png
-from vical.io.recording import save_recording
-from vical.sim import PandaSim, SimConfig
+from vical.io.recording import write_recording_files
+from vical.sim import MotionResult, PandaSim, SimConfig
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, sample_sensor
+
+APP = "vical-record"
+USER_ERRORS = (ConfigError, FileExistsError)
+
+
+class ClampedStepWarning(UserWarning):
+    """A pose step the arm could not execute as requested; the message compares the two."""
 
 
 def parse_steps(steps) -> np.ndarray:
     """``steps`` as an (S, 6) float array; ``ConfigError`` naming the bad entry otherwise."""
-    require(
-        steps is not None and len(steps) > 0, "steps", "a non-empty list of [dx, dy, dz, droll, dpitch, dyaw]", steps
-    )
+    ok = isinstance(steps, list | tuple) and len(steps) > 0
+    require(ok, "steps", "a non-empty list of [dx, dy, dz, droll, dpitch, dyaw]", steps)
     parsed = []
     for i, step in enumerate(steps):
         try:
@@ -44,40 +61,131 @@ def parse_steps(steps) -> np.ndarray:
     return np.array(parsed)
 
 
+def check_out(out, overwrite: bool) -> Path:
+    """``out`` as a Path; refused when it is a file, lies below one, or exists and ``overwrite`` is false."""
+    require(isinstance(out, str) and bool(out), "out", "a directory path", out)
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise FileExistsError(f"out={out} is a file; choose a directory path")
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"out={out} already exists; choose another directory or pass overwrite=true")
+    existing = next(d for d in path.absolute().parents if d.exists())
+    if not existing.is_dir():
+        raise FileExistsError(f"out={out} cannot be created: {existing} is a file")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise FileExistsError(f"out={out} cannot be created: {existing} is not writable")
+    return path
+
+
+def _plain(value):
+    """A config node as plain lists and dicts (scalars as they are)."""
+    return OmegaConf.to_container(value, resolve=True) if OmegaConf.is_config(value) else value
+
+
+def _require_bool(cfg: DictConfig, key: str) -> bool:
+    value = cfg.get(key)
+    require(isinstance(value, bool), key, "true or false", value)
+    return value
+
+
+def _render_size(value) -> tuple[int, int]:
+    ok = isinstance(value, list | tuple) and len(value) == 2
+    ok = ok and all(isinstance(v, int) and not isinstance(v, bool) and v >= 16 for v in value)
+    require(ok, "render_size", "[width, height], two integers >= 16 [px]", value)
+    return int(value[0]), int(value[1])
+
+
+def _seed(value) -> int:
+    require(isinstance(value, int) and not isinstance(value, bool) and value >= 0, "seed", "an integer >= 0", value)
+    return value
+
+
+def clamp_warning(i: int, T_start: np.ndarray, result: MotionResult) -> str:
+    """What step ``i`` asked for and what the arm executed instead, from the pose ``T_start`` (4, 4)."""
+
+    def motion(T: np.ndarray) -> str:
+        translation = np.linalg.norm(T[:3, 3] - T_start[:3, 3])
+        turn = np.degrees(matrix_to_euler(T[:3, :3]) - matrix_to_euler(T_start[:3, :3]))
+        rotation = np.round((turn + 180.0) % 360.0 - 180.0, 1) + 0.0  # + 0.0: no -0.0
+        return f"{translation:.3f} m, Euler increments [{rotation[0]:+.1f} {rotation[1]:+.1f} {rotation[2]:+.1f}] deg"
+
+    return (
+        f"steps[{i}] was not executed as requested ({result.message}): it asked for {motion(result.T_requested)}, "
+        f"the arm moved {motion(result.T_goal)}; the recording holds the executed motion"
+    )
+
+
 def write_images(recording: Recording, folder: Path) -> None:
-    """Write every frame's image as ``<folder>/<t_ns>.png`` (all or nothing)."""
-    with atomic_directory(folder) as tmp:
-        for t, image in zip(recording.frames.t, recording.frames.images, strict=True):
-            write_png(tmp / f"{int(t)}.png", image)
+    """Write every frame's image as ``<folder>/<t_ns>.png``."""
+    folder.mkdir()
+    for t, image in zip(recording.frames.t, recording.frames.images, strict=True):
+        write_png(folder / f"{int(t)}.png", image)
+
+
+@dataclass(frozen=True)
+class RecordSettings:
+    """The checked settings of one recording (``conf/record.yaml``)."""
+
+    steps: np.ndarray  # (S, 6) pose steps
+    seed: int
+    out: Path
+    overwrite: bool
+    images: bool
+    progress: bool
+    render_size: tuple[int, int]
+    settle_time: float
+    sampling: SensorSampling
+    sim: SimConfig
+    asymmetric_distortion: bool
+
+
+def check_settings(cfg: DictConfig) -> RecordSettings:
+    """Every setting of ``cfg`` checked, so that a bad one stops the run before the simulator starts."""
+    overwrite, images, progress = (_require_bool(cfg, key) for key in ("overwrite", "images", "progress"))
+    settle_time = cfg.get("settle_time")
+    require_range("settle_time", settle_time, 0.0, 60.0)
+    return RecordSettings(
+        steps=parse_steps(_plain(cfg.get("steps"))),
+        seed=_seed(cfg.get("seed")),
+        out=check_out(cfg.get("out"), overwrite),
+        overwrite=overwrite,
+        images=images,
+        progress=progress,
+        render_size=_render_size(_plain(cfg.get("render_size"))),
+        settle_time=float(settle_time),
+        sampling=SensorSampling.from_config(OmegaConf.to_container(cfg.sensor, resolve=True)),
+        sim=SimConfig.from_mapping(cfg.sim),
+        asymmetric_distortion=bool(cfg.task.asymmetric_distortion),
+    )
 
 
 def record(cfg: DictConfig) -> Path:
     """Run the motion of ``cfg`` with a sampled sensor and write the recording; return its directory."""
-    steps = parse_steps(OmegaConf.to_container(cfg.steps, resolve=True))
-    sampling = SensorSampling.from_config(OmegaConf.to_container(cfg.sensor, resolve=True))
-    out = Path(str(cfg.out))
-    if out.exists() and not cfg.overwrite:
-        raise FileExistsError(f"out={out} already exists; choose another directory or pass overwrite=true")
-    sim = PandaSim(SimConfig.from_mapping(cfg.sim))
-    rng = np.random.default_rng(int(cfg.seed))
-    truth = sample_sensor(sampling, rng, asymmetric=bool(cfg.task.asymmetric_distortion))
+    s = check_settings(cfg)
+    sim = PandaSim(s.sim)
+    rng = np.random.default_rng(s.seed)
+    truth = sample_sensor(s.sampling, rng, asymmetric=s.asymmetric_distortion)
     detector = detect_aprilgrid if sim.cfg.board.kind == "aprilgrid" else detect_checkerboard
-    detector = detector if sampling.backend == "render" else None
-    size = tuple(int(s) for s in cfg.render_size)
-    recorder = SensorRecorder(sim, sim.cfg.board.target, sampling, detector, bool(cfg.images), render_size=size)
+    detector = detector if s.sampling.backend == "render" else None
+    recorder = SensorRecorder(sim, sim.cfg.board.target, s.sampling, detector, s.images, render_size=s.render_size)
     try:
         recorder.start(truth, rng)
-        for step in tqdm(steps, desc="vical-record", unit="step", disable=not cfg.progress):
-            T_goal = step_pose(sim.ee_pose(), step[:3], step[3:])
-            recorder.add_motion(sim.move_to(T_goal, on_step=recorder.on_step, settle_time=float(cfg.settle_time)))
-        metadata = {"seed": int(cfg.seed), "config": OmegaConf.to_container(cfg, resolve=True)}
+        for i, step in enumerate(tqdm(s.steps, desc=APP, unit="step", disable=not s.progress)):
+            T_start = sim.ee_pose()
+            T_goal = step_pose(T_start, step[:3], step[3:])
+            result = sim.move_to(T_goal, on_step=recorder.on_step, settle_time=s.settle_time)
+            recorder.add_motion(result)
+            if result.clamped:
+                warnings.warn(clamp_warning(i, T_start, result), ClampedStepWarning, stacklevel=2)
+        metadata = {"seed": s.seed, "config": OmegaConf.to_container(cfg, resolve=True)}
         recording = recorder.recording(metadata)
     finally:
         recorder.close()
-    save_recording(recording, out, overwrite=bool(cfg.overwrite))
-    if cfg.images:
-        write_images(recording, out / "images")
-    return out
+    with atomic_directory(s.out, overwrite=s.overwrite) as tmp:
+        write_recording_files(recording, tmp)
+        if s.images:
+            write_images(recording, tmp / "images")
+    return s.out
 
 
 # An absolute path: the console script imports this module, and Hydra would read a relative
@@ -86,9 +194,24 @@ CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
 
 @hydra.main(config_path=CONF_DIR, config_name="record", version_base="1.3")
-def main(cfg: DictConfig) -> None:
-    out = record(cfg)
+def hydra_main(cfg: DictConfig) -> None:
+    try:
+        out = record(cfg)
+    except USER_ERRORS as err:
+        fail(APP, err)
     print(f"recording written to {out}")
+
+
+def main() -> None:
+    """Console entry point: the settings, and Hydra's own override errors, are checked before Hydra runs."""
+    one_line_warnings()
+    try:
+        cfg = check_composes(CONF_DIR, "record", sys.argv[1:])
+        if cfg is not None:  # None with Hydra flags (-m, --cfg, ...): record() checks under Hydra
+            check_settings(cfg)
+    except USER_ERRORS as err:
+        fail(APP, err)
+    hydra_main()
 
 
 if __name__ == "__main__":

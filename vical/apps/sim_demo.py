@@ -3,17 +3,23 @@
 Each step is an action of the paper's form (translation length, azimuth, polar angle, Euler
 increments) applied to the current end-effector pose; the last one asks for an unreachable pose
 to show how the simulator clamps. Usage: ``vical-sim-demo [--seed 0] [--config conf/sim/default.yaml]``.
+A missing or malformed ``--config`` and a bad value in it are one line ``vical-sim-demo: error: ...``
+with exit status 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
-import yaml
 
+from vical.apps.cli import ArgumentParser, one_line_warnings, report_error
+from vical.config import ConfigError
 from vical.geometry import make_transform, matrix_to_euler, step_pose
+from vical.io.errors import FormatError
+from vical.io.yamlfile import load_mapping
 from vical.sim import MotionResult, PandaSim, SimConfig
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[2] / "conf" / "sim" / "default.yaml"
@@ -39,14 +45,28 @@ def describe(i: int, result: MotionResult) -> str:
     )
 
 
-def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description="Move the simulated Panda through a few pose steps.")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the action sampler and the simulator")
+def _count(text: str) -> int:
+    """An argparse type: an integer >= 0."""
+    if not text.isdigit():
+        raise argparse.ArgumentTypeError(f"must be an integer >= 0, got {text!r}")
+    return int(text)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Console entry point; returns the exit status (0 ok, 2 bad input)."""
+    one_line_warnings()
+    parser = ArgumentParser(prog="vical-sim-demo", description="Move the simulated Panda through a few pose steps.")
+    parser.add_argument("--seed", type=_count, default=0, help="seed of the action sampler and the simulator")
     parser.add_argument("--config", type=Path, default=DEFAULT_CONFIG, help="sim config YAML (the sim/ group)")
-    parser.add_argument("--steps", type=int, default=5, help="random pose steps before the unreachable one")
-    args = parser.parse_args(argv)
-    cfg_map = yaml.safe_load(args.config.read_text()) if args.config.is_file() else None
-    sim = PandaSim(SimConfig.from_mapping({**(cfg_map or {}), "seed": args.seed}))
+    parser.add_argument("--steps", type=_count, default=5, help="random pose steps before the unreachable one")
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # --help (0), or a bad argument whose line argparse printed (2)
+        return int(done.code or 0)
+    try:
+        sim = PandaSim(SimConfig.from_mapping({**load_mapping(args.config, FormatError), "seed": args.seed}))
+    except (FormatError, ConfigError) as err:
+        return report_error("vical-sim-demo", f"--config {args.config}: {err}")
     rng = np.random.default_rng(args.seed)
     p0 = sim.ee_pose()[:3, 3]
     print(
@@ -72,7 +92,8 @@ def main(argv: list[str] | None = None) -> None:
         f"total path {total:.3f} m in {sim.time_ns / 1e9:.3f} s simulated; MuJoCo warnings: "
         f"{int(sim.data.warning.number.sum())}"
     )
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -4,14 +4,21 @@
 ``key=value`` overrides on the command line apply on top (only the length of the run and the cadence of
 logging, evaluation and checkpoints may differ from the checkpoint's config: ``RESUMABLE_KEYS``). On
 resume, overrides may only change keys the saved config has: group selections (``agent=...``), additions
-(``+key=...``) and deletions (``~key``) are refused by name.
+(``+key=...``) and deletions (``~key``) are refused by name. A finished run resumed at its own length is
+complete (nothing to do); with a larger ``train.total_steps`` it goes on (``vical.rl.trainer.resume_status``);
+with a smaller one it is refused.
 
-User-facing errors (a bad config value, an incompatible checkpoint, a missing run directory, diverged
-training) print one line ``vical-train: error: ...`` and exit with status 2, as ``vical-calibrate`` does.
+User-facing errors (a bad config value, Hydra's own override errors, an incompatible or unreadable
+checkpoint, a missing run directory, diverged training, a dead env worker) print one line
+``vical-train: error: ...`` and exit with status 2, as ``vical-calibrate`` does; they are checked before
+Hydra creates the run directory where the command line allows (no ``-m`` or other Hydra flags), and a run
+directory that an error left empty is removed. Ctrl-C stops the run with one line saying how to resume it
+(exit status 130).
 """
 
 from __future__ import annotations
 
+import shutil
 import sys
 from pathlib import Path
 
@@ -22,10 +29,18 @@ from hydra.core.override_parser.types import Override, OverrideType
 from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf
 
-from vical.apps.cli import check_launcher, fail, override_value
+from vical.apps.cli import (
+    check_composes,
+    check_launcher,
+    fail,
+    one_line_warnings,
+    override_value,
+    quiet_library_logs,
+)
 from vical.config import ConfigError
-from vical.rl.checkpoint import IncompatibleCheckpointError
-from vical.rl.trainer import TrainingDivergedError, train
+from vical.rl.checkpoint import IncompatibleCheckpointError, UnreadableCheckpointError
+from vical.rl.trainer import CHECKPOINT, TrainingDivergedError, checkpoint_step, parse_settings, resume_status, train
+from vical.rl.vector_trainer import WorkerDiedError
 
 # An absolute path: a relative config_path would resolve against the installed package when the console
 # script runs from another directory.
@@ -35,24 +50,28 @@ CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 USER_ERRORS = (
     ConfigError,
     IncompatibleCheckpointError,
+    UnreadableCheckpointError,
     FileNotFoundError,
     TrainingDivergedError,
+    WorkerDiedError,
     InstantiationException,  # the env's _target_ could not be built (bad id, bad arguments)
 )
 APP = "vical-train"
+INTERRUPTED = 130  # the shell's status for a command stopped by Ctrl-C (128 + SIGINT)
 
 _ABSENT = object()
 
 
-def _resume_or(resume: str | None, fresh: str) -> str:
-    """hydra.run.dir: the run being resumed (so no second output directory appears), else a fresh one."""
+def _run_dir(resume: str | None, run_dir: str | None, fresh: str) -> str:
+    """hydra.run.dir: the run being resumed (so no second output directory appears), the ``run_dir`` asked for
+    (so that train.log lands in it), else a fresh one."""
     if resume:
         check_resume_dir(resume)  # never let Hydra create a directory for a mistyped resume path
         return resume
-    return fresh
+    return run_dir or fresh
 
 
-OmegaConf.register_new_resolver("vical_resume_or", _resume_or, replace=True)
+OmegaConf.register_new_resolver("vical_run_dir", _run_dir, replace=True)
 
 
 def check_resume_dir(resume: str) -> Path:
@@ -107,27 +126,95 @@ def _refusal(override: Override, saved: DictConfig) -> str | None:
     return None
 
 
+def check_command_line(argv: list[str]) -> str | None:
+    """Everything about the command line that can be checked before Hydra creates a run directory.
+
+    Returns the message that a resumed run is complete already (nothing to train), else None.
+    Raises one of ``USER_ERRORS``.
+    """
+    check_launcher(argv)
+    resume = override_value(argv, "resume")
+    if resume is not None:
+        check_resume_dir(resume)
+    for key in ("run_dir", "hydra.run.dir"):
+        value = override_value(argv, key)
+        if value is not None and Path(value).exists() and not Path(value).is_dir():
+            raise ConfigError(f"{key}={value} is a file; give a directory for the run")
+    cfg = check_composes(CONF_DIR, "train", argv)
+    if cfg is None:
+        return None  # Hydra flags (-m, --cfg, ...): Hydra and the task function check the rest
+    if resume is not None:
+        return resume_status(resume, resumed_config(resume, argv).train.total_steps)
+    settings = OmegaConf.to_container(cfg, resolve=True)
+    parse_settings({**settings, "run_dir": settings["run_dir"] or "runs/<time>"})  # Hydra names it later
+    return None
+
+
+def _remove_unused(run_dir: Path) -> None:
+    """Remove a run directory that holds nothing but Hydra's empty log (the run stopped before it began), and
+    the parents below the working directory that it leaves empty."""
+    if not run_dir.is_dir() or any(e.suffix != ".log" or e.stat().st_size for e in run_dir.iterdir()):
+        return
+    shutil.rmtree(run_dir)
+    cwd = Path.cwd().resolve()
+    for parent in run_dir.resolve().parents:
+        if parent == cwd or cwd not in parent.parents or any(parent.iterdir()):
+            break
+        parent.rmdir()
+
+
+def interrupted_message(run_dir: Path) -> str:
+    """Where a run stopped by Ctrl-C can go on from, and the command that does it."""
+    try:
+        step = checkpoint_step(run_dir)
+    except UnreadableCheckpointError:
+        step = None
+    if step is None:
+        return f"{APP}: interrupted before the run's first checkpoint; nothing to resume in {run_dir}: start it again"
+    return (
+        f"{APP}: interrupted; the last checkpoint (step {step}) is {run_dir / CHECKPOINT}; "
+        f"continue with: {APP} resume={run_dir}"
+    )
+
+
 @hydra.main(config_path=CONF_DIR, config_name="train", version_base="1.3")
 def hydra_main(cfg: DictConfig) -> None:
+    output_dir = Path(HydraConfig.get().runtime.output_dir)
     try:
         if cfg.resume:
             cfg = resumed_config(str(cfg.resume), list(HydraConfig.get().overrides.task))
+            complete = resume_status(cfg.run_dir, cfg.train.total_steps)
+            if complete:
+                print(complete)
+                return
+        elif cfg.run_dir is None:
+            cfg.run_dir = str(output_dir)
         result = train(cfg)
     except USER_ERRORS as err:
+        _remove_unused(output_dir)
         fail(APP, err)
+    except KeyboardInterrupt:
+        print(interrupted_message(Path(cfg.run_dir or output_dir)), file=sys.stderr)
+        raise SystemExit(INTERRUPTED) from None
     print(f"trained {result.steps} steps, {result.episodes} episodes; run directory: {result.run_dir}")
 
 
 def main() -> None:
-    """Console entry point: check a ``resume=`` path and the launcher plugin before Hydra starts, then run."""
-    resume = override_value(sys.argv[1:], "resume")
+    """Console entry point: check the command line before Hydra starts, then run."""
+    one_line_warnings()
+    quiet_library_logs()
     try:
-        check_launcher(sys.argv[1:])
-        if resume is not None:
-            check_resume_dir(resume)
-    except ConfigError as err:
+        complete = check_command_line(sys.argv[1:])
+    except USER_ERRORS as err:
         fail(APP, err)
-    hydra_main()
+    if complete:
+        print(complete)
+        return
+    try:
+        hydra_main()
+    except KeyboardInterrupt:  # before the run began (Hydra starting, the env being built)
+        print(f"{APP}: interrupted before the run began", file=sys.stderr)
+        raise SystemExit(INTERRUPTED) from None
 
 
 if __name__ == "__main__":

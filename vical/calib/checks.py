@@ -18,9 +18,9 @@ TYPICAL = ImuNoise()
 PLAUSIBLE_RANGE = (0.01, 1000.0)  # x the typical value: outside it, no real IMU (or the wrong unit)
 
 # Peak memory of a camera-IMU solve, measured with experiments/bench_calibrator.py (real-size cases):
-# about 1 kB per corner (whitened Jacobians, the batched projection pass, the robust covariance) and
+# about 2.5 kB per corner (whitened Jacobians, the batched projection pass, the robust covariance) and
 # 25 kB per frame (its state, IMU factor and GTSAM's elimination).
-BYTES_PER_CORNER = 1000
+BYTES_PER_CORNER = 2500
 BYTES_PER_FRAME = 25_000
 
 

@@ -1,4 +1,6 @@
-"""The one error type the calibrator raises for inputs it cannot calibrate from."""
+"""The error type the calibrator raises for inputs it cannot calibrate from."""
+
+from vical.config import SettingError
 
 
 class CalibrationError(ValueError):
@@ -7,3 +9,7 @@ class CalibrationError(ValueError):
     The message names what is wrong (which frames, which time range, which parameter) and what
     to do about it (collect more views, rotate more, check the time stamps).
     """
+
+
+class CalibrationSettingError(SettingError, CalibrationError):
+    """A ``CalibrationError`` that changing one argument fixes (its message names the argument)."""

@@ -6,11 +6,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vical.calib.errors import CalibrationError
+from vical.calib.errors import CalibrationError, CalibrationSettingError
 from vical.data import CameraFrames, Target
 from vical.geometry import CameraModel
 
 MIN_CORNERS = 4  # a frame needs at least 4 corners to constrain its 6-DoF pose
+# Corners just outside the image (pixel noise, a rolling shutter's shift in simulated data) are not a wrong
+# image size; corners beyond this fraction of it are.
+OUTSIDE_TOLERANCE = 0.02
 
 
 @dataclass(frozen=True)
@@ -68,12 +71,34 @@ def collect_observations(
 
 
 def image_size(frames: CameraFrames, image_size: tuple[int, int] | None) -> tuple[int, int]:
-    """``(width, height)`` [px] from the argument or, failing that, from the frames' images."""
+    """``(width, height)`` [px] from the argument or, failing that, from the frames' images.
+
+    A given size must hold every detected corner: a smaller one is a wrong size, not a camera.
+    """
     if image_size is not None:
         w, h = (int(v) for v in image_size)
         if w <= 0 or h <= 0:
-            raise CalibrationError(f"image_size must be positive (width, height) [px], got {image_size}")
+            raise CalibrationError(f"image_size_px must be positive (width, height) [px], got {image_size}")
+        _check_corners_inside(frames, w, h)
         return w, h
     if frames.images is not None:
         return int(frames.images.shape[2]), int(frames.images.shape[1])
-    raise CalibrationError("the image size is unknown: pass image_size=(width, height) or frames with images")
+    raise CalibrationSettingError(
+        "the image size is unknown (no images came with the frames): give it as {fix}",
+        "image_size_px",
+        "(width, height)",
+        "W H",
+    )
+
+
+def _check_corners_inside(frames: CameraFrames, width: int, height: int) -> None:
+    corners = [c for c in frames.corners if len(c)]
+    if not corners:
+        return
+    u, v = np.concatenate(corners).max(axis=0)
+    if u > (1 + OUTSIDE_TOLERANCE) * width or v > (1 + OUTSIDE_TOLERANCE) * height:
+        raise CalibrationSettingError(
+            f"corners were detected up to u = {u:.0f} px, v = {v:.0f} px, outside the image size {width} x {height} px "
+            "given as {fix}; give the size of the images the corners were detected in",
+            "image_size_px", f"({width}, {height})", f"{width} {height}",
+        )  # fmt: skip

@@ -115,9 +115,13 @@ def _error_lines(errors: CalibrationErrors | None) -> list[str]:
     return lines
 
 
-def results_text(result: CalibrationResult, errors: CalibrationErrors | None = None) -> str:
-    """The full results text (Kalibr's ``results-*.txt`` in spirit): estimates +- 1-sigma and quality."""
+def results_text(result: CalibrationResult, errors: CalibrationErrors | None = None, failure: str | None = None) -> str:
+    """The full results text (Kalibr's ``results-*.txt`` in spirit): estimates +- 1-sigma and quality.
+
+    ``failure``: why the result must not be used; it heads the text.
+    """
     sections = [
+        [f"FAILED: {failure}", "The estimates below are kept for diagnosis; do not use them."] if failure else [],
         [f"vical calibration results: task {result.task}"],
         _camera_lines(result),
         _extrinsic_lines(result),
@@ -157,9 +161,14 @@ def summary_table(result: CalibrationResult, errors: CalibrationErrors | None = 
     return "\n".join(f"{a:<{width}}  {b:<28} {c}".rstrip() for a, b, c in rows)
 
 
-def write_results_text(path: str | os.PathLike, result: CalibrationResult, errors: CalibrationErrors | None = None):
+def write_results_text(
+    path: str | os.PathLike,
+    result: CalibrationResult,
+    errors: CalibrationErrors | None = None,
+    failure: str | None = None,
+) -> None:
     """Write ``results_text`` to ``path`` atomically."""
-    write_text_atomic(path, results_text(result, errors))
+    write_text_atomic(path, results_text(result, errors, failure))
 
 
 def _reprojection_figure(result: CalibrationResult):

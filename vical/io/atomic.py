@@ -2,7 +2,9 @@
 
 Files are written to a temporary sibling and moved into place with ``os.replace``; directories
 are built in a temporary sibling directory and renamed. A crash mid-write leaves at most a
-hidden ``.<name>.tmp-*`` sibling, never a partial file or directory at the final path.
+hidden ``.<name>.tmp-<pid>@<host>.*`` sibling, never a partial file or directory at the final
+path. The writer's process id and host in that name let a later write recognise a sibling whose
+writer is gone (killed, or the machine crashed) and remove it (``remove_stale_temporaries``).
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import socket
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -26,6 +29,48 @@ def _give_default_permissions(path: Path, base: int) -> None:
     os.chmod(path, base & ~_umask())
 
 
+def temporary_prefix(final: Path) -> str:
+    """``.<name>.tmp-<pid>@<host>.``: the name prefix of this process's temporary siblings of ``final``."""
+    return f".{final.name}.tmp-{os.getpid()}@{socket.gethostname()}."
+
+
+def _writer_is_gone(owner: str) -> bool:
+    """Whether the writer ``<pid>@<host>`` of a temporary sibling no longer runs (only this host can tell)."""
+    pid, at, host = owner.partition("@")
+    if not (pid.isdigit() and at and host == socket.gethostname()):
+        return False  # another machine's, or named before writers were recorded: leave it alone
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:
+        pass  # another user's live process
+    return False
+
+
+def remove_stale_temporaries(directory: str | os.PathLike, name: str | None = None) -> list[Path]:
+    """Remove the temporary siblings (of the entry ``name``, or of any) in ``directory`` whose writer is gone.
+
+    A writer killed mid-write (``kill -9``, a crash) cannot remove its temporary sibling; the next
+    write to the same place does, so that nothing half-written accumulates or blocks it.
+    """
+    directory = Path(directory)
+    if not directory.is_dir():
+        return []
+    removed = []
+    for entry in directory.iterdir():
+        head, marker, tail = entry.name.rpartition(".tmp-")
+        if not (marker and head.startswith(".")) or (name is not None and head != f".{name}"):
+            continue
+        if _writer_is_gone(tail.rsplit(".", 1)[0]):
+            if entry.is_dir() and not entry.is_symlink():
+                shutil.rmtree(entry, ignore_errors=True)
+            else:
+                entry.unlink(missing_ok=True)
+            removed.append(entry)
+    return removed
+
+
 def _fsync_file(path: Path) -> None:
     with open(path, "rb") as f:
         os.fsync(f.fileno())
@@ -40,7 +85,8 @@ def atomic_file(path: str | os.PathLike) -> Iterator[Path]:
     """
     final = Path(path)
     final.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{final.name}.tmp-", dir=final.parent)
+    remove_stale_temporaries(final.parent, final.name)
+    fd, tmp_name = tempfile.mkstemp(prefix=temporary_prefix(final), dir=final.parent)
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -81,7 +127,8 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
     """
     final = check_can_write_dir(path, overwrite)
     final.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
+    remove_stale_temporaries(final.parent, final.name)
+    tmp = Path(tempfile.mkdtemp(prefix=temporary_prefix(final), dir=final.parent))
     try:
         _give_default_permissions(tmp, 0o777)
         yield tmp

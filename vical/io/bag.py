@@ -25,8 +25,9 @@ from rosbags.typesys.store import Typestore
 from tqdm import tqdm
 
 from vical.data import NS_PER_S, CameraFrames, DataError, ImuSamples, Recording, Target
+from vical.io.atomic import remove_stale_temporaries, temporary_prefix
 from vical.io.checks import check_sampling, scale_imu, sort_and_dedupe
-from vical.io.errors import BagFormatError, FormatError
+from vical.io.errors import BagFormatError, FormatError, UnitError
 from vical.io.images import ImageDetector, check_size, run_detector, to_gray
 
 IMAGE_TYPE, COMPRESSED_TYPE, IMU_TYPE = (
@@ -59,7 +60,8 @@ def write_bag(
     if final.exists() and (not overwrite or final.is_dir()):
         raise FileExistsError(f"{final} already exists; pass overwrite=True to replace it")
     final.parent.mkdir(parents=True, exist_ok=True)
-    tmp_dir = Path(tempfile.mkdtemp(prefix=f".{final.name}.tmp-", dir=final.parent))
+    remove_stale_temporaries(final.parent, final.name)
+    tmp_dir = Path(tempfile.mkdtemp(prefix=temporary_prefix(final), dir=final.parent))
     try:
         _write_messages(recording, tmp_dir / final.name, image_topic, imu_topic)
         os.replace(tmp_dir / final.name, final)
@@ -148,6 +150,8 @@ def read_bag(
     try:
         imu_samples = _imu_samples(imu, f"{path} topic {imu_topic}", gyro_unit, accel_unit)
         camera_frames = _camera_frames(frames, f"{path} topic {image_topic}", keep_images)
+    except UnitError:
+        raise  # it names the unit setting to change
     except (FormatError, DataError) as exc:
         raise BagFormatError(str(exc)) from exc
     return Recording(imu_samples, camera_frames, target, metadata={"source": "rosbag1", "path": str(path.resolve())})

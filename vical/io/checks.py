@@ -13,12 +13,14 @@ import warnings
 import numpy as np
 
 from vical.data import NS_PER_S
-from vical.io.errors import FormatError
+from vical.io.errors import FormatError, UnitError
 
 # A plausible sample interval in ns: 10 kHz .. 0.1 Hz.
 MIN_DT_NS, MAX_DT_NS = 100_000, 10 * NS_PER_S
 # MEMS gyros saturate at about 2000 deg/s = 35 rad/s: larger readings are not rad/s.
 MAX_GYRO_RAD_S = 35.0
+# A calibration motion rotates faster than this somewhere (the calibrator needs rotation about two axes).
+MIN_MOTION_RAD_S = 0.1
 # The accelerometer's median norm is dominated by gravity (9.81 m/s^2).
 ACCEL_NORM_RANGE = (4.0, 30.0)
 GYRO_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
@@ -100,21 +102,51 @@ def sort_and_dedupe(t: np.ndarray, rows: np.ndarray, where: str, lines: np.ndarr
 def scale_imu(
     gyro: np.ndarray, accel: np.ndarray, gyro_unit: str, accel_unit: str, where: str
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Gyro [rad/s] and accel [m/s^2] from values in the given units; raise when they look like other units."""
+    """Gyro [rad/s] and accel [m/s^2] from values in the given units.
+
+    Raises ``UnitError`` naming the unit setting to change when the values fit another unit better.
+    """
     if gyro_unit not in GYRO_UNITS or accel_unit not in ACCEL_UNITS:
         raise FormatError(f"gyro_unit must be one of {list(GYRO_UNITS)}, accel_unit one of {list(ACCEL_UNITS)}")
     gyro = gyro * GYRO_UNITS[gyro_unit]
     accel = accel * ACCEL_UNITS[accel_unit]
     if len(gyro) == 0:
         return gyro, accel
-    peak = float(np.max(np.abs(gyro)))
-    if peak > MAX_GYRO_RAD_S:
-        raise FormatError(
-            f"{where}: gyro reads up to {peak:.1f} rad/s, beyond any MEMS gyro's range; the data look like "
-            "deg/s: convert to rad/s or pass gyro_unit='deg/s'"
-        )
-    norm = float(np.median(np.linalg.norm(accel, axis=1)))
-    if not ACCEL_NORM_RANGE[0] <= norm <= ACCEL_NORM_RANGE[1]:
-        hint = "the data look like g: pass accel_unit='g'" if 0.4 <= norm <= 3.0 else "check the accelerometer unit"
-        raise FormatError(f"{where}: median accelerometer norm is {norm:.3g}, not about 9.81 m/s^2; {hint}")
+    _check_gyro_unit(float(np.max(np.abs(gyro))), gyro_unit, where)
+    _check_accel_unit(float(np.median(np.linalg.norm(accel, axis=1))), accel_unit, where)
     return gyro, accel
+
+
+def _check_gyro_unit(peak: float, unit: str, where: str) -> None:
+    """The peak rate [rad/s] against the declared unit: beyond a MEMS gyro, or too slow only because of deg/s."""
+    if peak > MAX_GYRO_RAD_S and unit == "deg/s":
+        raise FormatError(
+            f"{where}: gyro reads up to {np.degrees(peak):.0f} deg/s, beyond any MEMS gyro's range even in deg/s; "
+            "check the gyro's unit and scale"
+        )
+    if peak > MAX_GYRO_RAD_S:
+        raise UnitError(
+            f"{where}: gyro reads up to {peak:.1f} rad/s, beyond any MEMS gyro's range; the data look like deg/s: "
+            "convert to rad/s or pass {fix}",
+            "gyro_unit", "'deg/s'", "deg/s",
+        )  # fmt: skip
+    as_written = np.degrees(peak)
+    if unit == "deg/s" and peak < MIN_MOTION_RAD_S <= as_written:
+        raise UnitError(
+            f"{where}: read as deg/s, the gyro peaks at {as_written:.3g} deg/s, too slow a motion to calibrate "
+            f"from, while {as_written:.3g} rad/s would be a calibration motion: the data look like rad/s; pass {{fix}}",
+            "gyro_unit", "'rad/s'", "rad/s",
+        )  # fmt: skip
+
+
+def _check_accel_unit(norm: float, unit: str, where: str) -> None:
+    """The median specific-force norm [m/s^2] against gravity: the unit that would make it about 9.81 m/s^2."""
+    low, high = ACCEL_NORM_RANGE
+    if low <= norm <= high:
+        return
+    as_written = norm / ACCEL_UNITS[unit]
+    message = f"{where}: median accelerometer norm is {norm:.3g} m/s^2 (read as {unit}), not about 9.81 m/s^2"
+    for other, scale in ACCEL_UNITS.items():
+        if other != unit and low <= as_written * scale <= high:
+            raise UnitError(f"{message}; the data look like {other}: pass {{fix}}", "accel_unit", repr(other), other)
+    raise FormatError(f"{message}; check the accelerometer's unit and scale")

@@ -26,7 +26,7 @@ import numpy as np
 from vical.data import CameraFrames, DataError, ImuSamples, Target
 from vical.io.atomic import atomic_file
 from vical.io.checks import check_sampling, parse_timestamp_ns, scale_imu, sort_and_dedupe, warn
-from vical.io.errors import CsvFormatError, FormatError, read_text_file
+from vical.io.errors import CsvFormatError, EmptyCsvError, FormatError, read_text_file
 
 IMU_HEADER = (
     "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"
@@ -58,6 +58,12 @@ def read_rows(path: str | os.PathLike, n_fields: int) -> tuple[list[list[str]], 
     if text and not text.endswith("\n") and rows:
         warn(f"{path}: the last line has no line end (truncated file?); line {lines[-1]} was read as is")
     return rows, lines
+
+
+def require_rows(rows: list[list[str]], path: Path, what: str) -> None:
+    """Raise ``EmptyCsvError`` naming the file when it holds no data rows (``what``: what a row would be)."""
+    if not rows:
+        raise EmptyCsvError(f"{path} holds no {what} (the file is empty or has only a header)")
 
 
 def parse_times(rows: list[list[str]], lines: list[int], path: Path) -> np.ndarray:
@@ -93,11 +99,12 @@ def read_imu_csv(path: str | os.PathLike, gyro_unit: str = "rad/s", accel_unit: 
     """IMU samples from an EuRoC-style CSV (timestamp ns, gyro xyz, accel xyz).
 
     Unsorted rows are sorted and exact duplicates dropped (with a warning); conflicting
-    duplicates, timestamps that are not ns and readings that look like deg/s or g raise
-    ``CsvFormatError`` naming the file and line.
+    duplicates and timestamps that are not ns raise ``CsvFormatError`` naming the file and line, a
+    file without samples ``EmptyCsvError``, readings that fit another unit ``UnitError``.
     """
     path = Path(path)
     rows, lines = read_rows(path, 7)
+    require_rows(rows, path, "IMU samples")
     t = parse_times(rows, lines, path)
     values = parse_floats(rows, lines, slice(1, 7), path)
     if not np.all(np.isfinite(values)):
@@ -106,10 +113,10 @@ def read_imu_csv(path: str | os.PathLike, gyro_unit: str = "rad/s", accel_unit: 
     try:
         order = sort_and_dedupe(t, values, str(path), np.asarray(lines))
         check_sampling(t[order], str(path))
-        gyro, accel = scale_imu(values[order, :3], values[order, 3:], gyro_unit, accel_unit, str(path))
-        return ImuSamples(t[order], gyro, accel)
     except (FormatError, DataError) as exc:
         raise CsvFormatError(str(exc)) from exc
+    gyro, accel = scale_imu(values[order, :3], values[order, 3:], gyro_unit, accel_unit, str(path))
+    return ImuSamples(t[order], gyro, accel)
 
 
 def write_imu_csv(imu: ImuSamples, path: str | os.PathLike) -> None:
@@ -136,10 +143,12 @@ def read_corners_csv(path: str | os.PathLike, target: Target) -> CameraFrames:
     """Camera frames (detections only, no images) from a corner CSV.
 
     Raises ``CsvFormatError`` naming the line for point ids outside the target, a point listed
-    twice in one frame, or non-numeric fields. Rows out of time order are sorted (warning).
+    twice in one frame, or non-numeric fields (``EmptyCsvError`` for a file without rows). Rows out
+    of time order are sorted (warning).
     """
     path = Path(path)
     rows, lines = read_rows(path, 4)
+    require_rows(rows, path, "corner rows")
     t = parse_times(rows, lines, path)
     ids = _parse_ids(rows, lines, target, path)
     detected = ids != NO_DETECTION_ID

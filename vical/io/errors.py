@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from vical.config import SettingError
+
 
 class FormatError(ValueError):
     """A file that cannot be read as the format it claims to be."""
@@ -19,6 +21,14 @@ class KalibrFormatError(FormatError):
 
 class CsvFormatError(FormatError):
     """A CSV file (EuRoC or corner observations) with malformed rows."""
+
+
+class EmptyCsvError(CsvFormatError):
+    """A CSV file without data rows (empty, or only a header)."""
+
+
+class UnitError(SettingError, FormatError):
+    """IMU readings that do not fit their declared unit; the message names the unit setting to change."""
 
 
 class BagFormatError(FormatError):

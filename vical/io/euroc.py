@@ -28,7 +28,7 @@ from vical.geometry.transforms import invert_transform
 from vical.io.atomic import atomic_directory
 from vical.io.checks import check_sampling, sort_and_dedupe, warn
 from vical.io.csvfiles import parse_times, read_corners_csv, read_imu_csv, read_rows, write_corners_csv, write_imu_csv
-from vical.io.errors import CsvFormatError, FormatError, KalibrFormatError
+from vical.io.errors import CsvFormatError, EmptyCsvError, FormatError, KalibrFormatError
 from vical.io.images import ImageDetector, frames_from_images, read_gray, write_png
 from vical.io.kalibr import read_camchain, read_imu_yaml
 from vical.io.yamlfile import as_floats, dump_yaml, load_mapping
@@ -171,7 +171,11 @@ def _read_imu(root: Path, gyro_unit: str, accel_unit: str) -> ImuSamples:
     if not csv.is_file():
         warn(f"{csv} is missing: the recording has no IMU data (intrinsic calibration only)")
         return ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
-    return read_imu_csv(csv, gyro_unit, accel_unit)
+    try:
+        return read_imu_csv(csv, gyro_unit, accel_unit)
+    except EmptyCsvError:
+        warn(f"{csv} holds no samples: the recording has no IMU data (intrinsic calibration only)")
+    return ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
 
 
 def _read_reference(root: Path) -> tuple[SensorTruth | None, tuple[int, int] | None]:

@@ -46,14 +46,23 @@ def save_recording(recording: Recording, path: str | os.PathLike, overwrite: boo
     Raises ``FileExistsError`` when ``path`` exists unless ``overwrite`` is true (the old
     directory is then replaced in one rename, never left half-updated).
     """
-    manifest = _manifest(recording)
     with atomic_directory(path, overwrite=overwrite) as tmp:
-        files = {}
-        for name, arrays in _array_files(recording).items():
-            files[name] = _write_npz(tmp / name, arrays, compress=name == "images.npz")
-        manifest["files"] = files
-        (tmp / MANIFEST).write_text(yaml.safe_dump(manifest, sort_keys=False), encoding="utf-8")
+        write_recording_files(recording, tmp)
     return Path(path)
+
+
+def write_recording_files(recording: Recording, directory: Path) -> None:
+    """Write the files of ``recording`` into the existing empty ``directory`` (not atomic by itself).
+
+    For callers that add files of their own to the recording's directory before it appears at its
+    final path (``save_recording`` is this inside ``vical.io.atomic.atomic_directory``).
+    """
+    manifest = _manifest(recording)
+    files = {}
+    for name, arrays in _array_files(recording).items():
+        files[name] = _write_npz(directory / name, arrays, compress=name == "images.npz")
+    manifest["files"] = files
+    (directory / MANIFEST).write_text(yaml.safe_dump(manifest, sort_keys=False), encoding="utf-8")
 
 
 def _manifest(recording: Recording) -> dict[str, Any]:

@@ -10,6 +10,20 @@ order of the tasks, so a parallel run gives exactly what a serial run gives.
 
 from __future__ import annotations
 
-from vical.parallel.pool import MAX_WORKERS, ParallelConfig, WorkerCrashed, connect_ray, imap_ordered
+from vical.parallel.pool import (
+    MAX_WORKERS,
+    ParallelConfig,
+    WorkerCrashed,
+    connect_ray,
+    imap_ordered,
+    single_threaded_children,
+)
 
-__all__ = ["MAX_WORKERS", "ParallelConfig", "WorkerCrashed", "connect_ray", "imap_ordered"]
+__all__ = [
+    "MAX_WORKERS",
+    "ParallelConfig",
+    "WorkerCrashed",
+    "connect_ray",
+    "imap_ordered",
+    "single_threaded_children",
+]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import socket
@@ -79,7 +80,8 @@ def _process_imap(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int) 
     # spawn, not fork: a forked MuJoCo renderer or GTSAM/TBB state is not safe in the child.
     executor = ProcessPoolExecutor(max_workers=min(workers, max(len(tasks), 1)), mp_context=_spawn())
     try:
-        futures = [executor.submit(fn, task) for task in tasks]
+        with single_threaded_children():  # the workers start with the first submissions
+            futures = [executor.submit(fn, task) for task in tasks]
         for index, future in enumerate(futures):
             try:
                 yield future.result()
@@ -94,6 +96,32 @@ def _process_imap(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int) 
 
 def _spawn():
     return multiprocessing.get_context("spawn")
+
+
+# One thread per worker for the numerical libraries: their default (a thread per core in every worker)
+# oversubscribes the cores. Measured: 12 evaluation episodes on 2 workers took 19.7 s with the default
+# threads and 17.8 s with one (serially 30.5 s and 31.2 s).
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@contextlib.contextmanager
+def single_threaded_children():
+    """Processes started inside see one thread for OpenMP / OpenBLAS / MKL (unless the user set a number)."""
+    saved = {name: os.environ.get(name) for name in THREAD_VARIABLES}
+    for name, value in saved.items():
+        if value is None:
+            os.environ[name] = "1"
+    try:
+        yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+
+
+def worker_environment() -> dict[str, str]:
+    """The thread settings of ``single_threaded_children`` as environment variables (for Ray's workers)."""
+    return {name: os.environ.get(name, "1") for name in THREAD_VARIABLES}
 
 
 # ------------------------------------------------------------------------------------------------ Ray
@@ -136,7 +164,7 @@ def connect_ray(config: ParallelConfig):
         _check_reachable(address)
     try:
         if address is None:  # a local instance: its workers import what this process imports
-            path = {"env_vars": {"PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}}
+            path = {"env_vars": {"PYTHONPATH": os.pathsep.join(p for p in sys.path if p), **worker_environment()}}
             ray.init(
                 num_cpus=config.workers, include_dashboard=False, log_to_driver=False, logging_level="ERROR",
                 runtime_env=path,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pickle
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -37,18 +38,38 @@ class IncompatibleCheckpointError(ValueError):
     """A checkpoint written under a config that differs from the current one in a setting that matters."""
 
 
+class UnreadableCheckpointError(ValueError):
+    """A checkpoint file that is truncated, corrupt or not a checkpoint (vical writes them atomically: a damaged
+    copy, a full disk elsewhere, or another program's file)."""
+
+
+# What torch.load raises for a file that is not a complete checkpoint (it has no exception type of its own).
+_UNREADABLE = (RuntimeError, EOFError, KeyError, ValueError, pickle.UnpicklingError, OSError)
+
+
 def save_checkpoint(state: dict, path: str | Path) -> None:
     """``torch.save`` ``state`` to ``path`` atomically: a crash leaves the old file or the complete new one."""
     with atomic_file(path) as tmp:
         torch.save(state, tmp)
 
 
-def load_checkpoint(path: str | Path) -> dict:
-    """Load a checkpoint written by :func:`save_checkpoint` (tensors, numbers, strings and containers only)."""
+def load_checkpoint(path: str | Path, mmap: bool = False) -> dict:
+    """Load a checkpoint written by :func:`save_checkpoint` (tensors, numbers, strings and containers only).
+
+    ``mmap``: map the tensors from the file instead of reading them (cheap when only the counters are needed).
+    Raises ``UnreadableCheckpointError`` for a file that is not a complete checkpoint.
+    """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no checkpoint at {path}: resume=<run dir> must name a run directory of vical-train")
-    return torch.load(path, map_location="cpu", weights_only=True)
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True, mmap=mmap)
+    except _UNREADABLE as exc:
+        reason = str(exc).split(". ")[0] or type(exc).__name__
+        raise UnreadableCheckpointError(
+            f"{path} cannot be read as a checkpoint (truncated or corrupt: {reason}); it cannot be resumed from: "
+            "restore it from a copy or start a new run"
+        ) from None
 
 
 def flatten(cfg: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:

@@ -357,6 +357,7 @@ class Trainer:
 
     def _restore(self, state: dict) -> None:
         require_compatible(state["config"], self.config, self.settings.resume / CHECKPOINT)
+        _require_reachable(self.settings.train.total_steps, state["counters"]["step"], self.settings.resume)
         self.agent.load_training_state(state["agent"])
         self.buffer.load_state_dict(state["buffer"])
         self.rng.bit_generator.state = state["rng"]
@@ -389,6 +390,59 @@ class Trainer:
             f"the run resumes from its last episode-boundary checkpoint ({self.settings.run_dir / CHECKPOINT}). "
             "Check the env's observations/rewards for NaN/inf, or lower agent.lr."
         )
+
+
+def _require_reachable(total_steps: int, step: int, run_dir: Path) -> None:
+    """Refuse a ``total_steps`` below the checkpoint's ``step``: resuming would overwrite later work with earlier."""
+    if total_steps < step:
+        raise ConfigError(
+            f"train.total_steps={total_steps} is below step {step} of the checkpoint {run_dir / CHECKPOINT}: the run "
+            f"is past it already; resume with train.total_steps >= {step}"
+        )
+
+
+def checkpoint_step(run_dir: str | Path) -> int | None:
+    """The step of the run's checkpoint, None when it has none (its tensors are mapped, not read)."""
+    path = Path(run_dir) / CHECKPOINT
+    return int(load_checkpoint(path, mmap=True)["counters"]["step"]) if path.is_file() else None
+
+
+def resume_status(run_dir: str | Path, total_steps: int) -> str | None:
+    """Whether the run at ``run_dir`` can go on to ``total_steps``: None when it can (from its checkpoint), a
+    message when it is complete at that length already (nothing to do).
+
+    A finished run (``agent.pt`` written at the end, no later checkpoint) asked for more steps goes on from
+    its last checkpoint: the steps after it are run again, identically, so the result equals a run of
+    ``total_steps`` from the start.
+
+    Raises:
+        ConfigError: the run would be shortened, or it has no checkpoint to go on from.
+    """
+    run = Path(run_dir)
+    checkpoint = checkpoint_step(run)
+    agent = run / AGENT
+    finished = int(load_checkpoint(agent, mmap=True)["config"]["train"]["total_steps"]) if agent.is_file() else None
+    if finished is not None and (checkpoint is None or checkpoint <= finished):
+        if total_steps == finished:
+            return f"run {run} is complete: it trained {finished} steps and wrote {agent}; nothing to do"
+        if total_steps < finished:
+            raise ConfigError(
+                f"train.total_steps={total_steps} is below the {finished} steps run {run} finished with: a run cannot "
+                f"be shortened (its agent is {agent}); start a new run for a shorter one"
+            )
+        if checkpoint is None:
+            raise ConfigError(
+                f"run {run} finished at {finished} steps without a checkpoint to go on from (train.checkpoint_every); "
+                f"start a new run with train.total_steps={total_steps}"
+            )
+        return None
+    if checkpoint is None:
+        raise ConfigError(
+            f"run {run} has no checkpoint yet (it stopped before its first one, at the first episode end after "
+            "train.checkpoint_every steps): start it again"
+        )
+    _require_reachable(total_steps, checkpoint, run)
+    return None
 
 
 def train(cfg: Mapping[str, Any]) -> TrainResult:

@@ -22,7 +22,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.vector import AsyncVectorEnv, AutoresetMode
 
-from vical.parallel import ParallelConfig, connect_ray
+from vical.parallel import ParallelConfig, connect_ray, single_threaded_children
 
 ERROR_KEY = "worker/error"  # info key of an exception caught in a sub-environment's step
 SEED_KEY = "worker/episode_seed"  # ... and the reset seed of the episode it ended
@@ -79,9 +79,10 @@ def make_vector_env(
     factory = functools.partial(_guarded, make_env, dict(env_cfg))
     if parallel.backend == "ray":
         return RayVectorEnv(factory, num_envs, parallel)
-    return AsyncVectorEnv(
-        [factory] * num_envs, context="spawn", shared_memory=False, autoreset_mode=AutoresetMode.DISABLED
-    )
+    with single_threaded_children():
+        return AsyncVectorEnv(
+            [factory] * num_envs, context="spawn", shared_memory=False, autoreset_mode=AutoresetMode.DISABLED
+        )
 
 
 def per_env_infos(infos: Mapping[str, Any], num_envs: int) -> list[dict[str, Any]]:

@@ -1,0 +1,51 @@
+"""vical.calib.plausibility: what gives away a result the data do not support, and a gyro unit error."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from vical.calib import calibrate_joint, nominal_T_cam_imu
+from vical.calib.plausibility import gyro_scale, implausibilities, likely_gyro_unit
+from vical.calib.result import ResidualStats
+from vical.calib.synthetic import make_recording
+from vical.data import ImuNoise, ImuSamples
+from vical.geometry import make_transform
+
+
+@pytest.fixture(scope="module")
+def calibrated():
+    rec = make_recording(duration=6.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=8)
+    result = calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", (640, 480), rec.truth.imu_noise)
+    return rec, result
+
+
+def test_a_sound_result_has_nothing_against_it_and_each_sign_of_failure_is_named(calibrated):
+    result = calibrated[1]
+    guess = make_transform(np.eye(3), [0.05, 0.05, -0.05])
+    assert implausibilities(result, guess) == []
+    assert implausibilities(replace(result, iterations=0), guess) == [
+        "the solve made no step from its initial guess (0 iterations)"
+    ]
+    stuck = result.T_cam_imu.copy()
+    stuck[:3, 3] = guess[:3, 3]
+    assert implausibilities(replace(result, T_cam_imu=stuck), guess) == [
+        "the camera-IMU translation is exactly its initial guess"
+    ]
+    (noisy,) = implausibilities(replace(result, imu_noise_scale=6.0), guess)
+    assert noisy.startswith("the IMU residuals (gyro rms ") and noisy.endswith("show a noise 6x the declared densities")
+    blurred = replace(result, reprojection=ResidualStats(5.0, 5.0, 1.0, 5.5, 9.0, 100))
+    assert implausibilities(blurred, guess) == ["the reprojection rms 5.5 px is 5.5x the assumed corner noise 1 px"]
+    assert implausibilities(result, guess, pixel_sigma=0.05)[0].endswith("x the declared corner noise 0.05 px")
+    # The truth is the nominal rig here, yet the solve moves (noisy data): it is not taken for a stuck one.
+    assert implausibilities(result, nominal_T_cam_imu()) == []
+
+
+def test_a_gyro_unit_error_shows_as_57_times_the_cameras_rotation(calibrated):
+    rec = calibrated[0]
+    in_rad = gyro_scale(rec.frames, rec.imu, rec.target, rec.truth.camera)
+    in_deg = ImuSamples(rec.imu.t, np.degrees(rec.imu.gyro), rec.imu.accel)
+    as_deg = gyro_scale(rec.frames, in_deg, rec.target, rec.truth.camera)
+    assert in_rad == pytest.approx(1.0, abs=0.03) and as_deg == pytest.approx(180 / np.pi, rel=0.03)
+    assert likely_gyro_unit(in_rad, "rad/s") is None and likely_gyro_unit(as_deg, "rad/s") == "deg/s"
+    assert likely_gyro_unit(in_rad * np.pi / 180, "deg/s") == "rad/s" and likely_gyro_unit(None, "rad/s") is None
