@@ -112,6 +112,8 @@ def test_information_mdp_rewards_shrinking_uncertainty_and_stops_when_good_enoug
         assert total["information"] == pytest.approx(10.0 * start)  # every e-fold paid once
         assert total["path"] < 0 and total["time"] < 0
         assert "calib/error_pct" not in info  # the information MDP needs no solve
+        figure = env.trajectory_figure(np.stack([obs, obs]), np.zeros((1, 6)))  # TensorBoard's episode image
+        assert len(figure.axes) == 2 and len(figure.axes[0].lines) == len(GROUPS) + 1  # groups and tolerance
     finally:
         env.close()
 

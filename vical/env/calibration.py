@@ -34,7 +34,7 @@ from vical.env.actions import action_to_step
 from vical.env.config import MdpConfig
 from vical.env.coverage import Coverage, view_features
 from vical.env.information import GROUPS, TASK_GROUPS, Guess, InformationTracker, excess, features, tolerance_ratios
-from vical.env.plots import episode_figure
+from vical.env.plots import episode_figure, information_figure
 from vical.env.rewards import step_reward_terms, terminal_reward_terms
 from vical.env.workspace import check_workspace, pose_frame
 from vical.sim import PandaSim, SimConfig
@@ -261,6 +261,8 @@ class CalibrationEnv(gym.Env):
 
     def trajectory_figure(self, observations: np.ndarray, actions: np.ndarray) -> Figure:
         """TensorBoard's episode figure (``vical.rl.logger`` calls it when the env has it)."""
+        if self.config.state == "information":
+            return information_figure(observations, self._bound, GROUPS)
         return episode_figure(observations, self._bound)
 
     def close(self) -> None:
