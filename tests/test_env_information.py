@@ -107,7 +107,7 @@ def test_information_mdp_rewards_shrinking_uncertainty_and_stops_when_good_enoug
             assert reward == pytest.approx(sum(v for k, v in info.items() if k.startswith("reward/")))
             if terminated or truncated:
                 break
-        assert terminated and info["reward/terminal"] == 50.0  # random motion gets there within 40 steps
+        assert terminated and info["reward/terminal"] == 100.0  # random motion gets there within 40 steps
         assert info["information/excess"] == 0.0 and all(info[f"information/{g}_ratio"] <= 1 for g in GROUPS)
         assert total["information"] == pytest.approx(10.0 * start)  # every e-fold paid once
         assert total["path"] < 0 and total["time"] < 0
