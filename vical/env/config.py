@@ -121,6 +121,78 @@ class RewardWeights:
         require_range("env.reward.accuracy_error_floor", self.accuracy_error_floor, 0.0, low_open=True)
 
 
+STATES = ("coverage", "information")
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """What "good enough" means per parameter group (``state: information``): the error norm each may keep.
+
+    Attributes:
+        focal_px, principal_point_px: [px] norm of the (fx, fy) and of the (cx, cy) error.
+        distortion_px: [px] displacement error at the image corner.
+        rotation_deg, translation_mm: [deg], [mm] norm of the extrinsic rotation / translation error.
+        time_offset_ms: [ms] time-offset error.
+    """
+
+    focal_px: float = 0.35
+    principal_point_px: float = 0.35
+    distortion_px: float = 0.5
+    rotation_deg: float = 0.1
+    translation_mm: float = 2.0
+    time_offset_ms: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in GROUP_TOLERANCE:
+            value = getattr(self, GROUP_TOLERANCE[name])
+            ok = isinstance(value, int | float) and np.isfinite(value) and value > 0
+            require(ok, f"env.information.tolerances.{GROUP_TOLERANCE[name]}", "a number > 0", value)
+
+    def of(self, group: str) -> float:
+        return float(getattr(self, GROUP_TOLERANCE[group]))
+
+
+GROUP_TOLERANCE = {
+    "focal": "focal_px",
+    "principal_point": "principal_point_px",
+    "distortion": "distortion_px",
+    "rotation": "rotation_deg",
+    "translation": "translation_mm",
+    "time_offset": "time_offset_ms",
+}
+
+
+@dataclass(frozen=True)
+class InformationSettings:
+    """The information state (``vical.env.information``) and its stopping rule.
+
+    Attributes:
+        tolerances: the error each group may keep (``Tolerances``).
+        confidence: the probability with which a stopped episode's errors should all be within
+            their tolerances: a group is done when its predicted error quantile (the 1-sigma times
+            the chi quantile of the group's dimension, at ``1 - (1 - confidence) / groups``) is
+            below its tolerance.
+        pixel_sigma: [px] corner noise the frames are weighted with; null measures it from the
+            PnP residuals (biased upwards before the lens is known).
+        information_weight: reward per e-fold of every group's predicted error above its tolerance.
+        time_weight: [1/s] charge per second of the step's motion (the path is charged by
+            ``reward.path_weight``).
+    """
+
+    tolerances: Tolerances = field(default_factory=Tolerances)
+    confidence: float = 0.9
+    pixel_sigma: float | None = 0.25
+    information_weight: float = 10.0
+    time_weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        require_range("env.information.confidence", self.confidence, 0.5, 1.0, high_open=True)
+        if self.pixel_sigma is not None:
+            require_range("env.information.pixel_sigma", self.pixel_sigma, 0.0, low_open=True)
+        require_range("env.information.information_weight", self.information_weight, 0.0)
+        require_range("env.information.time_weight", self.time_weight, 0.0)
+
+
 @dataclass(frozen=True)
 class MdpConfig:
     """The MDP's constants (everything in ``conf/env/calibration.yaml`` but the sim/sensor/task groups).
@@ -144,6 +216,11 @@ class MdpConfig:
             in ``info``, not paid); the paper calibrates only at the terminal condition.
         terminate_on_coverage: end the episode (and calibrate) when the coverage is complete;
             False lets fixed trajectories run all their steps (evaluation of baselines).
+        state: ``coverage`` (the paper's state, rewards and terminal condition) or
+            ``information`` (the predicted calibration uncertainty: ``vical.env.information``;
+            terminal when every group is within its tolerance, ``terminate_on_coverage`` then
+            switching that condition).
+        information: settings of the information state.
     """
 
     max_steps: int = 20
@@ -157,8 +234,11 @@ class MdpConfig:
     calibrate_on_termination: bool = True
     calibrate_on_truncation: bool = False
     terminate_on_coverage: bool = True
+    state: str = "coverage"
+    information: InformationSettings = field(default_factory=InformationSettings)
 
     def __post_init__(self) -> None:
+        require(self.state in STATES, "env.state", f"one of {list(STATES)}", self.state)
         require(
             isinstance(self.max_steps, int) and 1 <= self.max_steps <= 1000,
             "env.max_steps",

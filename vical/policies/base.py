@@ -10,6 +10,9 @@ sensors, and is scored the same way.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from types import MappingProxyType
+from typing import Any
 
 import numpy as np
 
@@ -26,11 +29,15 @@ class Policy(ABC):
         stop_at_coverage: the episode ends when the coverage is complete (the MDP's terminal
             condition); False for fixed trajectories, which run all their steps.
         max_steps: step limit of its episodes (None: the env's ``max_steps``).
+        env_settings: MDP settings the policy's episodes run with, over the evaluation env's
+            (a learned policy's state and stopping rule: ``state``, ``information``); empty for
+            policies that act in any env.
     """
 
     name: str = "policy"
     stop_at_coverage: bool = True
     max_steps: int | None = None
+    env_settings: Mapping[str, Any] = MappingProxyType({})
 
     def check(self, env: CalibrationEnv) -> None:  # noqa: B027 (optional hook)
         """Raise ``ConfigError`` (one line: what and what to do) when the policy cannot run in ``env``.

@@ -135,7 +135,8 @@ class EpisodeRow:
         calib_time_s: calibrator wall time [s] (until the failure for a failed calibration).
         steps: env steps of the episode (both trajectories).
         frames: camera frames the calibration was given.
-        coverage_reached: every trajectory of the episode completed the MDP's coverage.
+        coverage_reached: every trajectory of the episode reached the MDP's terminal condition (the
+            coverage; for a policy of the information state: every parameter group within tolerance).
         failed: the calibration raised ``CalibrationError``; ``error`` holds its message.
     """
 
@@ -215,7 +216,7 @@ class Trajectory:
 
 
 def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
-    """The calibration env of ``env_cfg`` with ``policy``'s step limit and coverage termination.
+    """The calibration env of ``env_cfg`` with ``policy``'s MDP settings, step limit and termination.
 
     The env never calibrates on its own: the evaluation calibrates every episode once per budget.
     """
@@ -226,7 +227,7 @@ def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
     }
     if policy.max_steps is not None:
         overrides["max_steps"] = policy.max_steps
-    env = hydra.utils.instantiate({**dict(env_cfg), **overrides})
+    env = hydra.utils.instantiate({**dict(env_cfg), **dict(policy.env_settings), **overrides})
     if not isinstance(env, CalibrationEnv):
         raise ConfigError(f"env must be the calibration env (env=calibration), got {type(env).__name__}")
     return env
@@ -247,7 +248,7 @@ def run_trajectory(env: CalibrationEnv, policy: Policy, seed: int, noise_stream:
         obs, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
             break
-    return Trajectory(env.recording(), env.steps, env.coverage.complete())
+    return Trajectory(env.recording(), env.steps, env.goal_reached)
 
 
 def _optional(value: float | None) -> float | None:

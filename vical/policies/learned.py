@@ -1,8 +1,11 @@
-"""The model-free learned policy: the SAC agent that ``vical-train env=calibration`` wrote to ``agent.pt``.
+"""The model-free learned policy: the SAC agent that ``vical-train env=calibration`` (or ``env=information``) wrote.
 
 Evaluation uses the deterministic action (the mean ``tanh(mu(s))`` in ``[-1, 1]^6``), mapped onto the
 env's action box exactly as training did (``vical.rl.trainer.BoxActions``). The run must have trained
-on the calibration env (24-D coverage state, 6-D action) with the action scale of the env it drives.
+on the calibration env (the 24-D coverage state or the 13-D information state, 6-D action) with the
+action scale of the env it drives. A policy of the information state brings its state and stopping
+rule to the env it is evaluated in (``Policy.env_settings``): it stops when it predicts every
+parameter group within its tolerances.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import numpy as np
 import torch
 
 from vical.config import ConfigError, from_mapping
-from vical.env.calibration import OBS_SIZE, CalibrationEnv
+from vical.env.calibration import INFO_OBS_SIZE, OBS_SIZE, CalibrationEnv
 from vical.env.config import Workspace
 from vical.policies.base import Policy
 from vical.rl.checkpoint import load_checkpoint
@@ -26,7 +29,10 @@ ACT_SIZE = 6
 # The agent that `vical-train +experiment=train_paper_policy` trained for the tables of docs/results.md
 # (its agent.pt and config.yaml), package data so that the paper's experiments run without training first.
 PAPER_POLICY_DIR = Path(__file__).resolve().parent / "params" / "paper_policy"
-TRAIN_HINT = "train one with `vical-train env=calibration task=<task>` and pass its run directory"
+TRAIN_HINT = "train one with `vical-train env=information task=<task>` and pass its run directory"
+STATE_SIZES = {"coverage": OBS_SIZE, "information": INFO_OBS_SIZE}
+# The MDP settings an information-state policy carries to the env it is evaluated in.
+CARRIED_SETTINGS = ("state", "information", "max_steps")
 
 
 def _policy_dims(model: dict[str, torch.Tensor], path: Path) -> tuple[int, int]:
@@ -48,10 +54,13 @@ def _check_run(state: dict[str, Any], path: Path) -> None:
         what = f"{target} {env.get('id', '')}".strip()
         raise ConfigError(f"{path} was trained on {what}, not the calibration env; {TRAIN_HINT}")
     obs_dim, act_dim = _policy_dims(state["model"], path)
-    if (obs_dim, act_dim) != (OBS_SIZE, ACT_SIZE):
+    kind = env.get("state", "coverage")
+    if kind not in STATE_SIZES:
+        raise ConfigError(f"{path} was trained on an env state {kind!r} that vical does not know; {TRAIN_HINT}")
+    if (obs_dim, act_dim) != (STATE_SIZES[kind], ACT_SIZE):
         raise ConfigError(
-            f"{path} has a {obs_dim}-D observation / {act_dim}-D action policy; the calibration env needs "
-            f"{OBS_SIZE}-D / {ACT_SIZE}-D; {TRAIN_HINT}"
+            f"{path} has a {obs_dim}-D observation / {act_dim}-D action policy; the calibration env's {kind} "
+            f"state needs {STATE_SIZES[kind]}-D / {ACT_SIZE}-D; {TRAIN_HINT}"
         )
 
 
@@ -96,16 +105,26 @@ class LearnedPolicy(Policy):
             )
         state = load_checkpoint(path)
         _check_run(state, path)
-        agent = SAC(OBS_SIZE, ACT_SIZE, SACConfig(**state["agent_config"]), seed=0)
-        agent.load_state_dict(state["model"])
         env = state["config"]["env"]
+        kind = env.get("state", "coverage")
+        agent = SAC(STATE_SIZES[kind], ACT_SIZE, SACConfig(**state["agent_config"]), seed=0)
+        agent.load_state_dict(state["model"])
         scale = env.get("action_scale", [np.nan] * ACT_SIZE)
         # Runs from before workspaces were named trained in the authors' box (Workspace's defaults).
         workspace = from_mapping(Workspace, env.get("workspace", {}), f"{path}: env.workspace")
-        return cls(agent, np.asarray(scale, dtype=float), workspace, path, **kwargs)
+        policy = cls(agent, np.asarray(scale, dtype=float), workspace, path, **kwargs)
+        if kind == "information":
+            policy.env_settings = {key: env[key] for key in CARRIED_SETTINGS if key in env}
+        return policy
 
     def check(self, env: CalibrationEnv) -> None:
-        """Refuse an env whose workspace or action scale differ from the training's (actions mean other motions)."""
+        """Refuse an env whose state, workspace or action scale differ from the training's."""
+        kind = self.env_settings.get("state", "coverage")
+        if env.config.state != kind:
+            raise ConfigError(
+                f"{self.source} was trained on the env's {kind} state, but the env has env.state={env.config.state}; "
+                f"evaluate it with env.state={kind} (vical-evaluate brings the training's state by itself)"
+            )
         trained, here = self.workspace, env.config.workspace
         if trained != here:
             raise ConfigError(
@@ -125,7 +144,7 @@ class LearnedPolicy(Policy):
         self._actions = BoxActions(env.action_space)
 
     def act(self, obs: np.ndarray, env: CalibrationEnv) -> np.ndarray:
-        """The agent's mean action for ``obs`` (24,), in env units (6,)."""
+        """The agent's mean action for ``obs`` (the env's state), in env units (6,)."""
         if self._actions is None:
             raise RuntimeError("LearnedPolicy.act called before reset(env, rng)")
         return self._actions.to_env(self.agent.act(np.asarray(obs, dtype=np.float32), deterministic=True))

@@ -56,7 +56,7 @@ class TrainConfig:
     plot_every_episodes: int = 10
     checkpoint_every: int = 1_000
     progress: bool = True
-    info_prefixes: list[str] = field(default_factory=lambda: ["calib/", "coverage/", "reward/"])
+    info_prefixes: list[str] = field(default_factory=lambda: ["calib/", "coverage/", "reward/", "information/"])
 
     def __post_init__(self) -> None:
         for name in ("total_steps", "updates_per_step", "buffer_size", "eval_episodes", "eval_max_episode_steps"):

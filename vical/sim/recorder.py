@@ -159,6 +159,14 @@ class SensorRecorder:
         """
         return self._frames["corners"][first:], self._frames["ids"][first:]
 
+    def stamps_since(self, first: int) -> list[int]:
+        """Camera timestamps [ns] (camera clock) of the frames observed from index ``first`` on."""
+        return self._frames["t"][first:]
+
+    def imu_samples(self) -> ImuSamples:
+        """The IMU samples recorded so far (for consumers that follow the data while it is recorded)."""
+        return self._imu.samples()
+
     def recording(self, metadata: dict[str, Any] | None = None) -> Recording:
         """Everything recorded since ``start``; the trajectory holds the truth at the IMU sample times."""
         if self.truth is None:

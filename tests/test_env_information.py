@@ -1,0 +1,146 @@
+"""The information state: the calibrator's covariance predicted while data arrive, its MDP, its bad inputs."""
+
+import numpy as np
+import pytest
+from configs import composed
+from hydra.errors import InstantiationException
+
+from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
+from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.observations import collect_observations
+from vical.calib.synthetic import make_recording
+from vical.config import ConfigError
+from vical.data import ImuNoise, Target
+from vical.env.calibration import INFO_OBS_SIZE, CalibrationEnv
+from vical.env.information import GROUPS, Guess, InformationTracker, excess, features, quantile_factor
+from vical.rl.trainer import make_env
+
+BIASES = {"gyro_bias": [0.01, -0.02, 0.005], "accel_bias": [0.05, -0.1, 0.08]}  # [rad/s], [m/s^2]
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return make_recording(
+        duration=12.0, target=Target.aprilgrid(), seed=3, time_offset=0.01, imu_noise=ImuNoise(), pixel_sigma=0.3,
+        **BIASES,
+    )  # fmt: skip
+
+
+def calibrator_sigmas(task: str, rec) -> dict[str, float]:
+    """The groups' 1-sigma as the calibrator reports them (its covariance at the solution)."""
+    if task == "intrinsic":
+        sig = calibrate_intrinsics(rec.frames, rec.target, "radtan", (640, 480), pixel_sigma=0.3).sigmas
+    elif task == "extrinsic":
+        sig = calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, rec.truth.imu_noise).sigmas
+    else:
+        sig = calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", (640, 480), rec.truth.imu_noise).sigmas
+    out = {}
+    if "fx" in sig:
+        out["focal"] = np.sqrt(0.5 * (sig["fx"] ** 2 + sig["fy"] ** 2))
+        out["principal_point"] = np.sqrt(0.5 * (sig["cx"] ** 2 + sig["cy"] ** 2))
+    if "rot_x" in sig:
+        out["time_offset"] = 1e3 * sig["time_offset"]
+    return out
+
+
+@pytest.mark.parametrize("task", ["intrinsic", "extrinsic", "joint"])
+def test_predicted_sigmas_are_the_calibrators_when_linearised_at_its_solution(recording, task):
+    """Fed frame by frame, the tracker's prediction equals the calibrator's own 1-sigma (within 15 %)."""
+    rec = recording
+    truth = rec.truth
+    tracker = InformationTracker(task, rec.target, Guess(truth.camera, truth.T_cam_imu, truth.time_offset,
+                                                         truth.imu_noise, pixel_sigma=0.3))  # fmt: skip
+    observations = collect_observations(rec.frames, rec.target)
+    for k in range(0, len(observations), 10):  # ten frames per env step
+        tracker.add_frames(observations[k : k + 10], rec.imu)
+    predicted, reported = tracker.sigmas(), calibrator_sigmas(task, rec)
+    for group, sigma in reported.items():
+        assert predicted[group] == pytest.approx(sigma, rel=0.15), group
+    assert set(predicted) == {"intrinsic": set(GROUPS[:3]), "extrinsic": set(GROUPS[3:]), "joint": set(GROUPS)}[task]
+
+
+def test_more_data_never_increases_the_predicted_sigma(recording):
+    rec = recording
+    guess = Guess(rec.truth.camera, rec.truth.T_cam_imu, 0.0, rec.truth.imu_noise, pixel_sigma=0.3)
+    tracker = InformationTracker("joint", rec.target, guess)
+    observations = collect_observations(rec.frames, rec.target)
+    before = tracker.sigmas()  # the priors only: finite
+    assert all(np.isfinite(v) and v > 0 for v in before.values())
+    for k in range(0, len(observations), 15):
+        tracker.add_frames(observations[k : k + 15], rec.imu)
+        after = tracker.sigmas()
+        assert all(after[g] <= before[g] * (1 + 1e-9) for g in after)
+        before = after
+    assert after["rotation"] < 0.05 and after["time_offset"] < 0.1  # [deg], [ms]: determined by 12 s of motion
+
+
+def test_features_and_excess():
+    ratios = {"focal": 100.0, "principal_point": 1.0, "rotation": 0.01}
+    f = features(ratios)
+    assert f.shape == (len(GROUPS),)
+    assert f[GROUPS.index("focal")] == pytest.approx(1.0) and f[GROUPS.index("principal_point")] == pytest.approx(0.5)
+    assert f[GROUPS.index("rotation")] == pytest.approx(0.0) and f[GROUPS.index("time_offset")] == 0.0
+    assert excess(ratios) == pytest.approx(np.log(100.0))
+    assert quantile_factor("time_offset", 0.9) == pytest.approx(1.6449, abs=1e-4)  # one dimension: the normal's
+    assert quantile_factor("rotation", 0.9) == pytest.approx(2.5003, abs=1e-4)  # three: sqrt(chi2_3(0.9))
+
+
+def information_env(task: str = "joint", *overrides: str) -> CalibrationEnv:
+    return make_env(composed("train", ["env=information", f"task={task}", *overrides])["env"])
+
+
+def test_information_mdp_rewards_shrinking_uncertainty_and_stops_when_good_enough():
+    env = information_env("joint", "env.max_steps=40")
+    try:
+        obs, info = env.reset(seed=5)
+        assert obs.shape == (INFO_OBS_SIZE,) and env.observation_space.contains(obs)
+        start = info["information/excess"]
+        assert start > 5  # the priors are far from the tolerances
+        rng = np.random.default_rng(0)
+        total = {"information": 0.0, "path": 0.0, "time": 0.0}
+        for _ in range(40):
+            obs, reward, terminated, truncated, info = env.step(
+                rng.uniform(env.action_space.low, env.action_space.high)
+            )
+            for term in total:
+                total[term] += info[f"reward/{term}"]
+            assert reward == pytest.approx(sum(v for k, v in info.items() if k.startswith("reward/")))
+            if terminated or truncated:
+                break
+        assert terminated and info["reward/terminal"] == 100.0  # random motion gets there within 40 steps
+        assert info["information/excess"] == 0.0 and all(info[f"information/{g}_ratio"] <= 1 for g in GROUPS)
+        assert total["information"] == pytest.approx(10.0 * start)  # every e-fold paid once
+        assert total["path"] < 0 and total["time"] < 0
+        assert "calib/error_pct" not in info  # the information MDP needs no solve
+        figure = env.trajectory_figure(np.stack([obs, obs]), np.zeros((1, 6)))  # TensorBoard's episode image
+        assert len(figure.axes) == 2 and len(figure.axes[0].lines) == len(GROUPS) + 1  # groups and tolerance
+    finally:
+        env.close()
+
+
+def test_the_intrinsic_task_tracks_the_camera_only():
+    env = information_env("intrinsic")
+    try:
+        obs, info = env.reset(seed=2)
+        assert set(k.removeprefix("information/").removesuffix("_ratio") for k in info if "ratio" in k) == set(
+            GROUPS[:3]
+        )
+        assert np.all(obs[3:6] == 0.0)  # rotation, translation, time offset: not the task's
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize(
+    "override, key",
+    [
+        ("env.information.tolerances.focal_px=0", "env.information.tolerances.focal_px"),
+        ("env.information.tolerances.time_offset_ms=-0.1", "env.information.tolerances.time_offset_ms"),
+        ("env.information.confidence=1.0", "env.information.confidence"),
+        ("env.state=coverage_and_more", "env.state"),
+    ],
+)
+def test_bad_information_settings_are_refused_by_key(override, key):
+    # vical-train prints the instantiation error's message as one line (ConfigError inside)
+    with pytest.raises(InstantiationException, match=key.replace(".", r"\.")) as raised:
+        information_env("joint", override)
+    assert isinstance(raised.value.__cause__, ConfigError)
