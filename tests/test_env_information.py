@@ -81,6 +81,7 @@ def test_features_and_excess():
     assert f[GROUPS.index("focal")] == pytest.approx(1.0) and f[GROUPS.index("principal_point")] == pytest.approx(0.5)
     assert f[GROUPS.index("rotation")] == pytest.approx(0.0) and f[GROUPS.index("time_offset")] == 0.0
     assert excess(ratios) == pytest.approx(np.log(100.0))
+    assert excess(ratios, cap=10.0) == pytest.approx(np.log(10.0))  # the reward's: the priors pay nothing
     assert quantile_factor("time_offset", 0.9) == pytest.approx(1.6449, abs=1e-4)  # one dimension: the normal's
     assert quantile_factor("rotation", 0.9) == pytest.approx(2.5003, abs=1e-4)  # three: sqrt(chi2_3(0.9))
 
@@ -109,7 +110,7 @@ def test_information_mdp_rewards_shrinking_uncertainty_and_stops_when_good_enoug
                 break
         assert terminated and info["reward/terminal"] == 100.0  # random motion gets there within 40 steps
         assert info["information/excess"] == 0.0 and all(info[f"information/{g}_ratio"] <= 1 for g in GROUPS)
-        assert total["information"] == pytest.approx(10.0 * start)  # every e-fold paid once
+        assert total["information"] == pytest.approx(40.0 * start)  # every e-fold paid once
         assert total["path"] < 0 and total["time"] < 0
         assert "calib/error_pct" not in info  # the information MDP needs no solve
         figure = env.trajectory_figure(np.stack([obs, obs]), np.zeros((1, 6)))  # TensorBoard's episode image
@@ -136,6 +137,7 @@ def test_the_intrinsic_task_tracks_the_camera_only():
         ("env.information.tolerances.focal_px=0", "env.information.tolerances.focal_px"),
         ("env.information.tolerances.time_offset_ms=-0.1", "env.information.tolerances.time_offset_ms"),
         ("env.information.confidence=1.0", "env.information.confidence"),
+        ("env.information.excess_cap=1", "env.information.excess_cap"),
         ("env.state=coverage_and_more", "env.state"),
     ],
 )

@@ -116,7 +116,7 @@ class CalibrationEnv(gym.Env):
             raise RuntimeError("CalibrationEnv.step called before reset()")
         a = np.clip(np.asarray(action, dtype=float).reshape(-1), self.action_space.low, self.action_space.high)
         before = self.coverage.vector()
-        excess_before = excess(self._ratios)
+        excess_before = excess(self._ratios, self.config.information.excess_cap)
         offset_before = self._offset.copy()
         motion = self.sim.move_to(
             self._goal_pose(a), on_step=self.recorder.on_step, settle_time=self.config.settle_time
@@ -145,7 +145,7 @@ class CalibrationEnv(gym.Env):
         """Reward terms and termination of the information state (the new frames already added)."""
         s = self.config.information
         terms = {
-            "information": s.information_weight * (excess_before - excess(self._ratios)),
+            "information": s.information_weight * (excess_before - excess(self._ratios, s.excess_cap)),
             "path": -self.config.reward.path_weight * float(motion.path_length),
             "time": -s.time_weight * float(motion.duration),
         }
@@ -256,7 +256,7 @@ class CalibrationEnv(gym.Env):
         info["coverage/path_length"] = self._path_length
         if self.information is not None:
             info.update({f"information/{g}_ratio": r for g, r in self._ratios.items()})
-            info["information/excess"] = excess(self._ratios)
+            info["information/excess"] = excess(self._ratios, self.config.information.excess_cap)
         return info
 
     def trajectory_figure(self, observations: np.ndarray, actions: np.ndarray) -> Figure:

@@ -175,6 +175,9 @@ class InformationSettings:
         pixel_sigma: [px] corner noise the frames are weighted with; null measures it from the
             PnP residuals (biased upwards before the lens is known).
         information_weight: reward per e-fold of every group's predicted error above its tolerance.
+        excess_cap: a ratio above this counts as this in the reward: how far above its tolerance a
+            group starts depends only on the priors' spread (uncapped, the first views paid ~200
+            whatever the action).
         time_weight: [1/s] charge per second of the step's motion (the path is charged by
             ``reward.path_weight``).
     """
@@ -183,6 +186,7 @@ class InformationSettings:
     confidence: float = 0.9
     pixel_sigma: float | None = 0.25
     information_weight: float = 10.0
+    excess_cap: float = 10.0
     time_weight: float = 1.0
 
     def __post_init__(self) -> None:
@@ -190,6 +194,7 @@ class InformationSettings:
         if self.pixel_sigma is not None:
             require_range("env.information.pixel_sigma", self.pixel_sigma, 0.0, low_open=True)
         require_range("env.information.information_weight", self.information_weight, 0.0)
+        require_range("env.information.excess_cap", self.excess_cap, 1.0, low_open=True)
         require_range("env.information.time_weight", self.time_weight, 0.0)
 
 

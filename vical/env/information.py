@@ -339,6 +339,6 @@ def features(ratios: dict[str, float]) -> np.ndarray:
     return out
 
 
-def excess(ratios: dict[str, float]) -> float:
-    """Sum over groups of ``ln(max(ratio, 1))``: e-folds the predicted errors still have to shrink by."""
-    return float(sum(np.log(max(r, 1.0)) for r in ratios.values()))
+def excess(ratios: dict[str, float], cap: float = np.inf) -> float:
+    """Sum over groups of ``ln(clip(ratio, 1, cap))``: e-folds the predicted errors still have to shrink by."""
+    return float(sum(np.log(min(max(r, 1.0), cap)) for r in ratios.values()))
