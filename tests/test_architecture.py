@@ -17,6 +17,8 @@ FORBIDDEN = {
     "rl": {"sim", "calib", "env", "policies", "apps"},
     "env": {"rl", "policies", "apps"},
     "policies": {"apps"},
+    # robot: the arm and sensor interfaces and hardware adapters; the simulated adapters live in sim
+    "robot": {"io", "sim", "calib", "env", "rl", "policies", "apps", "parallel"},
     "parallel": {"geometry", "data", "io", "sim", "calib", "env", "rl", "policies", "apps"},  # generic: config only
 }
 

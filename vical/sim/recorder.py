@@ -163,6 +163,12 @@ class SensorRecorder:
         """Camera timestamps [ns] (camera clock) of the frames observed from index ``first`` on."""
         return self._frames["t"][first:]
 
+    def images_since(self, first: int) -> list[np.ndarray]:
+        """Grey images (H, W) of the frames observed from index ``first`` on (``keep_images=True`` only)."""
+        if not self.keep_images:
+            raise RuntimeError("SensorRecorder.images_since needs keep_images=True")
+        return self._frames["images"][first:]
+
     def imu_samples(self) -> ImuSamples:
         """The IMU samples recorded so far (for consumers that follow the data while it is recorded)."""
         return self._imu.samples()

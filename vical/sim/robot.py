@@ -310,6 +310,10 @@ class PandaSim:
             t_end_ns=self.time_ns,
         )
 
+    def halt(self) -> None:
+        """Command the arm to hold its current joint positions (what a stop does to an interrupted motion)."""
+        self.data.ctrl[:] = self._hold_ctrl(self.q)
+
     def hold(self, duration: float, on_step: StepCallback | None = None) -> MotionResult:
         """Stay at rest at the current joint positions for ``duration`` [s] (physics keeps running)."""
         if not 0.0 <= duration <= 60.0:

@@ -1,0 +1,205 @@
+"""The simulated Panda and its camera + IMU behind ``vical.robot``'s interfaces: the test path of ``vical-collect``.
+
+``SimRig`` holds one simulator and one sensor drawn from the sensor distribution; ``SimArm`` and
+``SimViSensor`` are the only ways in. What crosses them is what a real rig delivers: the tool pose
+the arm reports, rendered grey images and IMU samples. The sensor's truth stays in the rig, for the
+tests that compare a calibration with it.
+
+Time in the simulator advances only while the arm moves (or waits out its command latency), so
+the sensor delivers data for those intervals only, as a real sensor would for a runner that reads
+after every motion. Faults a real rig has are configurable: command latency (the arm rests, the
+sensor streams), pose-tracking error (the arm ends a random offset away from the goal and reports
+where it is), and a gap in the IMU stream.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from vical.data import NS_PER_S, ImuSamples, SensorTruth
+from vical.geometry import make_transform, so3_exp
+from vical.robot.interfaces import (
+    Arm,
+    ArmLimits,
+    CameraImage,
+    MotionRefused,
+    SensorData,
+    StampedPose,
+    ViSensor,
+    check_pose,
+)
+from vical.sim.config import SimConfig
+from vical.sim.recorder import SensorRecorder
+from vical.sim.robot import PandaSim
+from vical.sim.sampling import SensorSampling, sample_sensor
+
+# The Panda's documented Cartesian limits (translation [m/s], rotation [rad/s], acceleration [m/s^2]);
+# the simulator plans in joint space within sim.motion's fractions of the joint limits.
+PANDA_CARTESIAN = (1.7, 2.5, 13.0)
+
+
+@dataclass(frozen=True)
+class RigFaults:
+    """What makes the simulated rig behave like a real one.
+
+    Attributes:
+        latency: [s] between a motion command and the arm starting to move (the arm rests, the sensor streams).
+        tracking_noise_m: [m] standard deviation per axis of where the arm ends relative to its goal.
+        tracking_noise_rad: [rad] standard deviation per axis of the orientation it ends with.
+        imu_gap: ``(start, duration)`` [s] after ``start()`` during which the IMU delivers nothing, or None.
+    """
+
+    latency: float = 0.0
+    tracking_noise_m: float = 0.0
+    tracking_noise_rad: float = 0.0
+    imu_gap: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("latency", "tracking_noise_m", "tracking_noise_rad"):
+            value = getattr(self, name)
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"RigFaults.{name} must be a number >= 0, got {value}")
+        if self.imu_gap is not None and (len(self.imu_gap) != 2 or min(self.imu_gap) < 0):
+            raise ValueError(f"RigFaults.imu_gap must be (start, duration) in seconds >= 0, got {self.imu_gap}")
+
+
+class SimRig:
+    """One simulated Panda holding one simulated sensor.
+
+    Args:
+        sim: the simulator's config (its board, start pose, physics).
+        sampling: the sensor distribution; the rig renders images whatever its ``backend``.
+        seed: draws the simulator, the sensor and its noise as ``CalibrationEnv.reset(seed=seed)`` does, so
+            a rig and an env episode with the same seed hold the same sensor.
+        asymmetric_distortion: draw the distortion-centre offset and tangential terms (the joint task's sensor).
+        faults: latency, tracking error, IMU gap.
+    """
+
+    def __init__(
+        self,
+        sim: SimConfig,
+        sampling: SensorSampling,
+        seed: int,
+        asymmetric_distortion: bool = False,
+        faults: RigFaults | None = None,
+    ) -> None:
+        self.faults = faults or RigFaults()
+        self.sim = PandaSim(sim)
+        # Analytic corners are never used: the runner detects corners in the rendered images.
+        self.recorder = SensorRecorder(self.sim, self.sim.cfg.board.target, replace(sampling, backend="project"),
+                                       keep_images=True)  # fmt: skip
+        sim_seed, sensor_seed, noise_seed = np.random.default_rng(seed).integers(2**63 - 1, size=3)
+        self.sim.reset(seed=int(sim_seed))
+        self.truth: SensorTruth = sample_sensor(sampling, np.random.default_rng(sensor_seed), asymmetric_distortion)
+        self.recorder.start(self.truth, np.random.default_rng([int(noise_seed), 0]))
+        self._tracking_rng = np.random.default_rng([int(noise_seed), 1])
+        self.arm = SimArm(self)
+        self.sensor = SimViSensor(self)
+
+    def close(self) -> None:
+        """Free the renderer."""
+        self.recorder.close()
+
+
+class SimArm(Arm):
+    """The simulated Panda as an ``Arm``: the tool frame is the sensor body (the ``ee`` site)."""
+
+    def __init__(self, rig: SimRig) -> None:
+        self._rig = rig
+        motion = rig.sim.cfg.motion
+        speed, angular, acceleration = PANDA_CARTESIAN
+        self.limits = ArmLimits(speed * motion.velocity_scale, angular * motion.velocity_scale,
+                                acceleration * motion.acceleration_scale)  # fmt: skip
+        self.stops = 0
+
+    def pose(self) -> StampedPose:
+        sim = self._rig.sim
+        return StampedPose(sim.time_ns, sim.ee_pose())
+
+    def move_to(self, T_base_tool: np.ndarray) -> StampedPose:
+        rig = self._rig
+        sim, recorder, faults = rig.sim, rig.recorder, rig.faults
+        goal = self._tracked(check_pose(T_base_tool))
+        ik = sim.solve_ik(goal)
+        if not ik.success:
+            raise MotionRefused(
+                f"the goal is out of reach: the closest pose is {1e3 * ik.position_error:.1f} mm and "
+                f"{np.degrees(ik.rotation_error):.1f} deg away"
+            )
+        fraction, touching = sim.first_collision(sim.q, ik.q)
+        if touching:
+            raise MotionRefused(f"the path collides ({touching}) at {100 * fraction:.0f}% of the motion")
+        if faults.latency > 0:
+            recorder.add_motion(sim.hold(faults.latency, on_step=recorder.on_step))
+        recorder.add_motion(sim.move_to(goal, on_step=recorder.on_step))
+        return self.pose()
+
+    def _tracked(self, T: np.ndarray) -> np.ndarray:
+        """The goal the arm actually ends at: ``T`` off by the tracking error."""
+        f, rng = self._rig.faults, self._rig._tracking_rng
+        if f.tracking_noise_m == 0 and f.tracking_noise_rad == 0:
+            return T
+        dR = so3_exp(rng.normal(0.0, f.tracking_noise_rad, 3))
+        return make_transform(dR @ T[:3, :3], T[:3, 3] + rng.normal(0.0, f.tracking_noise_m, 3))
+
+    def stop(self) -> None:
+        self._rig.sim.halt()
+        self.stops += 1
+
+    def close(self) -> None:
+        """Nothing to release: the rig owns the simulator (``SimRig.close``)."""
+
+
+class SimViSensor(ViSensor):
+    """The simulated camera + IMU as a ``ViSensor``: rendered grey images, the IMU model's samples.
+
+    Clocks: the IMU clock is the simulation clock; camera stamps are in the camera clock, exposed at
+    ``t_cam + time_offset`` (the sensor's truth).
+    """
+
+    def __init__(self, rig: SimRig) -> None:
+        self._rig = rig
+        camera = rig.truth.camera
+        self.image_size = (camera.width, camera.height)
+        sampling = rig.recorder.sampling
+        self.camera_rate_hz = float(sampling.camera.rate_hz)
+        self.imu_rate_hz = float(sampling.imu.rate_hz)
+        self._streaming = False
+        self._frames_read = 0
+        self._imu_read = 0
+        self._t_start: int | None = None
+
+    def start(self) -> None:
+        self._streaming = True
+        self._t_start = self._rig.sim.time_ns
+        self._frames_read = len(self._rig.recorder.stamps_since(0))
+        self._imu_read = len(self._rig.recorder.imu_samples())
+
+    def read(self) -> SensorData:
+        if not self._streaming:
+            return SensorData.empty()
+        recorder = self._rig.recorder
+        stamps = recorder.stamps_since(self._frames_read)
+        images = recorder.images_since(self._frames_read)
+        self._frames_read += len(stamps)
+        imu = recorder.imu_samples()
+        new = np.arange(self._imu_read, len(imu))
+        self._imu_read = len(imu)
+        frames = [CameraImage(t, image) for t, image in zip(stamps, images, strict=True)]
+        return SensorData(frames, self._without_gap(ImuSamples(imu.t[new], imu.gyro[new], imu.accel[new])))
+
+    def _without_gap(self, imu: ImuSamples) -> ImuSamples:
+        gap = self._rig.faults.imu_gap
+        if gap is None:
+            return imu
+        start = self._t_start + round(gap[0] * NS_PER_S)
+        keep = (imu.t < start) | (imu.t >= start + round(gap[1] * NS_PER_S))
+        return ImuSamples(imu.t[keep], imu.gyro[keep], imu.accel[keep])
+
+    def stop(self) -> None:
+        self._streaming = False
+
+    def close(self) -> None:
+        """Nothing to release: the rig owns the renderer (``SimRig.close``)."""
