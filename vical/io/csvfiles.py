@@ -123,8 +123,13 @@ def write_imu_csv(imu: ImuSamples, path: str | os.PathLike) -> None:
     """Write ``imu`` as an EuRoC-style CSV (exact: int ns, 17 significant digits), atomically."""
     with atomic_file(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
         f.write(IMU_HEADER + "\n")
-        for t, g, a in zip(imu.t.tolist(), imu.gyro.tolist(), imu.accel.tolist(), strict=True):
-            f.write(f"{t}," + ",".join(f"{v:.17g}" for v in (*g, *a)) + "\n")
+        f.write(imu_rows(imu))
+
+
+def imu_rows(imu: ImuSamples) -> str:
+    """The IMU CSV's lines of ``imu`` (each ending in a newline), without the header."""
+    rows = zip(imu.t.tolist(), imu.gyro.tolist(), imu.accel.tolist(), strict=True)
+    return "".join(f"{t}," + ",".join(f"{v:.17g}" for v in (*g, *a)) + "\n" for t, g, a in rows)
 
 
 # ------------------------------------------------------------------------------------ corners
@@ -133,10 +138,14 @@ def write_corners_csv(frames: CameraFrames, path: str | os.PathLike) -> None:
     with atomic_file(path) as tmp, open(tmp, "w", encoding="utf-8") as f:
         f.write(CORNER_HEADER + "\n")
         for t, corners, ids in zip(frames.t.tolist(), frames.corners, frames.ids, strict=True):
-            if not len(ids):
-                f.write(f"{t},{NO_DETECTION_ID},,\n")
-            for i, (u, v) in zip(ids.tolist(), corners.tolist(), strict=True):
-                f.write(f"{t},{i},{u:.17g},{v:.17g}\n")
+            f.write(corner_rows(t, corners, ids))
+
+
+def corner_rows(t: int, corners: np.ndarray, ids: np.ndarray) -> str:
+    """The corner CSV's lines of one frame stamped ``t`` [ns] (a no-detection line when ``ids`` is empty)."""
+    if not len(ids):
+        return f"{t},{NO_DETECTION_ID},,\n"
+    return "".join(f"{t},{i},{u:.17g},{v:.17g}\n" for i, (u, v) in zip(ids.tolist(), corners.tolist(), strict=True))
 
 
 def read_corners_csv(path: str | os.PathLike, target: Target) -> CameraFrames:

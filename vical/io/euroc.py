@@ -17,17 +17,29 @@ the recording's ``truth``.
 from __future__ import annotations
 
 import os
+import shutil
 import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from vical.data import NS_PER_S, CameraFrames, ImuSamples, Recording, SensorTruth, Target
+from vical.data import NS_PER_S, CameraFrames, ImuNoise, ImuSamples, Recording, SensorTruth, Target
 from vical.geometry.transforms import invert_transform
-from vical.io.atomic import atomic_directory
+from vical.io.atomic import atomic_directory, atomic_file, check_can_write_dir, write_text_atomic
 from vical.io.checks import check_sampling, sort_and_dedupe, warn
-from vical.io.csvfiles import parse_times, read_corners_csv, read_imu_csv, read_rows, write_corners_csv, write_imu_csv
+from vical.io.csvfiles import (
+    CORNER_HEADER,
+    IMU_HEADER,
+    corner_rows,
+    imu_rows,
+    parse_times,
+    read_corners_csv,
+    read_imu_csv,
+    read_rows,
+    write_corners_csv,
+    write_imu_csv,
+)
 from vical.io.errors import CsvFormatError, EmptyCsvError, FormatError, KalibrFormatError
 from vical.io.images import ImageDetector, frames_from_images, read_gray, write_png
 from vical.io.kalibr import read_camchain, read_imu_yaml
@@ -104,11 +116,114 @@ def _camera_sensor_yaml(rec: Recording) -> dict[str, Any]:
 
 
 def _imu_sensor_yaml(rec: Recording) -> dict[str, Any]:
-    data: dict[str, Any] = {"sensor_type": "imu", "comment": "written by vical", "T_BS": _matrix(np.eye(4))}
-    data["rate_hz"] = _rate_hz(rec.imu.t)
-    if rec.truth is not None:
-        noise = rec.truth.imu_noise
-        data["rate_hz"] = float(noise.rate_hz)
+    if rec.truth is None:
+        return _imu_noise_yaml(None, _rate_hz(rec.imu.t), "written by vical")
+    return _imu_noise_yaml(rec.truth.imu_noise, rec.truth.imu_noise.rate_hz, "written by vical")
+
+
+class EurocStreamWriter:
+    """Writes an EuRoC folder while the data arrives, so that a kill at any moment leaves a readable one.
+
+    The folder holds every IMU sample and every frame handed over before the kill: an image is
+    written to a temporary name and renamed, then listed in ``cam0/data.csv``, then its detections
+    go to ``cam0/corners.csv``; each batch of CSV lines is one ``write`` to a file opened for
+    appending, so no reader sees half a line. ``read_euroc`` reads it like any EuRoC folder (a
+    frame killed between its listing and its detections reads as undetected). Data is flushed to
+    the disk every ``sync_every`` frames and by ``close``.
+
+    Args:
+        path: the folder to create (``path/mav0/...``); an existing one is refused unless ``overwrite``.
+        image_size: (width, height) [px] of the frames, written to ``cam0/sensor.yaml``.
+        camera_rate_hz, imu_rate_hz: the streams' nominal rates (``sensor.yaml``).
+        imu_noise: the IMU's noise settings for ``imu0/sensor.yaml`` (the calibrator reads them), or None.
+        overwrite: replace an existing folder (it is removed first).
+        sync_every: frames between flushes to the disk.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        image_size: tuple[int, int],
+        camera_rate_hz: float,
+        imu_rate_hz: float,
+        imu_noise: ImuNoise | None = None,
+        overwrite: bool = False,
+        sync_every: int = 20,
+    ) -> None:
+        final = check_can_write_dir(path, overwrite)
+        if final.exists():
+            shutil.rmtree(final)
+        self.path = final
+        self.root = final / "mav0"
+        cam, imu = self.root / "cam0", self.root / "imu0"
+        (cam / "data").mkdir(parents=True)
+        imu.mkdir(parents=True)
+        width, height = (int(v) for v in image_size)
+        self.image_size = (width, height)
+        camera = {"sensor_type": "camera", "comment": "written by vical-collect", "rate_hz": float(camera_rate_hz),
+                  "resolution": [width, height]}  # fmt: skip
+        dump_yaml(cam / "sensor.yaml", camera)
+        dump_yaml(imu / "sensor.yaml", _imu_noise_yaml(imu_noise, imu_rate_hz, "written by vical-collect"))
+        write_text_atomic(cam / "data.csv", "#timestamp [ns],filename\n")
+        write_text_atomic(cam / "corners.csv", CORNER_HEADER + "\n")
+        write_text_atomic(imu / "data.csv", IMU_HEADER + "\n")
+        csvs = {"images": cam / "data.csv", "corners": cam / "corners.csv", "imu": imu / "data.csv"}
+        self._files = {name: os.open(p, os.O_WRONLY | os.O_APPEND) for name, p in csvs.items()}
+        self.frames = 0
+        self.imu_samples = 0
+        self._sync_every = int(sync_every)
+
+    def add_imu(self, imu: ImuSamples) -> None:
+        """Append IMU samples (stamp order, after those already written)."""
+        if len(imu):
+            self._append("imu", imu_rows(imu))
+            self.imu_samples += len(imu)
+
+    def add_frame(self, t_ns: int, image: np.ndarray, corners: np.ndarray, ids: np.ndarray) -> None:
+        """Append one frame: its grey ``image`` (H, W), its detections (K, 2) [px] and point ids (K,)."""
+        height, width = np.shape(image)[:2]
+        if (width, height) != self.image_size:
+            raise ValueError(f"frame {t_ns}: {width} x {height} px image, but the recording is {self.image_size}")
+        t = int(t_ns)
+        with atomic_file(self.root / "cam0" / "data" / f"{t}.png") as tmp:
+            write_png(tmp, image)
+        self._append("images", f"{t},{t}.png\n")
+        self._append("corners", corner_rows(t, np.asarray(corners).reshape(-1, 2), np.asarray(ids).reshape(-1)))
+        self.frames += 1
+        if self.frames % self._sync_every == 0:
+            self.sync()
+
+    def _append(self, name: str, text: str) -> None:
+        data = text.encode("utf-8")
+        written = os.write(self._files[name], data)
+        if written != len(data):  # a full disk: say so rather than go on after half a line
+            raise OSError(f"{self.path}: only {written} of {len(data)} bytes of {name} were written (disk full?)")
+
+    def sync(self) -> None:
+        """Flush everything written so far to the disk."""
+        for fd in self._files.values():
+            os.fsync(fd)
+
+    def close(self) -> None:
+        """Flush and close the files (the folder is readable at every moment before, too)."""
+        if not self._files:
+            return
+        self.sync()
+        for fd in self._files.values():
+            os.close(fd)
+        self._files = {}
+
+    def __enter__(self) -> EurocStreamWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _imu_noise_yaml(noise: ImuNoise | None, rate_hz: float, comment: str) -> dict[str, Any]:
+    data: dict[str, Any] = {"sensor_type": "imu", "comment": comment, "T_BS": _matrix(np.eye(4))}
+    data["rate_hz"] = float(rate_hz)
+    if noise is not None:
         data["gyroscope_noise_density"] = noise.gyro_noise_density
         data["gyroscope_random_walk"] = noise.gyro_random_walk
         data["accelerometer_noise_density"] = noise.accel_noise_density

@@ -62,9 +62,11 @@ def to_gray(image: np.ndarray, where: str) -> np.ndarray:
 
 
 def write_png(path: Path, image: np.ndarray) -> None:
-    """Write a (H, W) uint8 image as lossless PNG; raise naming the file on failure."""
-    if not cv2.imwrite(str(path), image):
-        raise OSError(f"{path}: OpenCV could not write the PNG image")
+    """Write a (H, W) uint8 image as lossless PNG, whatever ``path``'s extension; raise naming the file on failure."""
+    ok, encoded = cv2.imencode(".png", image)
+    if not ok:
+        raise OSError(f"{path}: OpenCV could not encode the image as PNG")
+    Path(path).write_bytes(encoded.tobytes())
 
 
 def check_size(image: np.ndarray, expected: tuple[int, int] | None, where: str) -> tuple[int, int]:
