@@ -58,7 +58,7 @@ def main() -> None:
     for k in range(args.episodes):
         for state, env in envs.items():
             times[state] += episode(env, FIRST_SEED + k, args.steps)
-    frames = envs["information"].information.frames_used / max(envs["information"].steps, 1)
+    frames = envs["information"].state.information.frames_used / max(envs["information"].steps, 1)
     coverage, information = (1e3 * np.median(times[s]) for s in ("coverage", "information"))
     print(f"  {'state':<12} {'steps':>5} {'median step [ms]':>17} {'mean [ms]':>10}")
     for state in envs:

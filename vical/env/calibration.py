@@ -27,15 +27,14 @@ from matplotlib.figure import Figure
 from vical.calib.aprilgrid import detect_aprilgrid
 from vical.calib.detection import detect_checkerboard
 from vical.calib.errors import CalibrationError
-from vical.calib.observations import FrameObservation
 from vical.calib.tasks import CalibrationTask, run_task
 from vical.data import Recording, SensorTruth
 from vical.env.actions import action_to_step
 from vical.env.config import MdpConfig
-from vical.env.coverage import Coverage, view_features
-from vical.env.information import GROUPS, TASK_GROUPS, Guess, InformationTracker, excess, features, tolerance_ratios
+from vical.env.information import GROUPS, TASK_GROUPS, Guess
 from vical.env.plots import episode_figure, information_figure
 from vical.env.rewards import step_reward_terms, terminal_reward_terms
+from vical.env.state import EpisodeState
 from vical.env.workspace import check_workspace, pose_frame
 from vical.sim import PandaSim, SimConfig
 from vical.sim.motion import MotionResult
@@ -68,13 +67,12 @@ class CalibrationEnv(gym.Env):
         self.recorder = SensorRecorder(
             self.sim, self.target, self.sampling, detector if self.sampling.backend == "render" else None
         )
-        self.coverage = Coverage(self.config.workspace, self.config.thresholds, self.config.view_novelty)
+        camera = self.sampling.camera
+        self.state = EpisodeState(self.config, self.target, (camera.width, camera.height))
         scale = np.asarray(self.config.action_scale, dtype=np.float32)
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
         size = INFO_OBS_SIZE if self.config.state == "information" else OBS_SIZE
         self.observation_space = gym.spaces.Box(0.0, 1.0, (size,), dtype=np.float32)
-        self.information: InformationTracker | None = None
-        self._ratios: dict[str, float] = {}
         self._bound = self.config.workspace.bound
         self.frame = pose_frame(self.sim, self.config.workspace)
         check_workspace(self.sim, self.frame, self.config.workspace)
@@ -98,16 +96,12 @@ class CalibrationEnv(gym.Env):
             self.sampling, np.random.default_rng(sensor_seed), asymmetric=self.task.asymmetric_distortion
         )
         self.recorder.start(self.truth, np.random.default_rng([int(noise_seed), stream]))
-        self.coverage.reset()
+        self.state.reset(self._tracker_task(), self._guess() if self.config.state == "information" else None)
         self._offset = np.zeros(6)
         self._steps = 0
-        self._path_length = 0.0
         self._frames_seen = 0
-        if self.config.state == "information":
-            self.information = self._tracker()
-            self._update_ratios()
         if self.config.reset_hold > 0:
-            self._record(self.sim.hold(self.config.reset_hold, on_step=self.recorder.on_step))
+            self._record(self.sim.hold(self.config.reset_hold, on_step=self.recorder.on_step), np.zeros(6))
         return self._observation(), self._info()
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
@@ -115,21 +109,20 @@ class CalibrationEnv(gym.Env):
         if self.truth is None:
             raise RuntimeError("CalibrationEnv.step called before reset()")
         a = np.clip(np.asarray(action, dtype=float).reshape(-1), self.action_space.low, self.action_space.high)
-        before = self.coverage.vector()
-        excess_before = excess(self._ratios, self.config.information.excess_cap)
+        before = self.state.coverage.vector()
+        excess_before = self.state.excess
         offset_before = self._offset.copy()
         motion = self.sim.move_to(
             self._goal_pose(a), on_step=self.recorder.on_step, settle_time=self.config.settle_time
         )
-        self._record(motion)
         self._offset = self._current_offset()
-        self.coverage.add_motion(self._offset - offset_before)
+        self._record(motion, self._offset - offset_before)
         self._steps += 1
         if self.config.state == "information":
             terms, terminated = self._information_step(excess_before, motion)
         else:
-            terms = step_reward_terms(before, self.coverage.vector(), motion, self.config.reward)
-            terminated = self.config.terminate_on_coverage and self.coverage.complete()
+            terms = step_reward_terms(before, self.state.coverage.vector(), motion, self.config.reward)
+            terminated = self.config.terminate_on_coverage and self.state.goal_reached
         truncated = not terminated and self._steps >= self.config.max_steps
         info = self._info()
         info["motion/clamped"] = float(motion.clamped)
@@ -145,7 +138,7 @@ class CalibrationEnv(gym.Env):
         """Reward terms and termination of the information state (the new frames already added)."""
         s = self.config.information
         terms = {
-            "information": s.information_weight * (excess_before - excess(self._ratios, s.excess_cap)),
+            "information": s.information_weight * (excess_before - self.state.excess),
             "path": -self.config.reward.path_weight * float(motion.path_length),
             "time": -s.time_weight * float(motion.duration),
         }
@@ -185,9 +178,7 @@ class CalibrationEnv(gym.Env):
     @property
     def goal_reached(self) -> bool:
         """The MDP's terminal condition holds: the coverage is complete, or (information state) every group is done."""
-        if self.config.state == "information":
-            return all(r <= 1.0 for r in self._ratios.values())
-        return self.coverage.complete()
+        return self.state.goal_reached
 
     @property
     def steps(self) -> int:
@@ -208,56 +199,35 @@ class CalibrationEnv(gym.Env):
     def _current_offset(self) -> np.ndarray:
         return self.frame.offset(self.sim.ee_pose())
 
-    def _record(self, motion: MotionResult) -> None:
-        """Account the motion and feed the frames it produced to the coverage (and the information state)."""
+    def _record(self, motion: MotionResult, offset_step: np.ndarray) -> None:
+        """Account the motion and feed the frames it produced to the state."""
         self.recorder.add_motion(motion)
-        self._path_length += motion.path_length
+        self.state.add_motion(offset_step, motion.path_length)
         corners, ids = self.recorder.detections_since(self._frames_seen)
         stamps = self.recorder.stamps_since(self._frames_seen)
         self._frames_seen += len(corners)
-        camera = self.truth.camera
-        for c, i in zip(corners, ids, strict=True):
-            view = view_features(c, i, self.target, camera.width, camera.height)
-            if view is not None:
-                self.coverage.add_view(view)
-        if self.information is not None:
-            points = self.target.points
-            frames = [
-                FrameObservation(-1, int(t), c, i, points[i]) for t, c, i in zip(stamps, corners, ids, strict=True)
-            ]
-            self.information.add_frames(frames, self.recorder.imu_samples())
-            self._update_ratios()
+        imu = self.recorder.imu_samples() if self.state.information is not None else None
+        self.state.add_frames(stamps, corners, ids, imu)
 
-    def _update_ratios(self) -> None:
-        s = self.config.information
-        self._ratios = tolerance_ratios(self.information.sigmas(), s.tolerances, s.confidence)
+    def _tracker_task(self) -> str:
+        """The calibration problem the information state predicts (the task's, ``joint`` for a camera + IMU task)."""
+        return self.task.calibrate if self.task.calibrate in TASK_GROUPS else "joint"
 
-    def _tracker(self) -> InformationTracker:
-        """The information state of a new episode, linearised at the sensor distribution's means (not the truth).
+    def _guess(self) -> Guess:
+        """The information state's linearisation point: the sensor distribution's means (not the truth).
 
         In the extrinsic task the intrinsics are given to the calibrator, so they are known here too.
         """
         guess = mean_sensor(self.sampling)
         camera = self.truth.camera if self.task.calibrate == "extrinsic" else guess.camera
-        kind = self.task.calibrate if self.task.calibrate in TASK_GROUPS else "joint"
         pixel_sigma = self.config.information.pixel_sigma
-        return InformationTracker(kind, self.target, Guess(camera, guess.T_cam_imu, guess.time_offset,
-                                                            guess.imu_noise, pixel_sigma))  # fmt: skip
+        return Guess(camera, guess.T_cam_imu, guess.time_offset, guess.imu_noise, pixel_sigma)
 
     def _observation(self) -> np.ndarray:
-        pose = np.clip((self._offset + self._bound) / (2 * self._bound), 0.0, 1.0)
-        if self.config.state == "information":
-            return np.r_[features(self._ratios), pose, self._steps / self.config.max_steps].astype(np.float32)
-        return np.r_[self.coverage.vector(), pose].astype(np.float32)
+        return self.state.observation(self._offset, self._steps)
 
     def _info(self) -> dict[str, float]:
-        info = {f"coverage/{k}": v for k, v in self.coverage.progress().items()}
-        info["coverage/views"] = float(self.coverage.num_views)
-        info["coverage/path_length"] = self._path_length
-        if self.information is not None:
-            info.update({f"information/{g}_ratio": r for g, r in self._ratios.items()})
-            info["information/excess"] = excess(self._ratios, self.config.information.excess_cap)
-        return info
+        return self.state.info()
 
     def trajectory_figure(self, observations: np.ndarray, actions: np.ndarray) -> Figure:
         """TensorBoard's episode figure (``vical.rl.logger`` calls it when the env has it)."""

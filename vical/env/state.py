@@ -1,0 +1,109 @@
+"""The MDP's state of one episode, fed with the sensor data as it arrives.
+
+``EpisodeState`` is what ``CalibrationEnv`` and ``vical-collect`` share, so that a policy sees the
+same state from the simulator and from a real robot: the coverage of the views and the motion
+(``vical.env.coverage``) and, for the information state, the predicted uncertainty of each parameter
+group over its tolerance (``vical.env.information``), both computed from the detections and the
+IMU samples only (never a ground truth).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from vical.calib.observations import FrameObservation
+from vical.data import ImuSamples, Target
+from vical.env.config import MdpConfig
+from vical.env.coverage import Coverage, view_features
+from vical.env.information import Guess, InformationTracker, excess, features, tolerance_ratios
+
+
+class EpisodeState:
+    """Coverage and (``state: information``) predicted uncertainty of one episode.
+
+    Args:
+        config: the MDP's settings (state kind, workspace, thresholds, information settings).
+        target: the calibration target.
+        image_size: (width, height) [px] of the camera.
+    """
+
+    def __init__(self, config: MdpConfig, target: Target, image_size: tuple[int, int]) -> None:
+        self.config = config
+        self.target = target
+        self.image_size = (int(image_size[0]), int(image_size[1]))
+        self.coverage = Coverage(config.workspace, config.thresholds, config.view_novelty)
+        self.information: InformationTracker | None = None
+        self.ratios: dict[str, float] = {}
+        self.path_length = 0.0
+        self.frames = 0
+
+    def reset(self, task: str, guess: Guess | None) -> None:
+        """Start an episode of ``task`` (``intrinsic``, ``extrinsic``, ``joint``); ``guess`` linearises the
+        information state (the sensor's datasheet values, never its truth; unused by the coverage state)."""
+        self.coverage.reset()
+        self.path_length = 0.0
+        self.frames = 0
+        self.information = None
+        self.ratios = {}
+        if self.config.state == "information":
+            if guess is None:
+                raise ValueError("the information state needs a guess of the sensor to linearise at")
+            self.information = InformationTracker(task, self.target, guess)
+            self._update_ratios()
+
+    def add_frames(
+        self, stamps: list[int], corners: list[np.ndarray], ids: list[np.ndarray], imu: ImuSamples | None
+    ) -> None:
+        """Feed new frames (camera stamps [ns], corners (K, 2) [px], point ids (K,)) and all IMU samples so far
+        (read by the information state only)."""
+        width, height = self.image_size
+        for c, i in zip(corners, ids, strict=True):
+            view = view_features(c, i, self.target, width, height)
+            if view is not None:
+                self.coverage.add_view(view)
+        self.frames += len(corners)
+        if self.information is not None:
+            points = self.target.points
+            seen = zip(stamps, corners, ids, strict=True)
+            self.information.add_frames([FrameObservation(-1, int(t), c, i, points[i]) for t, c, i in seen], imu)
+            self._update_ratios()
+
+    def add_motion(self, offset_step: np.ndarray, path_length: float) -> None:
+        """Account a motion: the pose offset it changed (6,) and its path [m]."""
+        self.coverage.add_motion(offset_step)
+        self.path_length += float(path_length)
+
+    def _update_ratios(self) -> None:
+        s = self.config.information
+        self.ratios = tolerance_ratios(self.information.sigmas(), s.tolerances, s.confidence)
+
+    @property
+    def excess(self) -> float:
+        """E-folds the predicted errors still have to shrink by (ratios capped as the reward caps them)."""
+        return excess(self.ratios, self.config.information.excess_cap)
+
+    @property
+    def goal_reached(self) -> bool:
+        """The coverage is complete, or (information state) every group is within its tolerance."""
+        if self.config.state == "information":
+            return all(r <= 1.0 for r in self.ratios.values())
+        return self.coverage.complete()
+
+    def observation(self, offset: np.ndarray, steps: int) -> np.ndarray:
+        """The policy's input: the state's terms, the pose ``offset`` (6,) normalised and (information state)
+        the fraction ``steps / max_steps``."""
+        bound = self.config.workspace.bound
+        pose = np.clip((offset + bound) / (2 * bound), 0.0, 1.0)
+        if self.config.state == "information":
+            return np.r_[features(self.ratios), pose, steps / self.config.max_steps].astype(np.float32)
+        return np.r_[self.coverage.vector(), pose].astype(np.float32)
+
+    def info(self) -> dict[str, float]:
+        """``coverage/*`` and ``information/*`` terms (TensorBoard, progress lines)."""
+        info = {f"coverage/{k}": v for k, v in self.coverage.progress().items()}
+        info["coverage/views"] = float(self.coverage.num_views)
+        info["coverage/path_length"] = self.path_length
+        if self.information is not None:
+            info.update({f"information/{g}_ratio": r for g, r in self.ratios.items()})
+            info["information/excess"] = self.excess
+        return info
