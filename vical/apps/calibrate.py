@@ -191,6 +191,7 @@ def _image_size(args, rec: Recording, camera: CameraModel | None, seen: tuple[in
     """
     images = rec.frames.images
     decoded = seen or (None if images is None else (int(images.shape[2]), int(images.shape[1])))
+    decoded = decoded or (tuple(rec.metadata["image_size"]) if "image_size" in rec.metadata else None)
     given = tuple(args.image_size) if args.image_size else None
     if decoded and given and decoded != given:
         raise CalibrationError(

@@ -113,6 +113,13 @@ class ImuSamples:
     def __len__(self) -> int:
         return len(self.t)
 
+    @classmethod
+    def concatenate(cls, parts: list[ImuSamples]) -> ImuSamples:
+        """The samples of ``parts`` one after the other (they must follow each other in time)."""
+        if not parts:
+            return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+        return cls(*(np.concatenate([getattr(p, key) for p in parts]) for key in ("t", "gyro", "accel")))
+
     def slice_time(self, t0: int, t1: int) -> ImuSamples:
         """Samples with ``t0 <= t <= t1`` [ns]."""
         m = (self.t >= t0) & (self.t <= t1)

@@ -244,9 +244,9 @@ def read_euroc(
 
     Corners come from ``detector`` when given, else from ``cam0/corners.csv`` when present,
     else the frames have no detections. Images are checked against the resolution in
-    ``cam0/sensor.yaml`` (or the first image); every image is decoded for that check (and for
-    detection). ``keep_images=False`` drops each decoded image after use, bounding memory on long
-    sequences.
+    ``cam0/sensor.yaml`` (or the first image), which becomes ``metadata["image_size"]`` (W, H) [px];
+    every image is decoded for that check (and for detection). ``keep_images=False`` drops each
+    decoded image after use, bounding memory on long sequences.
     """
     root = find_euroc_root(path)
     if root is None:
@@ -257,12 +257,14 @@ def read_euroc(
     frames = frames_from_images(t, images, target, detector, keep_images, resolution, desc="EuRoC cam0")
     if detector is None and (root / "cam0" / "corners.csv").is_file():
         frames = _attach_corners(frames, read_corners_csv(root / "cam0" / "corners.csv", target), root)
+    # Every image was checked against this size, so the frames' corners belong to it.
+    width, height = resolution or read_gray(files[0]).shape[::-1]
     return Recording(
         imu=_read_imu(root, gyro_unit, accel_unit),
         frames=frames,
         target=target,
         truth=truth,
-        metadata={"source": "euroc", "path": str(Path(path).resolve())},
+        metadata={"source": "euroc", "path": str(Path(path).resolve()), "image_size": [int(width), int(height)]},
     )
 
 

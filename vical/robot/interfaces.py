@@ -116,7 +116,7 @@ class SensorData:
 
     @classmethod
     def empty(cls) -> SensorData:
-        return cls([], ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3))))
+        return cls([], ImuSamples.concatenate([]))
 
 
 class Arm(ABC):

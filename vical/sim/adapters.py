@@ -5,16 +5,18 @@
 the arm reports, rendered grey images and IMU samples. The sensor's truth stays in the rig, for the
 tests that compare a calibration with it.
 
-Time in the simulator advances only while the arm moves (or waits out its command latency), so
-the sensor delivers data for those intervals only, as a real sensor would for a runner that reads
-after every motion. Faults a real rig has are configurable: command latency (the arm rests, the
+Time in the simulator advances while the arm moves, waits out its command latency, or rests while
+the sensor is read with nothing new to deliver (one camera period per such read), so the runner
+sees the streams a real sensor delivers. Faults a real rig has are configurable: command latency (the arm rests, the
 sensor streams), pose-tracking error (the arm ends a random offset away from the goal and reports
 where it is), and a gap in the IMU stream.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -33,7 +35,7 @@ from vical.robot.interfaces import (
 from vical.sim.config import SimConfig
 from vical.sim.recorder import SensorRecorder
 from vical.sim.robot import PandaSim
-from vical.sim.sampling import SensorSampling, sample_sensor
+from vical.sim.sampling import SensorSampling, mean_sensor, sample_sensor
 
 # The Panda's documented Cartesian limits (translation [m/s], rotation [rad/s], acceleration [m/s^2]);
 # the simulator plans in joint space within sim.motion's fractions of the joint limits.
@@ -93,6 +95,8 @@ class SimRig:
         sim_seed, sensor_seed, noise_seed = np.random.default_rng(seed).integers(2**63 - 1, size=3)
         self.sim.reset(seed=int(sim_seed))
         self.truth: SensorTruth = sample_sensor(sampling, np.random.default_rng(sensor_seed), asymmetric_distortion)
+        # What a datasheet says of the sensor (the runner's nominal values): the distribution's means.
+        self.datasheet: SensorTruth = mean_sensor(sampling)
         self.recorder.start(self.truth, np.random.default_rng([int(noise_seed), 0]))
         self._tracking_rng = np.random.default_rng([int(noise_seed), 1])
         self.arm = SimArm(self)
@@ -101,6 +105,21 @@ class SimRig:
     def close(self) -> None:
         """Free the renderer."""
         self.recorder.close()
+
+
+def sim_rig(
+    sim: Mapping[str, Any],
+    sensor: Mapping[str, Any],
+    seed: int,
+    asymmetric_distortion: bool = False,
+    faults: Mapping[str, Any] | None = None,
+) -> SimRig:
+    """The ``robot=sim`` factory of ``vical-collect`` (``conf/robot/sim.yaml``): a ``SimRig`` from config mappings."""
+    f = dict(faults or {})
+    if f.get("imu_gap") is not None:
+        f["imu_gap"] = tuple(f["imu_gap"])
+    return SimRig(SimConfig.from_mapping(sim), SensorSampling.from_config(sensor), int(seed),
+                  bool(asymmetric_distortion), RigFaults(**f))  # fmt: skip
 
 
 class SimArm(Arm):
@@ -178,9 +197,14 @@ class SimViSensor(ViSensor):
         self._imu_read = len(self._rig.recorder.imu_samples())
 
     def read(self) -> SensorData:
+        """The data of the last motion; when there is none, the simulation first rests one camera period
+        (time passes for a sensor that is read while the arm rests)."""
         if not self._streaming:
             return SensorData.empty()
-        recorder = self._rig.recorder
+        rig = self._rig
+        if len(rig.recorder.imu_samples()) == self._imu_read:
+            rig.recorder.add_motion(rig.sim.hold(1.0 / self.camera_rate_hz, on_step=rig.recorder.on_step))
+        recorder = rig.recorder
         stamps = recorder.stamps_since(self._frames_read)
         images = recorder.images_since(self._frames_read)
         self._frames_read += len(stamps)

@@ -1,0 +1,172 @@
+"""vical-collect on the simulated Panda: alignment, the policy loop, the recording, the calibration, and faults."""
+
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import hydra.utils
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from vical.apps import calibrate
+from vical.apps.collect import CONF_DIR, check_settings, collect, mdp_config, nominal_sensor
+from vical.env.actions import step_to_action
+from vical.env.information import Guess
+from vical.io.euroc import EurocStreamWriter, read_euroc
+from vical.io.kalibr import read_target_yaml
+from vical.policies.base import Policy
+from vical.policies.collect import CollectionStopped, Collector
+from vical.robot import MotionRefused, SensorStreamError
+from vical.sim.config import SimConfig
+
+
+def config(*overrides: str):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        return compose(config_name="collect", overrides=list(overrides))
+
+
+class Scripted(Policy):
+    """Repeats one step: ``translation`` (3) [m] and ``euler`` (3) [rad] increments in the workspace frame."""
+
+    stop_at_coverage = False
+
+    def __init__(self, translation=(0.0, 0.0, 0.0), euler=(0.0, 0.0, 0.0)) -> None:
+        self.action = step_to_action(np.asarray(translation, float), np.asarray(euler, float))
+
+    def act(self, obs, env):
+        return self.action
+
+
+def collector(tmp_path: Path, policy: Policy, *overrides: str) -> tuple[Collector, object]:
+    """A Collector on the simulated rig of ``overrides`` (as vical-collect builds it), and the rig."""
+    cfg = config(f"out={tmp_path / 'out'}", *overrides)
+    s = check_settings(cfg)
+    mdp = mdp_config(cfg, policy)
+    rig = hydra.utils.instantiate(cfg.robot, _convert_="all")
+    nominal = nominal_sensor(s, rig)
+    target = SimConfig.from_mapping(dict(cfg.sim)).board.target
+    writer = EurocStreamWriter(tmp_path / "rec", rig.sensor.image_size, 20.0, 200.0, nominal.imu_noise)
+    guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise, 0.25)
+    lines = []
+    c = Collector(rig.arm, rig.sensor, policy, mdp, s.task, target, guess, writer, s.align, s.limits, lines.append)
+    c.lines = lines
+    return c, rig
+
+
+def test_alignment_brings_the_board_centre_ahead_at_the_start_distance(tmp_path):
+    c, rig = collector(tmp_path, Scripted())
+    try:
+        away = rig.arm.pose().T_base_tool.copy()
+        away[:3, 3] += [-0.08, 0.1, -0.05]  # the arm starts off the aligned pose
+        rig.arm.move_to(away)
+        rig.sensor.start()
+        frame = c.align()
+        pose = rig.arm.pose().T_base_tool
+        board = rig.sim.T_world_board
+        centre = (board @ np.r_[rig.recorder.target.center, 1.0])[:3]
+        to_centre = centre - pose[:3, 3]
+        distance = np.linalg.norm(to_centre)
+        # PnP with the nominal camera scales the distance by the focal length's error (the lens's
+        # distortion, unknown to the nominal camera, adds a little).
+        scale = rig.truth.camera.fx / rig.datasheet.camera.fx
+        assert distance == pytest.approx(0.72 * scale, abs=0.02)
+        # The optical axis (tool x) points at the board centre within a degree.
+        assert np.degrees(np.arccos(to_centre @ pose[:3, 0] / distance)) < 1.0
+        # The board centre the workspace looks at lies on that line, as far as the nominal camera sees it.
+        seen = frame.look_at - pose[:3, 3]
+        assert np.linalg.norm(np.cross(seen / np.linalg.norm(seen), to_centre)) < 0.01
+        assert np.linalg.norm(seen) == pytest.approx(0.72, abs=0.01)
+        assert any("aligned after" in line for line in c.lines)
+    finally:
+        rig.close()
+
+
+def test_a_turned_away_camera_stops_the_run_with_the_board_lost(tmp_path):
+    turn = Scripted(euler=(0.0, 0.0, 0.3))
+    c, rig = collector(tmp_path, turn, "limits.lost_frames=15", "workspace.orientation=[1.5,1.2,1.2]")
+    try:
+        with pytest.raises(CollectionStopped, match="the board was out of view for 15 frames"):
+            c.run()
+        assert rig.arm.stops >= 1
+        rec = read_euroc(tmp_path / "rec", c.target)  # closed and readable
+        assert len(rec.frames) > 20 and len(rec.imu) > 100
+    finally:
+        rig.close()
+
+
+def test_motions_refused_even_when_shortened_stop_the_run(tmp_path):
+    c, rig = collector(tmp_path, Scripted(translation=(0.3, 0.0, 0.0)), "workspace.position=[3.0,3.0,3.0]")
+    try:
+        with pytest.raises(MotionRefused, match=r"out of reach.*3 steps in a row were refused, even shortened"):
+            c.run()
+        assert rig.arm.stops >= 1
+        assert sum("the arm refused" in line for line in c.lines) >= 9
+        assert len(read_euroc(tmp_path / "rec", c.target).frames) > 0
+    finally:
+        rig.close()
+
+
+def test_an_imu_gap_stops_the_run(tmp_path):
+    c, rig = collector(tmp_path, Scripted(translation=(0.0, 0.05, 0.0)), "robot.faults.imu_gap=[1.0,0.5]")
+    try:
+        with pytest.raises(SensorStreamError, match=r"the IMU stream has a 0\.5\d s gap"):
+            c.run()
+        rec = read_euroc(tmp_path / "rec", c.target)
+        assert np.diff(rec.imu.t).max() < 0.1e9  # nothing after the gap was written
+    finally:
+        rig.close()
+
+
+def test_bad_settings_are_refused_by_key(tmp_path):
+    (tmp_path / "full").mkdir()
+    (tmp_path / "full" / "x").write_text("x")
+    with pytest.raises(FileExistsError, match="already exists"):
+        check_settings(config(f"out={tmp_path / 'full'}"))
+    with pytest.raises(Exception, match=r"collect\.align\.distance must be > 0"):
+        check_settings(config(f"out={tmp_path / 'o'}", "align.distance=0"))
+    with pytest.raises(FileNotFoundError, match=r"guess\.camchain=nope\.yaml: no such file"):
+        check_settings(config(f"out={tmp_path / 'o'}", "guess.camchain=nope.yaml"))
+    with pytest.raises(Exception, match="extrinsic task calibrates with known intrinsics"):
+        check_settings(config(f"out={tmp_path / 'o'}", "task=extrinsic"))
+
+
+def test_collect_records_and_calibrates_with_a_random_policy(tmp_path):
+    out = tmp_path / "out"
+    cfg = config(f"out={out}", "policy=random_moving", "limits.max_steps=12", "report=false", "seed=5")
+    assert collect(cfg) == 0
+    target = read_target_yaml(out / "target.yaml")
+    rec = read_euroc(out / "recording", target)
+    assert len(rec.frames) > 100 and len(rec.imu) > 1000
+    assert (out / "calibration" / "camchain-imucam.yaml").is_file()
+    summary = (out / "collect.yaml").read_text()
+    assert "steps: 12" in summary and "done: the step limit" in summary
+
+
+KILL_ARGS = ["policy=random_moving", "limits.max_steps=40", "calibrate=false", "seed=2"]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT])
+def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, sig):
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "vical.apps.collect", f"out={out}", *KILL_ARGS]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    listed = out / "recording" / "mav0" / "cam0" / "data.csv"
+    deadline = time.monotonic() + 240
+    while (not listed.is_file() or listed.read_text().count("\n") < 120) and time.monotonic() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    proc.send_signal(sig)
+    _, err = proc.communicate(timeout=60)
+    if sig == signal.SIGINT:
+        assert proc.returncode == 130
+        assert "interrupted: the arm is stopped and the recording so far is in" in err
+        assert "interrupted" in (out / "collect.yaml").read_text()
+    target = read_target_yaml(out / "target.yaml")
+    rec = read_euroc(out / "recording", target)
+    assert len(rec.frames) >= 100
+    assert calibrate.main([str(out / "recording"), "--task", "joint", "--target", str(out / "target.yaml"),
+                           "--stored-corners", "--imu-yaml", str(out / "imu.yaml"), "--no-report",
+                           "--out", str(tmp_path / "cal")]) == 0  # fmt: skip

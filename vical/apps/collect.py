@@ -1,0 +1,229 @@
+"""``vical-collect``: run a calibration policy on an arm holding a camera + IMU, record, calibrate it.
+
+Configured by ``conf/collect.yaml``. The ``robot`` group builds the rig (``robot=sim``: the simulated
+Panda, ``vical.sim.adapters``); the ``policy`` group the policy (the shipped learned policy of the
+workspace by default), which brings the MDP it was trained in. ``vical.policies.collect.Collector``
+aligns, runs the policy and writes ``<out>/recording`` (EuRoC, with the detections) as the data
+arrive; then ``vical-calibrate`` calibrates it into ``<out>/calibration``. ``<out>/collect.yaml``
+says what the collection did.
+
+Exit status: 0 done; 2 a user error (a bad setting, an existing ``out``), before the robot moves; 1 the
+collection stopped on a fault (a refused motion, the board lost, a broken sensor stream: the arm is
+stopped, the recording so far kept and calibratable) or the calibration failed; 130 Ctrl-C (the arm
+stopped, the recording closed).
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import hydra
+from omegaconf import DictConfig, OmegaConf
+
+from vical.apps import calibrate
+from vical.apps.cli import check_composes, fail, one_line_warnings, report_error
+from vical.calib.errors import CalibrationError
+from vical.config import ConfigError, from_mapping, require
+from vical.data import SensorTruth
+from vical.env.config import MdpConfig
+from vical.env.information import Guess
+from vical.io.euroc import EurocStreamWriter
+from vical.io.kalibr import read_camchain, read_imu_yaml, write_imu_yaml, write_target_yaml
+from vical.io.yamlfile import dump_yaml
+from vical.policies.base import Policy
+from vical.policies.collect import Alignment, CollectionStopped, Collector, CollectResult, Limits
+from vical.policies.evaluation import instantiate_policy
+from vical.robot import MotionRefused, SensorStreamError
+from vical.sim.config import SimConfig
+
+APP = "vical-collect"
+USER_ERRORS = (ConfigError, FileExistsError, FileNotFoundError)
+FAULTS = (CollectionStopped, MotionRefused, SensorStreamError)
+EXIT_FAULT, EXIT_INTERRUPTED = 1, 130
+CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+
+
+@dataclass(frozen=True)
+class CollectSettings:
+    """The checked settings of a collection."""
+
+    out: Path
+    overwrite: bool
+    task: str
+    align: Alignment
+    limits: Limits
+    camchain: Path | None
+    imu_yaml: Path | None
+
+
+def _plain(node: Any) -> Any:
+    return OmegaConf.to_container(node, resolve=True) if OmegaConf.is_config(node) else node
+
+
+def _existing_file(value: Any, key: str) -> Path | None:
+    if value is None:
+        return None
+    path = Path(str(value))
+    if not path.is_file():
+        raise FileNotFoundError(f"{key}={value}: no such file")
+    return path
+
+
+def check_settings(cfg: DictConfig) -> CollectSettings:
+    """The settings of ``cfg``, checked before anything connects; ``ConfigError`` naming the key otherwise."""
+    out = cfg.get("out")
+    require(isinstance(out, str) and bool(out), "out", "a directory path", out)
+    overwrite = bool(cfg.get("overwrite"))
+    path = Path(out)
+    if path.exists() and not overwrite and (not path.is_dir() or any(path.iterdir())):
+        raise FileExistsError(f"out={out} already exists; choose another directory or pass overwrite=true")
+    task = cfg.task.name
+    guess = _plain(cfg.get("guess")) or {}
+    camchain = _existing_file(guess.get("camchain"), "guess.camchain")
+    if task == "extrinsic" and camchain is None:
+        raise ConfigError("the extrinsic task calibrates with known intrinsics: pass guess.camchain=<camchain.yaml>")
+    try:
+        align = from_mapping(Alignment, _plain(cfg.align), "align")
+        limits = from_mapping(Limits, _plain(cfg.limits), "limits")
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    return CollectSettings(path, overwrite, task, align, limits, camchain,
+                           _existing_file(guess.get("imu_yaml"), "guess.imu_yaml"))  # fmt: skip
+
+
+def mdp_config(cfg: DictConfig, policy: Policy) -> MdpConfig:
+    """The MDP the policy runs in: the ``env`` group's, with what the policy brings (as ``vical-evaluate`` does)."""
+    env = {k: v for k, v in _plain(cfg.env).items() if k not in ("_target_", "sim", "sensor", "task")}
+    env.update(policy.env_settings)
+    env["terminate_on_coverage"] = policy.stop_at_coverage
+    env["calibrate_on_termination"] = env["calibrate_on_truncation"] = False
+    if policy.max_steps is not None:
+        env["max_steps"] = policy.max_steps
+    return MdpConfig.from_config(env)
+
+
+def nominal_sensor(s: CollectSettings, rig: Any) -> SensorTruth:
+    """The sensor's nominal values: the ``guess`` files, else the adapter's datasheet."""
+    datasheet: SensorTruth | None = getattr(rig, "datasheet", None)
+    if datasheet is None and (s.camchain is None or s.imu_yaml is None):
+        raise ConfigError(
+            "the robot adapter knows no nominal values of the sensor: pass guess.camchain=<camchain.yaml> "
+            "and guess.imu_yaml=<imu.yaml> (a datasheet calibration and the IMU's noise densities)"
+        )
+    camera, T_cam_imu, shift = (datasheet.camera, datasheet.T_cam_imu, datasheet.time_offset) if datasheet else (
+        None, None, None)  # fmt: skip
+    if s.camchain is not None:
+        camera, T_file, shift_file = read_camchain(s.camchain)
+        T_cam_imu = T_file if T_file is not None else T_cam_imu
+        shift = shift_file if shift_file is not None else shift
+    if T_cam_imu is None:
+        raise ConfigError(f"guess.camchain={s.camchain} holds no T_cam_imu; write the nominal extrinsic into it")
+    noise = read_imu_yaml(s.imu_yaml) if s.imu_yaml is not None else datasheet.imu_noise
+    return SensorTruth(camera, T_cam_imu, shift or 0.0, noise)
+
+
+def collect(cfg: DictConfig) -> int:
+    """Collect and calibrate as ``cfg`` says; the exit status (module doc)."""
+    s = check_settings(cfg)
+    policy = instantiate_policy(_plain(cfg.policy)[s.task], cfg.policy.get("name", "policy"))
+    mdp = mdp_config(cfg, policy)
+    rig = hydra.utils.instantiate(cfg.robot, _convert_="all")
+    try:
+        nominal = nominal_sensor(s, rig)
+        if s.out.exists():
+            shutil.rmtree(s.out)
+        result = _run(cfg, s, rig, policy, mdp, nominal)
+    finally:
+        rig.close()
+    if result is None or not cfg.get("calibrate"):
+        return 0 if result is not None else EXIT_FAULT
+    return _calibrate(s, bool(cfg.get("report")))
+
+
+def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth):
+    """The collection; None when it stopped on a fault (reported), the result otherwise."""
+    sensor = rig.sensor
+    target = SimConfig.from_mapping(_plain(cfg.sim)).board.target  # the board the workspace group describes
+    s.out.mkdir(parents=True, exist_ok=True)
+    write_target_yaml(s.out / "target.yaml", target)
+    write_imu_yaml(s.out / "imu.yaml", nominal.imu_noise)
+    writer = EurocStreamWriter(s.out / "recording", sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz,
+                               nominal.imu_noise)  # fmt: skip
+    guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise,
+                  mdp.information.pixel_sigma)  # fmt: skip
+    progress = print if cfg.get("progress") else (lambda line: None)
+    collector = Collector(rig.arm, sensor, policy, mdp, s.task, target, guess, writer, s.align, s.limits, progress)
+    try:
+        with rig.arm, rig.sensor:
+            result = collector.run(int(cfg.seed))
+    except FAULTS as err:
+        _write_summary(s, None, f"stopped: {err}", writer.frames)
+        report_error(APP, f"stopped: {err}; the arm is stopped and the recording so far is in {writer.path} "
+                          f"({writer.frames} frames): {_calibrate_hint(s)}")  # fmt: skip
+        return None
+    except KeyboardInterrupt:
+        _write_summary(s, None, "interrupted (Ctrl-C)", writer.frames)
+        print(f"{APP}: interrupted: the arm is stopped and the recording so far is in {writer.path} "
+              f"({writer.frames} frames): {_calibrate_hint(s)}", file=sys.stderr)  # fmt: skip
+        raise SystemExit(EXIT_INTERRUPTED) from None
+    _write_summary(s, result, f"done: {result.reason}", writer.frames)
+    return result
+
+
+def _calibrate_args(s: CollectSettings) -> list[str]:
+    args = [str(s.out / "recording"), "--task", s.task, "--target", str(s.out / "target.yaml"), "--stored-corners"]
+    if s.task != "intrinsic":
+        args += ["--imu-yaml", str(s.out / "imu.yaml")]
+    if s.camchain is not None and s.task == "extrinsic":
+        args += ["--intrinsics", str(s.camchain)]
+    return args + ["--out", str(s.out / "calibration")]
+
+
+def _calibrate_hint(s: CollectSettings) -> str:
+    return "calibrate it with: vical-calibrate " + " ".join(_calibrate_args(s))
+
+
+def _calibrate(s: CollectSettings, report: bool) -> int:
+    """``vical-calibrate`` on the recording; its exit status (1 when it failed)."""
+    status = calibrate.main(_calibrate_args(s) + ([] if report else ["--no-report"]))
+    return 0 if status == 0 else EXIT_FAULT
+
+
+def _write_summary(s: CollectSettings, result: CollectResult | None, outcome: str, frames: int) -> None:
+    summary: dict[str, Any] = {"outcome": outcome, "frames": frames, "task": s.task}
+    if result is not None:
+        summary.update({"steps": result.steps, "path_length_m": round(result.path_length, 4),
+                        "duration_s": round(result.duration, 3), "goal_reached": result.goal_reached})  # fmt: skip
+    dump_yaml(s.out / "collect.yaml", summary)
+
+
+@hydra.main(config_path=CONF_DIR, config_name="collect", version_base="1.3")
+def hydra_main(cfg: DictConfig) -> None:
+    try:
+        status = collect(cfg)
+    except USER_ERRORS as err:
+        fail(APP, err)
+    except CalibrationError as err:
+        raise SystemExit(report_error(APP, err)) from None
+    if status:
+        raise SystemExit(status)
+
+
+def main() -> None:
+    """Console entry point: the settings, and Hydra's own override errors, are checked before Hydra runs."""
+    one_line_warnings()
+    try:
+        cfg = check_composes(CONF_DIR, "collect", sys.argv[1:])
+        if cfg is not None:
+            check_settings(cfg)
+    except USER_ERRORS as err:
+        fail(APP, err)
+    hydra_main()
+
+
+if __name__ == "__main__":
+    main()
