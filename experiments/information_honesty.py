@@ -36,7 +36,7 @@ EXTRINSIC = ["rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z"]
 
 def predicted(env) -> tuple[list[str], np.ndarray]:
     """Parameter names and 1-sigma of the env's information state, in the calibrator's parameters."""
-    names, cov = env.information.covariance()
+    names, cov = env.state.information.covariance()
     out_names, sigmas = [], []
     idx = {n: [i for i, m in enumerate(names) if m == n] for n in set(names)}
     if "K" in idx:
@@ -45,7 +45,7 @@ def predicted(env) -> tuple[list[str], np.ndarray]:
     if "E" in idx:
         # The tracker's E is T_imu_cam (right perturbation); the calibrator's rot_*/t_* are the
         # rotation error of R_cam_imu (camera frame) and t_cam_imu: the calibrator's own map.
-        t = env.information.guess.T_cam_imu[:3, 3]
+        t = env.state.information.guess.T_cam_imu[:3, 3]
         J = np.zeros((6, 6))
         J[:3, :3], J[3:, :3], J[3:, 3:] = -np.eye(3), skew(t), -np.eye(3)
         E = J @ cov[np.ix_(idx["E"], idx["E"])] @ J.T

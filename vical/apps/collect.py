@@ -134,6 +134,9 @@ def collect(cfg: DictConfig) -> int:
     rig = hydra.utils.instantiate(cfg.robot, _convert_="all")
     try:
         nominal = nominal_sensor(s, rig)
+        if cfg.get("dry_run"):
+            _dry_run(cfg, s, rig, policy, mdp, nominal)
+            return 0
         if s.out.exists():
             shutil.rmtree(s.out)
         result = _run(cfg, s, rig, policy, mdp, nominal)
@@ -144,19 +147,35 @@ def collect(cfg: DictConfig) -> int:
     return _calibrate(s, bool(cfg.get("report")))
 
 
-def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth):
-    """The collection; None when it stopped on a fault (reported), the result otherwise."""
-    sensor = rig.sensor
-    target = SimConfig.from_mapping(_plain(cfg.sim)).board.target  # the board the workspace group describes
-    s.out.mkdir(parents=True, exist_ok=True)
-    write_target_yaml(s.out / "target.yaml", target)
-    write_imu_yaml(s.out / "imu.yaml", nominal.imu_noise)
-    writer = EurocStreamWriter(s.out / "recording", sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz,
-                               nominal.imu_noise)  # fmt: skip
+def _collector(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth,
+               writer: EurocStreamWriter | None) -> Collector:  # fmt: skip
     guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise,
                   mdp.information.pixel_sigma)  # fmt: skip
     progress = print if cfg.get("progress") else (lambda line: None)
-    collector = Collector(rig.arm, sensor, policy, mdp, s.task, target, guess, writer, s.align, s.limits, progress)
+    return Collector(rig.arm, rig.sensor, policy, mdp, s.task, board(cfg), guess, writer, s.align, s.limits, progress)
+
+
+def board(cfg: DictConfig):
+    """The calibration target: the board the workspace group describes (``sim.board``)."""
+    return SimConfig.from_mapping(_plain(cfg.sim)).board.target
+
+
+def _dry_run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth):
+    """Connect, read the arm and the streams, locate the board; move nothing, write nothing."""
+    print(f"{APP}: dry run: reading the arm and the sensor for {cfg.dry_run_seconds} s; nothing moves")
+    with rig.arm, rig.sensor:
+        _collector(cfg, s, rig, policy, mdp, nominal, None).dry_run(float(cfg.dry_run_seconds))
+
+
+def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth):
+    """The collection; None when it stopped on a fault (reported), the result otherwise."""
+    sensor = rig.sensor
+    s.out.mkdir(parents=True, exist_ok=True)
+    write_target_yaml(s.out / "target.yaml", board(cfg))
+    write_imu_yaml(s.out / "imu.yaml", nominal.imu_noise)
+    writer = EurocStreamWriter(s.out / "recording", sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz,
+                               nominal.imu_noise)  # fmt: skip
+    collector = _collector(cfg, s, rig, policy, mdp, nominal, writer)
     try:
         with rig.arm, rig.sensor:
             result = collector.run(int(cfg.seed))

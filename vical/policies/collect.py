@@ -153,12 +153,13 @@ class SensorStream:
     Keeps the detections and IMU samples of the recording for the state.
     """
 
-    def __init__(self, sensor: ViSensor, target: Target, writer: EurocStreamWriter, limits: Limits) -> None:
+    def __init__(self, sensor: ViSensor, target: Target, writer: EurocStreamWriter | None, limits: Limits) -> None:
         self.sensor = sensor
         self.target = target
         self.writer = writer
         self.limits = limits
         self.recording = False
+        self.keep_imu = False  # keep the IMU samples without recording (the dry run)
         self.stamps: list[int] = []
         self.corners: list[np.ndarray] = []
         self.ids: list[np.ndarray] = []
@@ -189,6 +190,7 @@ class SensorStream:
             detections.append((frame.t_ns, corners, ids))
         if self.recording and len(data.imu):
             self.writer.add_imu(data.imu)
+        if (self.recording or self.keep_imu) and len(data.imu):
             self._imu.append(data.imu)
         if self._lost >= self.limits.lost_frames:
             raise CollectionStopped(
@@ -237,7 +239,7 @@ class Collector:
         task: ``intrinsic``, ``extrinsic`` or ``joint``: the state's calibration problem.
         target: the board.
         guess: the sensor's nominal values (the information state's linearisation; the alignment's camera).
-        writer: where the recording goes.
+        writer: where the recording goes (None for ``dry_run`` only).
         align, limits: alignment and stopping settings.
         progress: prints one line per stage and step.
     """
@@ -251,7 +253,7 @@ class Collector:
         task: str,
         target: Target,
         guess: Guess,
-        writer: EurocStreamWriter,
+        writer: EurocStreamWriter | None,
         align: Alignment,
         limits: Limits | None = None,
         progress: Callable[[str], None] = print,
@@ -275,6 +277,8 @@ class Collector:
     # ------------------------------------------------------------------ the run
     def run(self, seed: int = 0) -> CollectResult:
         """Align, rest, run the policy; the arm is stopped and the recording closed however it ends."""
+        if self.stream.writer is None:
+            raise ValueError("Collector.run needs a writer for the recording")
         self._started = time.monotonic()
         self.stream.sensor.start()
         try:
@@ -406,6 +410,56 @@ class Collector:
                     f"no sensor data for {self.limits.wait_timeout:.0f} s; check that the camera and IMU stream"
                 )
             time.sleep(self.limits.poll_interval)
+
+    # ------------------------------------------------------------------ dry run
+    def dry_run(self, seconds: float = 3.0) -> list[str]:
+        """Check a new set-up without moving: read the streams for ``seconds`` of sensor time, locate the
+        board; lines saying what arrived (also printed). Nothing is written."""
+        self.stream.sensor.start()
+        try:
+            pose = self.arm.pose()
+            self.stream.keep_imu = True
+            seen: list[tuple[int, np.ndarray, np.ndarray]] = []
+            seen.extend(self.stream.read())
+            start = self.stream.last_imu_ns
+            self._wait(lambda: start is None or self._covered(start, seconds), seen.extend)
+        finally:
+            self.stream.sensor.stop()
+        lines = [self._arm_line(pose), *self._camera_lines(seen), self._imu_line(self.stream.imu())]
+        for line in lines:
+            self.progress(line)
+        return lines
+
+    def _covered(self, start: int, seconds: float) -> bool:
+        return self.stream.last_imu_ns - start >= seconds * NS_PER_S
+
+    def _arm_line(self, pose: StampedPose) -> str:
+        p, lim = pose.position, self.arm.limits
+        return (f"arm: tool at [{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m; limits {lim.max_speed:g} m/s, "
+                f"{lim.max_angular_speed:g} rad/s, {lim.max_acceleration:g} m/s^2")  # fmt: skip
+
+    def _camera_lines(self, seen: list[tuple[int, np.ndarray, np.ndarray]]) -> list[str]:
+        stamps = np.array([d[0] for d in seen], dtype=np.int64)
+        rate = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) / NS_PER_S) if len(stamps) > 1 else 0.0
+        with_board = [d for d in seen if len(d[2]) >= self.align_settings.min_corners]
+        lines = [f"camera: {len(seen)} frames at {rate:.1f} Hz, the board in {len(with_board)} of them"]
+        if with_board:
+            _, corners, ids = with_board[-1]
+            solved = pnp(self.guess.camera, FrameObservation(-1, 0, corners, ids, self.target.points[ids]))
+            if solved is not None:
+                distance = np.linalg.norm(transform_points(solved[0], self.target.center[None])[0])
+                lines.append(f"board: its centre {distance:.3f} m from the camera (with the nominal camera)")
+        return lines
+
+    @staticmethod
+    def _imu_line(imu: ImuSamples) -> str:
+        if len(imu) < 2:
+            return "imu: no samples"
+        rate = (len(imu) - 1) / ((imu.t[-1] - imu.t[0]) / NS_PER_S)
+        gravity = float(np.linalg.norm(imu.accel.mean(axis=0)))
+        spin = float(np.degrees(np.linalg.norm(imu.gyro.mean(axis=0))))
+        return (f"imu: {len(imu)} samples at {rate:.0f} Hz; at rest it reads {gravity:.2f} m/s^2 (gravity: 9.81) "
+                f"and turns {spin:.2f} deg/s (the gyro's bias)")  # fmt: skip
 
     # ------------------------------------------------------------------ alignment
     def align(self) -> PoseFrame:
