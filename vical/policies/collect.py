@@ -50,6 +50,9 @@ from vical.robot import Arm, MotionRefused, SensorData, SensorStreamError, Stamp
 R_TOOL_CAMERA = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 
 
+# How far beyond the workspace bounds a reached pose may end ([m] x 3, [rad] x 3) before the run stops:
+# tracking error and goals executed a little off stay inside; a wrong tool frame does not.
+OUTSIDE_MARGIN = np.r_[0.05, 0.05, 0.05, 0.1, 0.1, 0.1]
 # Fractions of a refused step the runner tries, in order, before it stops.
 REFUSAL_FRACTIONS = (1.0, 0.5, 0.25)
 
@@ -337,7 +340,7 @@ class Collector:
         if reached is None:
             return
         offset = frame.offset(reached.T_base_tool)
-        if np.any(np.abs(offset) > bound + np.r_[0.01, 0.01, 0.01, 0.02, 0.02, 0.02]):
+        if np.any(np.abs(offset) > bound + OUTSIDE_MARGIN):
             raise CollectionStopped(
                 f"the arm ended outside the workspace (offset {np.round(offset, 3).tolist()}, bounds "
                 f"{np.round(bound, 3).tolist()}); check its tool frame and calibration"
