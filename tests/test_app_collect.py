@@ -170,3 +170,13 @@ def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, s
     assert calibrate.main([str(out / "recording"), "--task", "joint", "--target", str(out / "target.yaml"),
                            "--stored-corners", "--imu-yaml", str(out / "imu.yaml"), "--no-report",
                            "--out", str(tmp_path / "cal")]) == 0  # fmt: skip
+
+
+def test_a_dry_run_reads_the_rig_moves_nothing_and_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "out"
+    assert collect(config(f"out={out}", "dry_run=true", "dry_run_seconds=2")) == 0
+    printed = capsys.readouterr().out
+    assert "nothing moves" in printed and "arm: tool at [0.400, -0.000, 0.420] m" in printed  # still the start pose
+    assert "camera: 21 frames at 10.0 Hz, the board in 21 of them" in printed
+    assert "imu: " in printed and "at 200 Hz; at rest it reads 9.8" in printed
+    assert not out.exists()

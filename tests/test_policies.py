@@ -14,7 +14,13 @@ from vical.env.config import Workspace
 from vical.policies.base import WaypointPolicy
 from vical.policies.evaluation import run_trajectory
 from vical.policies.handcrafted import LENGTHS, TASKS, handcrafted_fractions, handcrafted_policy, handcrafted_waypoints
-from vical.policies.learned import PAPER_POLICY_DIR, LearnedPolicy, learned_policy
+from vical.policies.learned import (
+    INFORMATION_POLICY_DIR,
+    PAPER_POLICY_DIR,
+    LearnedPolicy,
+    learned_policy,
+    shipped_policy_dir,
+)
 from vical.policies.random_policy import RandomMovingPolicy
 from vical.rl.trainer import train
 
@@ -26,6 +32,12 @@ def env_config(task: str = "intrinsic") -> dict:
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
         cfg = compose(config_name="evaluate", overrides=[f"task={task}", "workspace=paper"])
     return OmegaConf.to_container(cfg.env, resolve=True)
+
+
+def composed(config_name: str, overrides: list[str]) -> dict:
+    """``conf/<config_name>.yaml`` with ``overrides``, resolved to plain containers."""
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        return OmegaConf.to_container(compose(config_name=config_name, overrides=overrides), resolve=True)
 
 
 @pytest.fixture(scope="module")
@@ -166,8 +178,8 @@ def test_learned_policy_refuses_a_pendulum_run_and_a_missing_run(tmp_path):
         LearnedPolicy.from_run(tmp_path / "missing")
 
 
-def test_without_a_run_the_learned_policy_is_the_shipped_paper_policy(env):
-    policy = learned_policy(None)
+def test_without_a_run_the_paper_workspace_gets_the_shipped_paper_policy(env):
+    policy = learned_policy(None, workspace="paper")
     assert policy.source == PAPER_POLICY_DIR / "agent.pt"
     obs, _ = env.reset(seed=0)
     policy.reset(env, np.random.default_rng(0))  # refuses an env with another action scale
@@ -176,10 +188,36 @@ def test_without_a_run_the_learned_policy_is_the_shipped_paper_policy(env):
     assert np.abs(action).max() > 0.01  # a trained policy moves
 
 
+def test_without_a_run_the_practitioners_workspace_gets_the_shipped_information_policy():
+    cfg = composed("evaluate", ["policy=learned", "task=joint"])  # the default workspace: practitioner
+    policy = hydra.utils.instantiate(cfg["policy"]["joint"])
+    assert policy.source == INFORMATION_POLICY_DIR / "agent.pt" and policy.workspace.name == "practitioner"
+    assert policy.env_settings["state"] == "information"
+    # It carries the information MDP it was trained with: the one conf/env/information.yaml configures.
+    assert policy.env_settings["information"] == composed("train", ["env=information"])["env"]["information"]
+    env = hydra.utils.instantiate({**cfg["env"], **policy.env_settings})
+    try:
+        obs, _ = env.reset(seed=7)
+        policy.reset(env, np.random.default_rng(0))
+        for _ in range(2):
+            action = policy.act(obs, env)
+            assert env.action_space.contains(action.astype(np.float32)) and np.abs(action).max() > 0.01
+            obs, _, terminated, truncated, _ = env.step(action)
+            assert not (terminated or truncated)
+    finally:
+        env.close()
+
+
+def test_no_policy_is_shipped_for_an_unknown_workspace():
+    assert composed("evaluate", ["policy=learned", "workspace=paper"])["policy"]["workspace"] == "paper"
+    with pytest.raises(ConfigError, match=r"no learned policy for workspace 'lab'.*workspace=lab"):
+        shipped_policy_dir("lab")
+
+
 def test_the_paper_policy_refuses_the_practitioners_workspace_by_name():
     env = hydra.utils.instantiate(env_config("intrinsic") | {"workspace": {"name": "practitioner", "frame": "board"}})
     try:
         with pytest.raises(ConfigError, match=r"trained in workspace 'paper' .* evaluate it with workspace=paper"):
-            learned_policy(None).check(env)
+            learned_policy(None, workspace="paper").check(env)
     finally:
         env.close()

@@ -26,9 +26,14 @@ from vical.rl.trainer import AGENT, BoxActions
 
 CALIBRATION_ENV = "vical.env.calibration.CalibrationEnv"
 ACT_SIZE = 6
-# The agent that `vical-train +experiment=train_paper_policy` trained for the tables of docs/results.md
-# (its agent.pt and config.yaml), package data so that the paper's experiments run without training first.
-PAPER_POLICY_DIR = Path(__file__).resolve().parent / "params" / "paper_policy"
+# The shipped agents (agent.pt and config.yaml, package data, so that evaluation runs without training
+# first): `+experiment=train_paper_policy` for the paper's tables in the authors' workspace, and the best
+# seed of `+experiment=train_information_policy` for the practitioner's workspace (docs/results.md).
+PARAMS_DIR = Path(__file__).resolve().parent / "params"
+PAPER_POLICY_DIR = PARAMS_DIR / "paper_policy"
+INFORMATION_POLICY_DIR = PARAMS_DIR / "information_policy"
+SHIPPED_POLICIES = {"paper": PAPER_POLICY_DIR, "practitioner": INFORMATION_POLICY_DIR}
+DEFAULT_WORKSPACE = "practitioner"
 TRAIN_HINT = "train one with `vical-train env=information task=<task>` and pass its run directory"
 STATE_SIZES = {"coverage": OBS_SIZE, "information": INFO_OBS_SIZE}
 # The MDP settings an information-state policy carries to the env it is evaluated in.
@@ -150,9 +155,22 @@ class LearnedPolicy(Policy):
         return self._actions.to_env(self.agent.act(np.asarray(obs, dtype=np.float32), deterministic=True))
 
 
+def shipped_policy_dir(workspace: str = DEFAULT_WORKSPACE) -> Path:
+    """The run directory of the policy vical ships for the workspace named ``workspace``."""
+    if workspace not in SHIPPED_POLICIES:
+        raise ConfigError(
+            f"vical ships no learned policy for workspace {workspace!r} (only for {sorted(SHIPPED_POLICIES)}); "
+            f"{TRAIN_HINT} workspace={workspace}"
+        )
+    return SHIPPED_POLICIES[workspace]
+
+
 def learned_policy(
-    run_dir: str | None = None, name: str = "model-free learned policy", max_steps: int | None = None
+    run_dir: str | None = None,
+    workspace: str = DEFAULT_WORKSPACE,
+    name: str = "model-free learned policy",
+    max_steps: int | None = None,
 ) -> LearnedPolicy:
     """The factory ``conf/policy/learned.yaml`` names: the agent of ``run_dir`` (``policy.run_dir=<run>``),
-    or the shipped policy of the paper's experiment (``PAPER_POLICY_DIR``) when ``run_dir`` is None."""
-    return LearnedPolicy.from_run(run_dir or PAPER_POLICY_DIR, name=name, max_steps=max_steps)
+    or, when ``run_dir`` is None, the policy shipped for the workspace named ``workspace``."""
+    return LearnedPolicy.from_run(run_dir or shipped_policy_dir(workspace), name=name, max_steps=max_steps)
