@@ -152,7 +152,7 @@ class SimArm(Arm):
             raise MotionRefused(f"the path collides ({touching}) at {100 * fraction:.0f}% of the motion")
         if faults.latency > 0:
             recorder.add_motion(sim.hold(faults.latency, on_step=recorder.on_step))
-        recorder.add_motion(sim.move_to(goal, on_step=recorder.on_step))
+        recorder.add_motion(sim.move_joints(ik.q, on_step=recorder.on_step))
         return self.pose()
 
     def _tracked(self, T: np.ndarray) -> np.ndarray:

@@ -240,7 +240,22 @@ class PandaSim:
         q_goal, collision_message = self._safe_goal(q0, ik.q)
         if collision_message:
             messages.append(collision_message)
-        plan = self._plan(q0, q_goal, settle)
+        return self._move_joints(T_req, q_goal, settle, on_step, messages)
+
+    def move_joints(
+        self, q_goal: np.ndarray, on_step: StepCallback | None = None, settle_time: float | None = None
+    ) -> MotionResult:
+        """Move to the joint positions ``q_goal`` (7,) (from ``solve_ik``, checked by ``first_collision``) in
+        physics, as ``move_to`` executes its goal; no IK, no collision check."""
+        q_goal = np.asarray(q_goal, dtype=float)
+        settle = self.cfg.motion.settle_time if settle_time is None else float(settle_time)
+        p, R = self.ik.forward(q_goal)
+        return self._move_joints(make_transform(R, p), q_goal, settle, on_step, [])
+
+    def _move_joints(
+        self, T_req: np.ndarray, q_goal: np.ndarray, settle: float, on_step: StepCallback | None, messages: list[str]
+    ) -> MotionResult:
+        plan = self._plan(self.q, q_goal, settle)
         t_start = self.time_ns
         trace = self._execute(plan, on_step)
         return self._result(T_req, q_goal, plan, trace, messages, t_start)
