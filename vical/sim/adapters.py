@@ -40,6 +40,10 @@ from vical.sim.sampling import SensorSampling, mean_sensor, sample_sensor
 # The Panda's documented Cartesian limits (translation [m/s], rotation [rad/s], acceleration [m/s^2]);
 # the simulator plans in joint space within sim.motion's fractions of the joint limits.
 PANDA_CARTESIAN = (1.7, 2.5, 13.0)
+# A goal the IK reaches this closely is executed (as a real controller's success threshold accepts it);
+# beyond, the arm refuses it.
+REACH_TOLERANCE_M = 0.005
+REACH_TOLERANCE_RAD = np.radians(0.5)
 
 
 @dataclass(frozen=True)
@@ -142,7 +146,8 @@ class SimArm(Arm):
         sim, recorder, faults = rig.sim, rig.recorder, rig.faults
         goal = self._tracked(check_pose(T_base_tool))
         ik = sim.solve_ik(goal)
-        if not ik.success:
+        close_enough = ik.position_error <= REACH_TOLERANCE_M and ik.rotation_error <= REACH_TOLERANCE_RAD
+        if not (ik.success or close_enough):
             raise MotionRefused(
                 f"the goal is out of reach: the closest pose is {1e3 * ik.position_error:.1f} mm and "
                 f"{np.degrees(ik.rotation_error):.1f} deg away"
