@@ -10,15 +10,21 @@ import hydra.utils
 import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
 from vical.apps import calibrate
 from vical.apps.collect import CONF_DIR, check_settings, collect, mdp_config, nominal_sensor
+from vical.calib.metrics import parameter_errors
+from vical.calib.tasks import CalibrationTask, run_task, task_score
+from vical.config import ConfigError
 from vical.env.actions import step_to_action
 from vical.env.information import Guess
 from vical.io.euroc import EurocStreamWriter, read_euroc
-from vical.io.kalibr import read_target_yaml
+from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.base import Policy
 from vical.policies.collect import CollectionStopped, Collector
+from vical.policies.evaluation import build_env, run_trajectory
+from vical.policies.learned import PAPER_POLICY_DIR, learned_policy
 from vical.robot import MotionRefused, SensorStreamError
 from vical.sim.config import SimConfig
 
@@ -131,6 +137,10 @@ def test_bad_settings_are_refused_by_key(tmp_path):
         check_settings(config(f"out={tmp_path / 'o'}", "guess.camchain=nope.yaml"))
     with pytest.raises(Exception, match="extrinsic task calibrates with known intrinsics"):
         check_settings(config(f"out={tmp_path / 'o'}", "task=extrinsic"))
+    # The paper's policy in the practitioner's workspace: refused before the rig is built.
+    with pytest.raises(ConfigError, match="trained in workspace 'paper'"):
+        collect(config(f"out={tmp_path / 'o'}", f"policy.run_dir={PAPER_POLICY_DIR}"))
+    assert not (tmp_path / "o").exists()
 
 
 def test_collect_records_and_calibrates_with_a_random_policy(tmp_path):
@@ -180,3 +190,33 @@ def test_a_dry_run_reads_the_rig_moves_nothing_and_writes_nothing(tmp_path, caps
     assert "camera: 21 frames at 10.0 Hz, the board in 21 of them" in printed
     assert "imu: " in printed and "at 200 Hz; at rest it reads 9.8" in printed
     assert not out.exists()
+
+
+def test_collect_with_the_shipped_policy_calibrates_as_well_as_the_env_on_the_same_sensors(tmp_path):
+    """vical-collect (rendered images, the alignment, the runner's state) against the evaluation's env episode of
+    the same policy on the same sensors; the truth is read by the test only (from the env of the same seed)."""
+    evaluate = composed_evaluate("task=joint")
+    task = CalibrationTask.from_config(evaluate["task"])
+    runner, env_scores = [], []
+    for seed in (0, 1, 2):
+        out = tmp_path / f"sensor{seed}"
+        assert collect(config(f"out={out}", f"seed={seed}", "report=false", "progress=false")) == 0
+        camera, T_cam_imu, time_offset = read_camchain(out / "calibration" / "camchain-imucam.yaml")
+        policy = learned_policy()
+        env = build_env(evaluate["env"], policy)
+        try:
+            episode = run_trajectory(env, policy, seed)
+            truth = env.truth
+        finally:
+            env.close()
+        collected = parameter_errors(camera, T_cam_imu, time_offset, truth)
+        in_env = run_task(task, episode.recording).errors
+        assert collected.time_offset_ms <= 0.1 and in_env.time_offset_ms <= 0.1
+        runner.append(task_score(task, collected))
+        env_scores.append(task_score(task, in_env))
+    assert np.mean(runner) <= 1.5 * np.mean(env_scores), (runner, env_scores)
+
+
+def composed_evaluate(*overrides: str) -> dict:
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        return OmegaConf.to_container(compose(config_name="evaluate", overrides=list(overrides)), resolve=True)

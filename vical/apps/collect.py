@@ -35,7 +35,7 @@ from vical.io.euroc import EurocStreamWriter
 from vical.io.kalibr import read_camchain, read_imu_yaml, write_imu_yaml, write_target_yaml
 from vical.io.yamlfile import dump_yaml
 from vical.policies.base import Policy
-from vical.policies.collect import Alignment, CollectionStopped, Collector, CollectResult, Limits
+from vical.policies.collect import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
 from vical.policies.evaluation import instantiate_policy
 from vical.robot import MotionRefused, SensorStreamError
 from vical.sim.config import SimConfig
@@ -131,6 +131,7 @@ def collect(cfg: DictConfig) -> int:
     s = check_settings(cfg)
     policy = instantiate_policy(_plain(cfg.policy)[s.task], cfg.policy.get("name", "policy"))
     mdp = mdp_config(cfg, policy)
+    policy.check(RobotEpisode(mdp))  # before connecting: a policy of another workspace or state
     rig = hydra.utils.instantiate(cfg.robot, _convert_="all")
     try:
         nominal = nominal_sensor(s, rig)

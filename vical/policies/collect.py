@@ -282,6 +282,7 @@ class Collector:
         """Align, rest, run the policy; the arm is stopped and the recording closed however it ends."""
         if self.stream.writer is None:
             raise ValueError("Collector.run needs a writer for the recording")
+        self.policy.check(self.episode)  # a policy made for another MDP fails before anything moves
         self._started = time.monotonic()
         self.stream.sensor.start()
         try:
@@ -301,7 +302,6 @@ class Collector:
         self._rest(self.mdp.reset_hold)
         self._update_state()
         episode = self.episode
-        self.policy.check(episode)
         self.policy.reset(episode, np.random.default_rng(seed))
         max_steps = self.limits.max_steps or self.policy.max_steps or self.mdp.max_steps
         reason = f"the step limit ({max_steps})"
