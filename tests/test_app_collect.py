@@ -103,14 +103,26 @@ def test_a_turned_away_camera_stops_the_run_with_the_board_lost(tmp_path):
         rig.close()
 
 
-def test_motions_refused_even_when_shortened_stop_the_run(tmp_path):
-    c, rig = collector(tmp_path, Scripted(translation=(0.3, 0.0, 0.0)), "workspace.position=[3.0,3.0,3.0]")
+def test_motions_refused_with_their_fallbacks_stop_the_run(tmp_path):
+    c, rig = collector(tmp_path, Scripted(translation=(0.05, 0.0, 0.0)), "robot.faults.refuse_after=3")
     try:
-        with pytest.raises(MotionRefused, match=r"out of reach.*3 steps in a row were refused, even shortened"):
+        refused = r"protective stop.*3 steps in a row were refused, with their fallbacks"
+        with pytest.raises(MotionRefused, match=refused):
             c.run()
-        assert rig.arm.stops >= 1
-        assert sum("the arm refused" in line for line in c.lines) >= 9
+        assert rig.arm.stops >= 1 and rig.arm.motions == 3  # the alignment's motion and two steps
+        assert sum("the arm refused the step" in line for line in c.lines) == 3
         assert len(read_euroc(tmp_path / "rec", c.target).frames) > 0
+    finally:
+        rig.close()
+
+
+def test_a_goal_out_of_reach_is_pulled_toward_the_start(tmp_path):
+    # A workspace far larger than the arm's reach: the goals beyond it are executed pulled inward.
+    c, rig = collector(tmp_path, Scripted(translation=(0.3, 0.0, 0.0)), "workspace.position=[3.0,3.0,3.0]",
+                       "limits.max_steps=8")  # fmt: skip
+    try:
+        result = c.run()
+        assert result.steps == 8 and any("the arm refused the step" in line for line in c.lines)
     finally:
         rig.close()
 

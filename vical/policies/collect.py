@@ -14,8 +14,8 @@
 
 Everything the sensor delivers after the alignment is written as it arrives
 (``vical.io.euroc.EurocStreamWriter``), so a kill leaves a readable, calibratable recording. A
-motion the arm refuses is retried shortened (a half, a quarter of the step), then skipped; several
-refused steps in a row, a lost board, an IMU gap, any exception or Ctrl-C stop the arm first; the
+goal the arm refuses is retried as half the step, then pulled toward the workspace's centre, then
+skipped; several refused steps in a row, a lost board, an IMU gap, any exception or Ctrl-C stop the arm first; the
 recording is flushed and closed in every case.
 
 The path is the sum of the straight lines between the poses the arm reported after each motion
@@ -53,8 +53,8 @@ R_TOOL_CAMERA = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 # How far beyond the workspace bounds a reached pose may end ([m] x 3, [rad] x 3) before the run stops:
 # tracking error and goals executed a little off stay inside; a wrong tool frame does not.
 OUTSIDE_MARGIN = np.r_[0.05, 0.05, 0.05, 0.1, 0.1, 0.1]
-# Fractions of a refused step the runner tries, in order, before it stops.
-REFUSAL_FRACTIONS = (1.0, 0.5, 0.25)
+# A refused goal offset is retried scaled by these, toward the workspace's centre (the start pose).
+CENTRE_FRACTIONS = (0.9, 0.75, 0.5)
 
 
 class CollectionStopped(RuntimeError):
@@ -100,7 +100,7 @@ class Limits:
         max_steps: policy steps (None: the MDP's ``max_steps``).
         time_limit: [s] wall time of the whole collection.
         lost_frames: consecutive frames without the board that stop the run.
-        max_refused: consecutive steps the arm refuses (even shortened) that stop the run.
+        max_refused: consecutive steps the arm refuses (with their fallbacks) that stop the run.
         max_imu_gap: [s] the longest gap between IMU samples that is not a broken stream.
         wait_timeout: [s] wall time to wait for sensor data before the stream counts as broken.
         poll_interval: [s] between reads while waiting.
@@ -351,23 +351,27 @@ class Collector:
         episode.pose_offset = offset
 
     def _move(self, frame: PoseFrame, start: np.ndarray, goal: np.ndarray) -> StampedPose | None:
-        """Move toward the workspace offset ``goal``; None when the arm refused the step even shortened.
+        """Move toward the workspace offset ``goal``; None when the arm refused it and every fallback.
 
-        The env executes the closest reachable pose of an unreachable goal; an arm refuses it, so the
-        runner tries a half and a quarter of the step, then skips it (the policy's next action may
-        lead elsewhere); ``limits.max_refused`` refused steps in a row stop the run.
+        The env executes the closest reachable pose of an unreachable goal; an arm refuses it. The
+        runner then tries half the step, then the goal pulled toward the workspace's centre (the start
+        pose, which the arm reached): near the workspace's edge the part of the box the arm reaches
+        depends on where the alignment put the start. A step with every fallback refused is skipped;
+        ``limits.max_refused`` of them in a row stop the run.
         """
-        for fraction in REFUSAL_FRACTIONS:
+        fallbacks = [start + 0.5 * (goal - start), *(f * goal for f in CENTRE_FRACTIONS)]
+        for k, offset in enumerate([goal, *fallbacks]):
             try:
-                reached = self.arm.move_to(frame.pose(start + fraction * (goal - start)))
+                reached = self.arm.move_to(frame.pose(offset))
                 self._refused = 0
                 return reached
             except MotionRefused as err:
                 refused = err
-                self.progress(f"the arm refused {fraction:.0%} of the step ({err})")
+                if k == 0:
+                    self.progress(f"the arm refused the step ({err}); trying shorter ones")
         self._refused += 1
         if self._refused >= self.limits.max_refused:
-            raise MotionRefused(f"{refused}; {self._refused} steps in a row were refused, even shortened")
+            raise MotionRefused(f"{refused}; {self._refused} steps in a row were refused, with their fallbacks")
         return None
 
     def _report(self) -> None:

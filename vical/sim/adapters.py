@@ -9,7 +9,7 @@ Time in the simulator advances while the arm moves, waits out its command latenc
 the sensor is read with nothing new to deliver (one camera period per such read), so the runner
 sees the streams a real sensor delivers. Faults a real rig has are configurable: command latency (the arm rests, the
 sensor streams), pose-tracking error (the arm ends a random offset away from the goal and reports
-where it is), and a gap in the IMU stream.
+where it is), a gap in the IMU stream, and a protective stop (every goal refused).
 """
 
 from __future__ import annotations
@@ -55,18 +55,22 @@ class RigFaults:
         tracking_noise_m: [m] standard deviation per axis of where the arm ends relative to its goal.
         tracking_noise_rad: [rad] standard deviation per axis of the orientation it ends with.
         imu_gap: ``(start, duration)`` [s] after ``start()`` during which the IMU delivers nothing, or None.
+        refuse_after: motions after which the arm refuses every goal (a protective stop), or None.
     """
 
     latency: float = 0.0
     tracking_noise_m: float = 0.0
     tracking_noise_rad: float = 0.0
     imu_gap: tuple[float, float] | None = None
+    refuse_after: int | None = None
 
     def __post_init__(self) -> None:
         for name in ("latency", "tracking_noise_m", "tracking_noise_rad"):
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ValueError(f"RigFaults.{name} must be a number >= 0, got {value}")
+        if self.refuse_after is not None and int(self.refuse_after) < 0:
+            raise ValueError(f"RigFaults.refuse_after must be a number of motions >= 0, got {self.refuse_after}")
         if self.imu_gap is not None and (len(self.imu_gap) != 2 or min(self.imu_gap) < 0):
             raise ValueError(f"RigFaults.imu_gap must be (start, duration) in seconds >= 0, got {self.imu_gap}")
 
@@ -136,6 +140,7 @@ class SimArm(Arm):
         self.limits = ArmLimits(speed * motion.velocity_scale, angular * motion.velocity_scale,
                                 acceleration * motion.acceleration_scale)  # fmt: skip
         self.stops = 0
+        self.motions = 0
 
     def pose(self) -> StampedPose:
         sim = self._rig.sim
@@ -144,6 +149,8 @@ class SimArm(Arm):
     def move_to(self, T_base_tool: np.ndarray) -> StampedPose:
         rig = self._rig
         sim, recorder, faults = rig.sim, rig.recorder, rig.faults
+        if faults.refuse_after is not None and self.motions >= faults.refuse_after:
+            raise MotionRefused("the arm is in a protective stop (robot.faults.refuse_after)")
         goal = self._tracked(check_pose(T_base_tool))
         ik = sim.solve_ik(goal)
         close_enough = ik.position_error <= REACH_TOLERANCE_M and ik.rotation_error <= REACH_TOLERANCE_RAD
@@ -158,6 +165,7 @@ class SimArm(Arm):
         if faults.latency > 0:
             recorder.add_motion(sim.hold(faults.latency, on_step=recorder.on_step))
         recorder.add_motion(sim.move_joints(ik.q, on_step=recorder.on_step))
+        self.motions += 1
         return self.pose()
 
     def _tracked(self, T: np.ndarray) -> np.ndarray:
