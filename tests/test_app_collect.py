@@ -19,6 +19,7 @@ from vical.calib.tasks import CalibrationTask, run_task, task_score
 from vical.config import ConfigError
 from vical.env.actions import step_to_action
 from vical.env.information import Guess
+from vical.io.bag import read_bag
 from vical.io.euroc import EurocStreamWriter, read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.base import Policy
@@ -157,11 +158,15 @@ def test_bad_settings_are_refused_by_key(tmp_path):
 
 def test_collect_records_and_calibrates_with_a_random_policy(tmp_path):
     out = tmp_path / "out"
-    cfg = config(f"out={out}", "policy=random_moving", "limits.max_steps=12", "report=false", "seed=5")
+    cfg = config(f"out={out}", "policy=random_moving", "limits.max_steps=12", "report=false", "seed=5", "bag=true")
     assert collect(cfg) == 0
     target = read_target_yaml(out / "target.yaml")
     rec = read_euroc(out / "recording", target)
     assert len(rec.frames) > 100 and len(rec.imu) > 1000
+    bag = read_bag(out / "recording.bag", target)  # the same data in Kalibr's bag
+    np.testing.assert_array_equal(bag.frames.t, rec.frames.t)
+    np.testing.assert_array_equal(bag.frames.images, rec.frames.images)
+    np.testing.assert_array_equal(bag.imu.t, rec.imu.t)
     assert (out / "calibration" / "camchain-imucam.yaml").is_file()
     summary = (out / "collect.yaml").read_text()
     assert "steps: 12" in summary and "done: the step limit" in summary

@@ -31,7 +31,9 @@ from vical.config import ConfigError, from_mapping, require
 from vical.data import SensorTruth
 from vical.env.config import MdpConfig
 from vical.env.information import Guess
-from vical.io.euroc import EurocStreamWriter
+from vical.io.bag import write_bag
+from vical.io.errors import FormatError
+from vical.io.euroc import EurocStreamWriter, read_euroc
 from vical.io.kalibr import read_camchain, read_imu_yaml, write_imu_yaml, write_target_yaml
 from vical.io.yamlfile import dump_yaml
 from vical.policies.base import Policy
@@ -182,6 +184,7 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
             result = collector.run(int(cfg.seed))
     except FAULTS as err:
         _write_summary(s, None, f"stopped: {err}", writer.frames)
+        _write_bag(cfg, s)
         report_error(APP, f"stopped: {err}; the arm is stopped and the recording so far is in {writer.path} "
                           f"({writer.frames} frames): {_calibrate_hint(s)}")  # fmt: skip
         return None
@@ -191,7 +194,21 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
               f"({writer.frames} frames): {_calibrate_hint(s)}", file=sys.stderr)  # fmt: skip
         raise SystemExit(EXIT_INTERRUPTED) from None
     _write_summary(s, result, f"done: {result.reason}", writer.frames)
+    _write_bag(cfg, s)
     return result
+
+
+def _write_bag(cfg: DictConfig, s: CollectSettings) -> None:
+    """``bag=true``: the recording also as a ROS1 bag with Kalibr's topics (written whole, from the EuRoC folder,
+    which is what survives a kill)."""
+    if not cfg.get("bag") or not (s.out / "recording" / "mav0" / "cam0" / "data.csv").is_file():
+        return
+    try:
+        recording = read_euroc(s.out / "recording", board(cfg))
+    except FormatError as err:  # no frame recorded yet
+        print(f"{APP}: no bag written: {err}", file=sys.stderr)
+        return
+    print(f"bag written to {write_bag(recording, s.out / 'recording.bag')}")
 
 
 def _calibrate_args(s: CollectSettings) -> list[str]:
