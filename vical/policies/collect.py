@@ -153,7 +153,7 @@ class RobotEpisode:
 class SensorStream:
     """Reads the sensor, checks the streams, detects the board and (once recording) writes everything.
 
-    Keeps the detections and IMU samples of the recording for the state.
+    Keeps the recording's IMU samples for the state (the detections go to the caller).
     """
 
     def __init__(self, sensor: ViSensor, target: Target, writer: EurocStreamWriter | None, limits: Limits) -> None:
@@ -163,9 +163,7 @@ class SensorStream:
         self.limits = limits
         self.recording = False
         self.keep_imu = False  # keep the IMU samples without recording (the dry run)
-        self.stamps: list[int] = []
-        self.corners: list[np.ndarray] = []
-        self.ids: list[np.ndarray] = []
+        self.frames = 0  # recorded
         self._imu: list[ImuSamples] = []
         self._last_imu: int | None = None
         self._last_frame: int | None = None
@@ -187,9 +185,7 @@ class SensorStream:
             self._lost = 0 if len(ids) else self._lost + 1
             if self.recording:
                 self.writer.add_frame(frame.t_ns, frame.image, corners, ids)
-                self.stamps.append(frame.t_ns)
-                self.corners.append(corners)
-                self.ids.append(ids)
+                self.frames += 1
             detections.append((frame.t_ns, corners, ids))
         if self.recording and len(data.imu):
             self.writer.add_imu(data.imu)
@@ -323,7 +319,7 @@ class Collector:
         last = self.stream.last_imu_ns
         duration = 0.0 if first is None or last is None else (last - first) / NS_PER_S
         self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, {duration:.1f} s")
-        return CollectResult(episode.steps, self.state.path_length, duration, len(self.stream.stamps),
+        return CollectResult(episode.steps, self.state.path_length, duration, self.stream.frames,
                              self.state.goal_reached, reason)  # fmt: skip
 
     def _step(self, frame: PoseFrame, action: np.ndarray) -> None:
