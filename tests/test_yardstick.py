@@ -18,7 +18,7 @@ TASKS = ("joint", "intrinsic")
 def recorded_fingerprints() -> dict[str, dict[str, str]]:
     """The table under "The yardstick's fingerprint" in docs/results.md: task -> part -> hash."""
     text = RESULTS.read_text()
-    section = text.split("### The yardstick's fingerprint", 1)[1]
+    section = text.split("### The yardstick's fingerprint", 1)[1].split("\n#", 1)[0]  # up to the next heading
     header = re.search(r"^\| part \|(.+)\|$", section, re.M)
     assert header, "docs/results.md: the fingerprint table has no header row"
     columns = [c.strip().strip("`").removeprefix("yardstick_") for c in header.group(1).split("|")]
