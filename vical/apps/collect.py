@@ -38,7 +38,7 @@ from vical.io.kalibr import read_camchain, read_imu_yaml, write_imu_yaml, write_
 from vical.io.yamlfile import dump_yaml
 from vical.policies.base import Policy
 from vical.policies.collect import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
-from vical.policies.evaluation import instantiate_policy
+from vical.policies.evaluation import instantiate_policy, policy_mdp
 from vical.robot import MotionRefused, SensorStreamError
 from vical.sim.config import SimConfig
 
@@ -100,12 +100,7 @@ def check_settings(cfg: DictConfig) -> CollectSettings:
 def mdp_config(cfg: DictConfig, policy: Policy) -> MdpConfig:
     """The MDP the policy runs in: the ``env`` group's, with what the policy brings (as ``vical-evaluate`` does)."""
     env = {k: v for k, v in _plain(cfg.env).items() if k not in ("_target_", "sim", "sensor", "task")}
-    env.update(policy.env_settings)
-    env["terminate_on_coverage"] = policy.stop_at_coverage
-    env["calibrate_on_termination"] = env["calibrate_on_truncation"] = False
-    if policy.max_steps is not None:
-        env["max_steps"] = policy.max_steps
-    return MdpConfig.from_config(env)
+    return MdpConfig.from_config({**env, **policy_mdp(policy)})
 
 
 def nominal_sensor(s: CollectSettings, rig: Any) -> SensorTruth:

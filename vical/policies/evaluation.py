@@ -215,19 +215,26 @@ class Trajectory:
     coverage_reached: bool
 
 
-def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
-    """The calibration env of ``env_cfg`` with ``policy``'s MDP settings, step limit and termination.
+def policy_mdp(policy: Policy) -> dict[str, Any]:
+    """What ``policy``'s episodes change of an env config: its MDP settings, step limit and termination.
 
-    The env never calibrates on its own: the evaluation calibrates every episode once per budget.
+    The env never calibrates on its own: the evaluation calibrates every episode once per budget,
+    ``vical-collect`` once at the end.
     """
-    overrides = {
+    settings = {
+        **dict(policy.env_settings),
         "terminate_on_coverage": policy.stop_at_coverage,
         "calibrate_on_termination": False,
         "calibrate_on_truncation": False,
     }
     if policy.max_steps is not None:
-        overrides["max_steps"] = policy.max_steps
-    env = hydra.utils.instantiate({**dict(env_cfg), **dict(policy.env_settings), **overrides})
+        settings["max_steps"] = policy.max_steps
+    return settings
+
+
+def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
+    """The calibration env of ``env_cfg`` with ``policy``'s MDP settings, step limit and termination."""
+    env = hydra.utils.instantiate({**dict(env_cfg), **policy_mdp(policy)})
     if not isinstance(env, CalibrationEnv):
         raise ConfigError(f"env must be the calibration env (env=calibration), got {type(env).__name__}")
     return env
