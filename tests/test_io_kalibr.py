@@ -12,6 +12,7 @@ from test_io_samples import make_camera, make_truth
 from vical.data import ImuNoise, Target
 from vical.geometry.camera import CameraModel
 from vical.geometry.transforms import invert_transform
+from vical.io.checks import FormatWarning
 from vical.io.errors import KalibrFormatError
 from vical.io.kalibr import (
     read_camchain,
@@ -232,3 +233,31 @@ def test_bad_camchain_files(tmp_path):
         read_camchain(path)
     with pytest.raises(KalibrFormatError, match="does not exist"):
         read_camchain(tmp_path / "missing.yaml")
+
+
+def test_a_rotation_rounded_when_written_is_re_orthonormalised_with_a_warning(tmp_path):
+    truth = make_truth()
+    path = tmp_path / "camchain.yaml"
+    write_camchain_imucam(path, truth.camera, truth.T_cam_imu, 0.0)
+    data = yaml.safe_load(path.read_text())
+    data["cam0"]["T_cam_imu"] = [[round(v, 5) for v in row] for row in data["cam0"]["T_cam_imu"]]  # as published
+    path.write_text(yaml.safe_dump(data))
+    with pytest.warns(FormatWarning, match=r"T_cam_imu is .* from orthonormal \(rounded when written\)"):
+        _, T, _ = read_camchain(path)
+    R = T[:3, :3]
+    np.testing.assert_allclose(R @ R.T, np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(T, truth.T_cam_imu, atol=2e-5)  # the nearest rotation: the rounding's size
+    data["cam0"]["T_cam_imu"][0][1] += 1e-3  # beyond rounding: not a rotation
+    path.write_text(yaml.safe_dump(data))
+    with pytest.raises(KalibrFormatError, match=r"not a rigid transform .*beyond the 0\.0001"):
+        read_camchain(path)
+
+
+def test_an_aprilgrid_code_offset_is_refused_unless_zero(tmp_path):
+    path = tmp_path / "target.yaml"
+    grid = "target_type: aprilgrid\ntagRows: 6\ntagCols: 6\ntagSize: 0.088\ntagSpacing: 0.3\n"
+    path.write_text(grid + "codeOffset: 0\n")
+    assert read_target_yaml(path).kind == "aprilgrid"
+    path.write_text(grid + "codeOffset: 36\n")
+    with pytest.raises(KalibrFormatError, match=r"codeOffset 36 is not supported .*codeOffset 0"):
+        read_target_yaml(path)

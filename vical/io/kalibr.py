@@ -31,6 +31,7 @@ import numpy as np
 from vical.data import ImuNoise, Target, TargetError
 from vical.geometry.camera import CameraModel, CameraModelError
 from vical.geometry.transforms import invert_transform
+from vical.io.checks import warn
 from vical.io.errors import KalibrFormatError
 from vical.io.yamlfile import as_floats, dump_yaml, load_mapping, require
 
@@ -48,6 +49,10 @@ DISTORTION_ALIASES = {
 # (key, whether the stored matrix is T_imu_cam and must be inverted)
 EXTRINSIC_KEYS = (("T_cam_imu", False), ("T_imu_cam", True), ("T_BS", True), ("T_SC", True), ("body_T_cam0", True))
 TIMESHIFT_KEYS = ("timeshift_cam_imu", "td")
+# max |R R^T - I| of a stored rotation: exact below the first (float noise), rounded when written (a few
+# decimals) below the second, and re-orthonormalised with a warning; beyond it, not a rotation.
+EXACT_ROTATION_ERROR = 1e-9
+ROUNDED_ROTATION_ERROR = 1e-4
 
 
 # ------------------------------------------------------------------------------- camchain
@@ -158,10 +163,19 @@ def parse_transform(value: Any, key: str, where: str) -> np.ndarray:
         value = require(value, "data", f"{where} [{key}]", KalibrFormatError)
     T = as_floats(value, 16, key, where, KalibrFormatError).reshape(4, 4)
     R = T[:3, :3]
-    if not np.allclose(T[3], [0, 0, 0, 1]) or not np.allclose(R @ R.T, np.eye(3), atol=1e-5):
-        raise KalibrFormatError(f"{where}: {key} is not a rigid transform (rotation block not orthonormal)")
+    error = float(np.abs(R @ R.T - np.eye(3)).max())
+    if not np.allclose(T[3], [0, 0, 0, 1]) or error >= ROUNDED_ROTATION_ERROR:
+        raise KalibrFormatError(
+            f"{where}: {key} is not a rigid transform (rotation block not orthonormal: |R R^T - I| = {error:.1e}, "
+            f"beyond the {ROUNDED_ROTATION_ERROR:g} of a rotation written with a few decimals)"
+        )
     if np.linalg.det(R) < 0:
         raise KalibrFormatError(f"{where}: {key} has a reflection (det < 0), not a rotation")
+    if error > EXACT_ROTATION_ERROR:
+        warn(f"{where}: {key} is {error:.1e} from orthonormal (rounded when written); using the nearest rotation")
+        U, _, Vt = np.linalg.svd(R)
+        T = T.copy()
+        T[:3, :3] = U @ Vt
     return T
 
 
@@ -249,6 +263,7 @@ def read_target_yaml(path: str | os.PathLike) -> Target:
             row_sp, col_sp = _length(data, "rowSpacingMeters", where), _length(data, "colSpacingMeters", where)
             return Target("checkerboard", rows, cols, row_sp, col_sp)
         if kind == "aprilgrid":
+            _refuse_code_offset(data, where)
             size = _length(data, "tagSize", where)
             spacing = _length(data, "tagSpacing", where)
             rows, cols = _count(data, "tagRows", where), _count(data, "tagCols", where)
@@ -256,6 +271,16 @@ def read_target_yaml(path: str | os.PathLike) -> Target:
     except TargetError as exc:
         raise KalibrFormatError(f"{where}: {exc}") from exc
     raise KalibrFormatError(f"{where}: target_type {kind!r} is not supported; use 'checkerboard' or 'aprilgrid'")
+
+
+def _refuse_code_offset(data: dict[str, Any], where: str) -> None:
+    """vical numbers an aprilgrid's tags from 0; a grid printed with other tag codes would be misread."""
+    offset = data.get("codeOffset", 0)
+    if offset != 0:
+        raise KalibrFormatError(
+            f"{where}: codeOffset {offset!r} is not supported (vical reads aprilgrids whose tags are numbered "
+            "from 0, Kalibr's default); print a grid with codeOffset 0"
+        )
 
 
 def _count(data: dict[str, Any], key: str, where: str) -> int:
