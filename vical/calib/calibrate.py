@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from vical.calib.checks import image_coverage_warnings
 from vical.calib.errors import CalibrationError
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.observations import collect_observations
@@ -72,10 +73,12 @@ def calibrate_joint(
         frame_stride=opts.frame_stride,
     )  # fmt: skip
     observations = collect_observations(frames, target)
-    return run_visual_inertial(
+    result = run_visual_inertial(
         "joint", observations, imu, target, intrinsic.camera, imu_noise or ImuNoise(), initial_T_cam_imu,
         initial_time_offset, opts, start,
     )  # fmt: skip
+    coverage = image_coverage_warnings(observations, (intrinsic.camera.width, intrinsic.camera.height))
+    return replace(result, warnings=coverage + result.warnings)
 
 
 def calibrate_two_stage(

@@ -1,10 +1,15 @@
-"""Checks of a calibration's inputs before the solve: the IMU noise settings and the memory a recording needs."""
+"""Checks of a calibration's inputs: the IMU noise settings, the memory a recording needs, the image coverage."""
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
 
 from vical.calib.errors import CalibrationError
+from vical.calib.observations import FrameObservation
 from vical.data import ImuNoise
 
 # Kalibr's imu.yaml keys of the noise settings, and the paper's IMU (a typical MEMS unit) for scale.
@@ -22,6 +27,14 @@ PLAUSIBLE_RANGE = (0.01, 1000.0)  # x the typical value: outside it, no real IMU
 # 25 kB per frame (its state, IMU factor and GTSAM's elimination).
 BYTES_PER_CORNER = 2500
 BYTES_PER_FRAME = 25_000
+
+# Below this share of the image inside the hull of all corners, the lens model is extrapolated.
+MIN_IMAGE_COVERAGE = 0.5
+IMAGE_REGIONS = (
+    ("top-left corner", "top edge", "top-right corner"),
+    ("left edge", "centre", "right edge"),
+    ("bottom-left corner", "bottom edge", "bottom-right corner"),
+)
 
 
 def check_imu_noise(noise: ImuNoise) -> list[str]:
@@ -67,3 +80,23 @@ def check_memory(frames: int, corners: int, limit_mb: float, stride: int) -> Non
         f"limit of {limit_mb:.0f} MB; use every {thin}th frame (frame_stride={thin}, vical-calibrate --frame-stride "
         f"{thin}) or raise the limit (memory_limit_mb, --memory-limit)"
     )
+
+
+def image_coverage_warnings(observations: Sequence[FrameObservation], size: tuple[int, int]) -> list[str]:
+    """A warning when the corners of all views cover less than ``MIN_IMAGE_COVERAGE`` of the image
+    (their convex hull), naming the ninths of the image that no corner reached."""
+    points = np.concatenate([o.uv for o in observations]).astype(np.float32) if observations else np.zeros((0, 2))
+    width, height = size
+    if len(points) < 3:
+        return []
+    share = cv2.contourArea(cv2.convexHull(points)) / (width * height)
+    if share >= MIN_IMAGE_COVERAGE:
+        return []
+    col = np.clip((points[:, 0] * 3 // width).astype(int), 0, 2)
+    row = np.clip((points[:, 1] * 3 // height).astype(int), 0, 2)
+    seen = set(zip(row.tolist(), col.tolist(), strict=True))
+    empty = [IMAGE_REGIONS[r][c] for r in range(3) for c in range(3) if (r, c) not in seen]
+    return [
+        f"the board's corners covered only {share:.0%} of the image (none in the {', '.join(empty)}): the lens "
+        "distortion there is extrapolated, not measured; show the board near every edge and corner of the image"
+    ]

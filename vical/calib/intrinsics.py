@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
+from vical.calib.checks import image_coverage_warnings
 from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError
 from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera
@@ -193,6 +194,7 @@ def calibrate_intrinsics(
         status=solution.status,
         num_frames=len(poses),
         warnings=rejection.warnings
+        + image_coverage_warnings(observations, size)
         + _dropped_frames_warning(len(frames), len(poses))
         + correlation_warnings(found)
         + unobservable_warnings(names, covariance),
