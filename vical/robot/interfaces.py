@@ -21,6 +21,7 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import Self
 
 import numpy as np
 
@@ -119,7 +120,29 @@ class SensorData:
         return cls([], ImuSamples.concatenate([]))
 
 
-class Arm(ABC):
+class Device(ABC):
+    """What an arm and a sensor share: ``stop`` and ``close``, and a ``with`` block that calls both on leaving
+    (normally, by an exception or Ctrl-C)."""
+
+    @abstractmethod
+    def stop(self) -> None:
+        """Stop what the device is doing (safe to call at any time)."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the device (after ``stop``)."""
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        try:
+            self.stop()
+        finally:
+            self.close()
+
+
+class Arm(Device):
     """A robot arm that moves the sensor: read the tool pose, move it, stop.
 
     Use it as a context manager: leaving the block (normally, by an exception or Ctrl-C) stops the
@@ -147,17 +170,8 @@ class Arm(ABC):
     def close(self) -> None:
         """Release the connection (after ``stop``)."""
 
-    def __enter__(self) -> Arm:
-        return self
 
-    def __exit__(self, *exc: object) -> None:
-        try:
-            self.stop()
-        finally:
-            self.close()
-
-
-class ViSensor(ABC):
+class ViSensor(Device):
     """A camera + IMU: start streaming, read what arrived, stop (module doc: clocks).
 
     Attributes:
@@ -187,12 +201,3 @@ class ViSensor(ABC):
     @abstractmethod
     def close(self) -> None:
         """Release the device (after ``stop``)."""
-
-    def __enter__(self) -> ViSensor:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        try:
-            self.stop()
-        finally:
-            self.close()
