@@ -25,12 +25,10 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from vical.apps.collect import FAULTS, board, check_settings, mdp_config
+from vical.apps.collect import FAULTS, build_collector, check_settings, mdp_config, nominal_sensor
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask, run_task
-from vical.env.information import Guess
-from vical.io.euroc import EurocStreamWriter, read_euroc
-from vical.policies.collect import Collector
+from vical.io.euroc import read_euroc
 from vical.policies.evaluation import build_env, instantiate_policy, run_trajectory
 from vical.sim.adapters import RigFaults, SimRig
 from vical.sim.config import SimConfig
@@ -74,13 +72,7 @@ def collect_episode(cfg, seed: int, faults: RigFaults, policy, mdp, workdir: Pat
     rig = SimRig(SimConfig.from_mapping(plain(cfg.sim)), SensorSampling.from_config(plain(cfg.sensor)), seed,
                  bool(cfg.task.asymmetric_distortion), faults)  # fmt: skip
     try:
-        nominal = rig.datasheet
-        writer = EurocStreamWriter(workdir / f"rec{seed}", rig.sensor.image_size, rig.sensor.camera_rate_hz,
-                                   rig.sensor.imu_rate_hz, nominal.imu_noise)  # fmt: skip
-        guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise,
-                      mdp.information.pixel_sigma)  # fmt: skip
-        target = board(cfg)
-        c = Collector(rig.arm, rig.sensor, policy, mdp, s.task, target, guess, writer, s.align, s.limits, lambda _: 0)
+        c = build_collector(cfg, s, rig, policy, mdp, nominal_sensor(s, rig), workdir / f"rec{seed}", lambda _: None)
         try:
             c.run(seed)
             stop = "done"
@@ -89,7 +81,7 @@ def collect_episode(cfg, seed: int, faults: RigFaults, policy, mdp, workdir: Pat
         truth, profile = rig.truth, rig.recorder.recording().path_profile
     finally:
         rig.close()
-    rec = read_euroc(workdir / f"rec{seed}", target, keep_images=False)
+    rec = read_euroc(workdir / f"rec{seed}", c.target, keep_images=False)
     # The simulated end effector's path from the recording's start (the runner only sums straight lines).
     path = float(profile.length[-1] - np.interp(rec.imu.t[0], profile.t, profile.length))
     return dataclasses.replace(rec, truth=truth), Collected(c.episode.steps, path, c.state.goal_reached, stop)

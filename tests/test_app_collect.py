@@ -13,21 +13,19 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from vical.apps import calibrate
-from vical.apps.collect import CONF_DIR, check_settings, collect, mdp_config, nominal_sensor
+from vical.apps.collect import CONF_DIR, build_collector, check_settings, collect, mdp_config, nominal_sensor
 from vical.calib.metrics import parameter_errors
 from vical.calib.tasks import CalibrationTask, run_task, task_score
 from vical.config import ConfigError
 from vical.env.actions import step_to_action
-from vical.env.information import Guess
 from vical.io.bag import read_bag
-from vical.io.euroc import EurocStreamWriter, read_euroc
+from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.base import Policy
 from vical.policies.collect import CollectionStopped, Collector
 from vical.policies.evaluation import build_env, run_trajectory
 from vical.policies.learned import PAPER_POLICY_DIR, learned_policy
 from vical.robot import MotionRefused, SensorStreamError
-from vical.sim.config import SimConfig
 
 
 def config(*overrides: str):
@@ -51,14 +49,10 @@ def collector(tmp_path: Path, policy: Policy, *overrides: str) -> tuple[Collecto
     """A Collector on the simulated rig of ``overrides`` (as vical-collect builds it), and the rig."""
     cfg = config(f"out={tmp_path / 'out'}", *overrides)
     s = check_settings(cfg)
-    mdp = mdp_config(cfg, policy)
     rig = hydra.utils.instantiate(cfg.robot, _convert_="all")
-    nominal = nominal_sensor(s, rig)
-    target = SimConfig.from_mapping(dict(cfg.sim)).board.target
-    writer = EurocStreamWriter(tmp_path / "rec", rig.sensor.image_size, 20.0, 200.0, nominal.imu_noise)
-    guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise, 0.25)
     lines = []
-    c = Collector(rig.arm, rig.sensor, policy, mdp, s.task, target, guess, writer, s.align, s.limits, lines.append)
+    c = build_collector(cfg, s, rig, policy, mdp_config(cfg, policy), nominal_sensor(s, rig), tmp_path / "rec",
+                        lines.append)  # fmt: skip
     c.lines = lines
     return c, rig
 

@@ -16,8 +16,9 @@ import logging
 import os
 import sys
 import warnings
+from collections.abc import Callable
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from hydra import compose, initialize_config_dir
 from hydra.core.override_parser.overrides_parser import OverridesParser
@@ -138,3 +139,23 @@ def check_launcher(argv: list[str]) -> None:
     module, install = LAUNCHER_PLUGINS[choice]
     if importlib.util.find_spec(module) is None:
         raise ConfigError(f"hydra/launcher={choice} needs a Hydra launcher plugin that is not installed: {install}")
+
+
+def check_then_run(
+    app: str,
+    conf_dir: str | os.PathLike,
+    config_name: str,
+    check_settings: Callable[[DictConfig], Any],
+    hydra_main: Callable[[], Any],
+    user_errors: tuple[type[BaseException], ...],
+) -> None:
+    """Console entry point of a Hydra app: the command line composed and the settings checked first (one
+    line ``<app>: error: ...`` and status 2 for ``user_errors`` and Hydra's own override errors), then Hydra."""
+    one_line_warnings()
+    try:
+        cfg = check_composes(conf_dir, config_name, sys.argv[1:])
+        if cfg is not None:  # None with Hydra flags (-m, --cfg, ...): the app checks under Hydra
+            check_settings(cfg)
+    except user_errors as err:
+        fail(app, err)
+    hydra_main()

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import shutil
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from vical.apps import calibrate
-from vical.apps.cli import check_composes, fail, one_line_warnings, report_error
+from vical.apps.cli import check_then_run, fail, report_error
 from vical.calib.errors import CalibrationError
 from vical.config import ConfigError, from_mapping, require
 from vical.data import SensorTruth
@@ -145,12 +146,26 @@ def collect(cfg: DictConfig) -> int:
     return _calibrate(s, bool(cfg.get("report")))
 
 
-def _collector(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth,
-               writer: EurocStreamWriter | None) -> Collector:  # fmt: skip
+def build_collector(
+    cfg: DictConfig,
+    s: CollectSettings,
+    rig: Any,
+    policy: Policy,
+    mdp: MdpConfig,
+    nominal: SensorTruth,
+    recording: Path | None,
+    progress: Callable[[str], None] | None = None,
+) -> Collector:
+    """The runner of ``vical-collect`` on ``rig``, writing the EuRoC folder ``recording`` (None: the dry run's,
+    which writes nothing); ``progress`` defaults to printing when ``cfg.progress``."""
+    sensor = rig.sensor
+    writer = None if recording is None else EurocStreamWriter(
+        recording, sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz, nominal.imu_noise)  # fmt: skip
     guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise,
                   mdp.information.pixel_sigma)  # fmt: skip
-    progress = print if cfg.get("progress") else (lambda line: None)
-    return Collector(rig.arm, rig.sensor, policy, mdp, s.task, board(cfg), guess, writer, s.align, s.limits, progress)
+    if progress is None:
+        progress = print if cfg.get("progress") else (lambda line: None)
+    return Collector(rig.arm, sensor, policy, mdp, s.task, board(cfg), guess, writer, s.align, s.limits, progress)
 
 
 def board(cfg: DictConfig):
@@ -162,18 +177,16 @@ def _dry_run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp:
     """Connect, read the arm and the streams, locate the board; move nothing, write nothing."""
     print(f"{APP}: dry run: reading the arm and the sensor for {cfg.dry_run_seconds} s; nothing moves")
     with rig.arm, rig.sensor:
-        _collector(cfg, s, rig, policy, mdp, nominal, None).dry_run(float(cfg.dry_run_seconds))
+        build_collector(cfg, s, rig, policy, mdp, nominal, None).dry_run(float(cfg.dry_run_seconds))
 
 
 def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth):
     """The collection; None when it stopped on a fault (reported), the result otherwise."""
-    sensor = rig.sensor
     s.out.mkdir(parents=True, exist_ok=True)
     write_target_yaml(s.out / "target.yaml", board(cfg))
     write_imu_yaml(s.out / "imu.yaml", nominal.imu_noise)
-    writer = EurocStreamWriter(s.out / "recording", sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz,
-                               nominal.imu_noise)  # fmt: skip
-    collector = _collector(cfg, s, rig, policy, mdp, nominal, writer)
+    collector = build_collector(cfg, s, rig, policy, mdp, nominal, s.out / "recording")
+    writer = collector.stream.writer
     try:
         with rig.arm, rig.sensor:
             result = collector.run(int(cfg.seed))
@@ -247,14 +260,7 @@ def hydra_main(cfg: DictConfig) -> None:
 
 def main() -> None:
     """Console entry point: the settings, and Hydra's own override errors, are checked before Hydra runs."""
-    one_line_warnings()
-    try:
-        cfg = check_composes(CONF_DIR, "collect", sys.argv[1:])
-        if cfg is not None:
-            check_settings(cfg)
-    except USER_ERRORS as err:
-        fail(APP, err)
-    hydra_main()
+    check_then_run(APP, CONF_DIR, "collect", check_settings, hydra_main, USER_ERRORS)
 
 
 if __name__ == "__main__":

@@ -15,7 +15,6 @@ User errors (a bad value, an existing ``out``, Hydra's own override errors) prin
 from __future__ import annotations
 
 import os
-import sys
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,7 +24,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
-from vical.apps.cli import check_composes, fail, one_line_warnings
+from vical.apps.cli import check_then_run, fail
 from vical.calib.aprilgrid import detect_aprilgrid
 from vical.calib.detection import detect_checkerboard
 from vical.config import ConfigError, require, require_range
@@ -204,14 +203,7 @@ def hydra_main(cfg: DictConfig) -> None:
 
 def main() -> None:
     """Console entry point: the settings, and Hydra's own override errors, are checked before Hydra runs."""
-    one_line_warnings()
-    try:
-        cfg = check_composes(CONF_DIR, "record", sys.argv[1:])
-        if cfg is not None:  # None with Hydra flags (-m, --cfg, ...): record() checks under Hydra
-            check_settings(cfg)
-    except USER_ERRORS as err:
-        fail(APP, err)
-    hydra_main()
+    check_then_run(APP, CONF_DIR, "record", check_settings, hydra_main, USER_ERRORS)
 
 
 if __name__ == "__main__":
