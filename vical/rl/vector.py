@@ -1,41 +1,57 @@
-"""Environments in worker processes for ``vical-train`` (``train.num_envs > 1``): gymnasium's vector API.
+"""Environments in worker processes for ``vical-train`` (``train.num_envs > 1``), each stepped on its own.
 
-Every sub-environment runs in its own process, on this machine (gymnasium's ``AsyncVectorEnv``,
-spawned) or as a Ray actor (``RayVectorEnv``, ``parallel.backend=ray``); an env's terminal work
-(the calibration env's solve) happens there, while the learner goes on in the main process. The
-trainer resets each sub-environment itself (autoreset off), with a seed it draws, so a run is a
-function of its seed and ``num_envs``. ``GuardedEnv`` wraps every sub-environment:
+Every env runs in its own process, on this machine (spawned ``multiprocessing`` processes) or as a
+Ray actor (``parallel.backend=ray``); an env's terminal work (the calibration env's solve) happens
+there, while the learner goes on in the main process. Unlike a lockstep vector env, each worker takes
+one command at a time and answers when it is done, so a fast env never waits for a slow one
+(``vical.rl.vector_trainer`` keeps the run a function of its seed). ``GuardedEnv`` wraps every env:
 
 - an exception in ``step`` ends the episode (truncated, reward 0) and is reported in the info
   (``worker/error`` with the episode's reset seed) instead of ending the run;
-- ``replay()`` resets to a seed and repeats a list of actions: a checkpoint stores each running
+- ``replay`` resets to a seed and repeats a list of actions: a checkpoint stores each running
   episode's seed and actions, and a resumed run replays them to the exact mid-episode state.
+
+Both kinds of workers offer ``send(i, command, *args)`` (``reset``, ``step`` or ``replay``),
+``receive()`` (the answers ready, waiting for at least one), the env's spaces and ``close``. A worker
+that dies raises ``WorkerDied``; an exception outside ``step`` (building the env, a reset) raises
+``WorkerError`` with the worker's traceback.
 """
 
 from __future__ import annotations
 
+import contextlib
 import functools
-from collections.abc import Callable, Mapping, Sequence
+import multiprocessing.connection
+import signal
+import traceback
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium.vector import AsyncVectorEnv, AutoresetMode
 
 from vical.parallel import ParallelConfig, connect_ray, single_threaded_children
 
-ERROR_KEY = "worker/error"  # info key of an exception caught in a sub-environment's step
+ERROR_KEY = "worker/error"  # info key of an exception caught in an env's step
 SEED_KEY = "worker/episode_seed"  # ... and the reset seed of the episode it ended
+CLOSE_TIMEOUT_S = 30.0  # a closing worker may finish its step in flight (a terminal solve) first
+
+
+class WorkerDied(RuntimeError):
+    """A worker process ended (killed, out of memory) while the run needed it."""
+
+
+class WorkerError(RuntimeError):
+    """A worker raised outside an env step (building the env, resetting it); the message holds its traceback."""
 
 
 class GuardedEnv(gym.Wrapper):
-    """A sub-environment that reports a failing step instead of raising, and can replay an episode."""
+    """An env that reports a failing step instead of raising, and can replay an episode."""
 
     def __init__(self, env: gym.Env) -> None:
         super().__init__(env)
         self.episode_seed: int | None = None
         self.last_obs: Any = None
-        self.replay_script: tuple[int, list[np.ndarray]] | None = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self.episode_seed = seed
@@ -52,94 +68,155 @@ class GuardedEnv(gym.Wrapper):
         self.last_obs = obs
         return obs, reward, terminated, truncated, info
 
-    def replay(self) -> Any:
-        """Reset to ``replay_script``'s seed and take its actions; the observation reached."""
-        seed, actions = self.replay_script
+    def replay(self, seed: int, actions: list[np.ndarray]) -> Any:
+        """Reset to ``seed`` and take ``actions``; the observation reached."""
         obs, _ = self.reset(seed=seed)
         for action in actions:
             obs, *_ = self.env.step(action)
         self.last_obs = obs
         return obs
 
+    def run(self, command: str, args: tuple) -> Any:
+        if command == "reset":
+            return self.reset(seed=args[0])
+        return getattr(self, command)(*args)
+
 
 def _guarded(make_env: Callable[[Mapping[str, Any]], gym.Env], env_cfg: Mapping[str, Any]) -> GuardedEnv:
     return GuardedEnv(make_env(env_cfg))
 
 
-def make_vector_env(
+def make_workers(
     make_env: Callable[[Mapping[str, Any]], gym.Env],
     env_cfg: Mapping[str, Any],
     num_envs: int,
     parallel: ParallelConfig,
 ):
-    """``num_envs`` guarded copies of the env, each in its own process (local or Ray actors), autoreset off.
+    """``num_envs`` guarded copies of the env, each in its own worker (local processes or Ray actors).
 
     ``make_env`` must be a module-level function (it is sent to the workers).
     """
     factory = functools.partial(_guarded, make_env, dict(env_cfg))
     if parallel.backend == "ray":
-        return RayVectorEnv(factory, num_envs, parallel)
-    with single_threaded_children():
-        return AsyncVectorEnv(
-            [factory] * num_envs, context="spawn", shared_memory=False, autoreset_mode=AutoresetMode.DISABLED
-        )
+        return RayWorkers(factory, num_envs, parallel)
+    return ProcessWorkers(factory, num_envs)
 
 
-def per_env_infos(infos: Mapping[str, Any], num_envs: int) -> list[dict[str, Any]]:
-    """The vector API's info (arrays with ``_key`` masks) as one dict per sub-environment."""
-    out: list[dict[str, Any]] = [{} for _ in range(num_envs)]
-    for key, values in infos.items():
-        if key.startswith("_"):
-            continue
-        mask = infos.get(f"_{key}", np.ones(num_envs, dtype=bool))
-        for i in np.flatnonzero(mask):
-            out[i][key] = values[i]
-    return out
+# ----------------------------------------------------------------------------------- local processes
+def _serve(connection, factory: Callable[[], GuardedEnv]) -> None:
+    """A worker process: build the env, then answer commands until told to close (or the pipe closes)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle (it closes us)
+    try:
+        env = factory()
+        connection.send(("ok", (env.observation_space, env.action_space)))
+    except Exception:
+        connection.send(("error", traceback.format_exc()))
+        return
+    while True:
+        try:
+            command, args = connection.recv()
+        except EOFError:  # the main process is gone
+            break
+        if command == "close":
+            break
+        try:
+            connection.send(("ok", env.run(command, args)))
+        except Exception:
+            connection.send(("error", traceback.format_exc()))
+    env.close()
 
 
-class RayVectorEnv:
-    """The subset of gymnasium's vector API the trainer uses, over Ray actors (one sub-environment each)."""
+class ProcessWorkers:
+    """One spawned process per env, each answering one command at a time over its pipe."""
+
+    def __init__(self, factory: Callable[[], GuardedEnv], num_envs: int) -> None:
+        context = multiprocessing.get_context("spawn")
+        self.connections, self.processes = [], []
+        with single_threaded_children():
+            for _ in range(num_envs):
+                parent, child = context.Pipe()
+                process = context.Process(target=_serve, args=(child, factory), daemon=True)
+                process.start()
+                child.close()
+                self.connections.append(parent)
+                self.processes.append(process)
+        spaces = [self._answer(i) for i in range(num_envs)]
+        self.observation_space, self.action_space = spaces[0]
+
+    def send(self, i: int, command: str, *args) -> None:
+        try:
+            self.connections[i].send((command, args))
+        except (BrokenPipeError, ConnectionResetError, EOFError, OSError) as err:
+            raise WorkerDied(f"env worker {i} died") from err
+
+    def receive(self, timeout: float | None = None) -> list[tuple[int, Any]]:
+        """``(env index, answer)`` of every worker whose answer is ready; waits up to ``timeout`` for one."""
+        ready = multiprocessing.connection.wait(self.connections, timeout)
+        return [(i, self._answer(i)) for i, c in enumerate(self.connections) if c in ready]
+
+    def _answer(self, i: int) -> Any:
+        try:
+            status, payload = self.connections[i].recv()
+        except (EOFError, ConnectionResetError, OSError) as err:
+            raise WorkerDied(f"env worker {i} died (exit code {self.processes[i].exitcode})") from err
+        if status == "error":
+            raise WorkerError(f"env worker {i} raised:\n{payload}")
+        return payload
+
+    def close(self, kill: bool = False) -> None:
+        """Ask every worker to close its env and end (``kill``: terminate them at once).
+
+        A worker finishes the command in flight first; one that takes longer than ``CLOSE_TIMEOUT_S``
+        is terminated (never a hang).
+        """
+        for connection, process in zip(self.connections, self.processes, strict=True):
+            if not kill and process.is_alive():
+                with contextlib.suppress(OSError):
+                    connection.send(("close", ()))
+        for connection, process in zip(self.connections, self.processes, strict=True):
+            process.join(timeout=0 if kill else CLOSE_TIMEOUT_S)
+            if process.is_alive():
+                process.terminate()
+                process.join()
+            connection.close()
+
+
+# ----------------------------------------------------------------------------------------------- Ray
+class RayWorkers:
+    """One Ray actor per env (``parallel.backend=ray``), the same commands as ``ProcessWorkers``."""
 
     def __init__(self, factory: Callable[[], GuardedEnv], num_envs: int, parallel: ParallelConfig) -> None:
         ray = self._ray = connect_ray(parallel)
-        actor = ray.remote(num_cpus=1)(_EnvActor)
+        actor = ray.remote(num_cpus=1, max_restarts=0)(_EnvActor)
         self.actors = [actor.remote(factory) for _ in range(num_envs)]
-        self.num_envs = num_envs
-        self._pending: list | None = None
-        self.single_observation_space, self.single_action_space = ray.get(self.actors[0].spaces.remote())
+        self._pending: dict[Any, int] = {}
+        self.observation_space, self.action_space = self._get(0, self.actors[0].spaces.remote())
 
-    def reset(self, seed: Sequence[int] | None = None, options: dict | None = None):
-        options = dict(options or {})
-        mask = options.pop("reset_mask", np.ones(self.num_envs, dtype=bool))
-        seeds = list(seed) if seed is not None else [None] * self.num_envs
-        refs = {i: a.reset.remote(seeds[i], options or None) for i, a in enumerate(self.actors) if mask[i]}
-        results = {i: self._ray.get(ref) for i, ref in refs.items()}
-        obs = np.stack([results[i][0] if i in results else self._ray.get(self.actors[i].last.remote())
-                        for i in range(self.num_envs)])  # fmt: skip
-        return obs, _stack_infos([results[i][1] if i in results else {} for i in range(self.num_envs)])
+    def send(self, i: int, command: str, *args) -> None:
+        self._pending[self.actors[i].run.remote(command, args)] = i
 
-    def step_async(self, actions: np.ndarray) -> None:
-        self._pending = [a.step.remote(act) for a, act in zip(self.actors, actions, strict=True)]
+    def receive(self, timeout: float | None = None) -> list[tuple[int, Any]]:
+        if not self._pending:
+            return []
+        ready, _ = self._ray.wait(list(self._pending), num_returns=1, timeout=timeout)
+        return [(i, self._get(i, ref)) for ref in ready for i in [self._pending.pop(ref)]]
 
-    def step_wait(self):
-        results, self._pending = self._ray.get(self._pending), None
-        obs, rewards, terminated, truncated, infos = zip(*results, strict=True)
-        return (np.stack(obs), np.array(rewards), np.array(terminated), np.array(truncated), _stack_infos(infos))
+    def _get(self, i: int, ref) -> Any:
+        try:
+            return self._ray.get(ref)
+        except self._ray.exceptions.RayActorError as err:
+            raise WorkerDied(f"env worker {i} (a Ray actor) died") from err
+        except self._ray.exceptions.RayTaskError as err:
+            raise WorkerError(f"env worker {i} raised:\n{err}") from err
 
-    def set_attr(self, name: str, values: Sequence[Any]) -> None:
-        self._ray.get([a.set_attr.remote(name, v) for a, v in zip(self.actors, values, strict=True)])
-
-    def call(self, name: str) -> tuple[Any, ...]:
-        return tuple(self._ray.get([a.call.remote(name) for a in self.actors]))
-
-    def close(self, terminate: bool = False) -> None:
+    def close(self, kill: bool = False) -> None:
         """Kill the actors (an actor holds nothing that needs closing beyond its process)."""
-        for a in self.actors:
-            self._ray.kill(a)
+        for actor in self.actors:
+            self._ray.kill(actor)
 
 
 class _EnvActor:
-    """One guarded sub-environment in a Ray actor."""
+    """One guarded env in a Ray actor."""
 
     def __init__(self, factory: Callable[[], GuardedEnv]) -> None:
         self.env = factory()
@@ -147,29 +224,5 @@ class _EnvActor:
     def spaces(self):
         return self.env.observation_space, self.env.action_space
 
-    def reset(self, seed, options):
-        return self.env.reset(seed=seed, options=options)
-
-    def step(self, action):
-        return self.env.step(action)
-
-    def last(self):
-        return self.env.last_obs
-
-    def set_attr(self, name, value):
-        setattr(self.env, name, value)
-
-    def call(self, name):
-        return getattr(self.env, name)()
-
-
-def _stack_infos(infos: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """Per-env info dicts as the vector API's (an object array per key and its ``_key`` mask)."""
-    n, out = len(infos), {}
-    for key in dict.fromkeys(k for info in infos for k in info):
-        values, mask = np.empty(n, dtype=object), np.zeros(n, dtype=bool)
-        for i, info in enumerate(infos):
-            if key in info:
-                values[i], mask[i] = info[key], True
-        out[key], out[f"_{key}"] = values, mask
-    return out
+    def run(self, command: str, args: tuple):
+        return self.env.run(command, args)

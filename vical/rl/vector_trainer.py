@@ -1,28 +1,32 @@
 """Training with ``train.num_envs`` environments in worker processes (``vical.rl.vector``).
 
-The loop steps every env at once: one action per env (uniform during warm-up, else the policy's
-sample for that env's observation, in env order); the envs step in their workers (an episode's
-terminal work included) while the learner does ``num_envs * updates_per_step`` gradient updates on
-the transitions stored before (once more than ``warmup_steps`` are stored), so ``updates_per_step``
-keeps its meaning per collected transition and collecting overlaps with learning; then the
-``num_envs`` new transitions go into the buffer in env order. An env whose episode ended is reset before the next step
-with a seed drawn from the trainer's generator. Steps count transitions: logging, evaluation and
-checkpoints happen when the count crosses a multiple of their interval, and a run may end up to
+The envs step independently: a worker gets its next action as soon as it answers, so a fast env never
+waits for a slow one, while the run stays a function of its seed and ``num_envs``. Transitions are
+numbered by *round*: round ``r`` holds every env's ``r``-th step. The learner takes rounds in order:
+it stores round ``r``'s transitions in env order, then does ``num_envs * updates_per_step`` gradient
+updates (once more than ``warmup_steps`` transitions are stored; so ``updates_per_step`` keeps its
+meaning per collected transition), and the network after them is *version* ``r``. An env's action of
+round ``r`` is sampled from version ``r - policy_lag`` (uniform during warm-up), with noise drawn from a
+generator keyed by (seed, env, round), and an env's episode ``e`` is reset with a seed keyed by (seed,
+env, e): which env answers first never changes a number. An env may thus run up to ``policy_lag - 1``
+rounds ahead of the slowest one. Logging, evaluation and checkpoints happen after a round's updates,
+when the step count (transitions stored) crossed a multiple of their interval; a run may end up to
 ``num_envs - 1`` transitions past ``total_steps``.
 
-A checkpoint can fall in the middle of episodes: it stores each running episode's reset seed and
-actions, and a resumed run replays them in the workers to the same state (the env must be
-deterministic given its seed and actions; the replayed observations are checked against the
-stored ones). So a run killed and resumed equals the uninterrupted run, bit for bit, for the same
-seed and ``num_envs``.
+A checkpoint (after round ``r``) can fall in the middle of episodes: it stores each env's running
+episode (reset seed and actions) and the network versions that the next rounds act with; a resumed
+run replays the episodes in the workers to the same state (the env must be deterministic given its
+seed and actions; the replayed observations are checked against the stored ones). So a run killed
+and resumed equals the uninterrupted run, bit for bit, for the same seed and ``num_envs``.
 """
 
 from __future__ import annotations
 
-import contextlib
+import copy
 import logging
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
@@ -31,9 +35,13 @@ from tqdm import tqdm
 from vical.config import ConfigError
 from vical.rl.checkpoint import flatten, save_checkpoint
 from vical.rl.trainer import CHECKPOINT, Episode, Trainer, TrainResult, make_env
-from vical.rl.vector import ERROR_KEY, SEED_KEY, make_vector_env, per_env_infos
+from vical.rl.vector import ERROR_KEY, SEED_KEY, WorkerDied, make_workers
 
 log = logging.getLogger(__name__)
+
+# Streams of the keyed generators (the first word of the key after the seed).
+_ACTION_NOISE, _WARMUP_ACTION, _RESET_SEED = 1, 2, 3
+_INITIAL_VERSION = -1  # the network before any round (version r: after round r's updates)
 
 
 class WorkerDiedError(RuntimeError):
@@ -42,22 +50,79 @@ class WorkerDiedError(RuntimeError):
 
 @dataclass
 class RunningEpisode(Episode):
-    """An episode in one env: its reset seed and the actions taken so far (to replay it on resume)."""
+    """An episode in one env as stored so far: its reset seed and the actions taken (to replay it on resume)."""
 
     seed: int = 0
+    index: int = 0  # the env's episode count before it (its reset seed is keyed by it)
     env_actions: list[np.ndarray] = field(default_factory=list)
+
+
+@dataclass
+class Step:
+    """One env's answer to a step (and, when its episode ended and the run goes on, the next reset)."""
+
+    action: np.ndarray
+    env_action: np.ndarray
+    obs: np.ndarray
+    reward: float
+    terminated: bool
+    truncated: bool
+    info: dict[str, Any]
+    reset: RunningEpisode | None = None  # the env's next episode, as reset
+
+    @property
+    def ended(self) -> bool:
+        return self.terminated or self.truncated
+
+
+@dataclass
+class Worker:
+    """What one env's worker is doing: the round of its next step and the observation to act on."""
+
+    round: int
+    obs: np.ndarray | None  # None while a step or a reset is in flight
+    episodes_started: int
+    action: tuple[np.ndarray, np.ndarray] | None = None  # (policy units, env units) of the step in flight
+    reset: tuple[int, int] | None = None  # (seed, episode index) of the reset in flight
+
+
+class PolicyVersions:
+    """The policy network after each recent round, for sampling actions ``policy_lag`` rounds behind."""
+
+    def __init__(self, policy: torch.nn.Module) -> None:
+        self._acting = copy.deepcopy(policy)
+        self._loaded: int | None = None
+        self.states: dict[int, dict[str, torch.Tensor]] = {}
+
+    def keep(self, version: int, policy: torch.nn.Module) -> None:
+        self.states[version] = {k: v.detach().clone() for k, v in policy.state_dict().items()}
+
+    def forget_before(self, version: int) -> None:
+        for old in [v for v in self.states if v < version]:
+            del self.states[old]
+
+    @torch.no_grad()
+    def sample(self, version: int, obs: np.ndarray, generator: torch.Generator) -> np.ndarray:
+        if self._loaded != version:
+            self._acting.load_state_dict(self.states[version])
+            self._loaded = version
+        action, _ = self._acting.sample(torch.tensor(obs, dtype=torch.float32).unsqueeze(0), generator)
+        return action[0].numpy()
 
 
 class VectorTrainer(Trainer):
     """``Trainer`` with ``num_envs`` env workers (the env config is built in each worker)."""
 
     def __init__(self, cfg) -> None:
-        self._restored_episodes: list[dict] | None = None
+        self._restored: dict | None = None
         self._worker_died = False
         super().__init__(cfg)  # restores a checkpoint's counters, buffer and generators
         self.env.close()  # the main process keeps its env only for the spaces: the workers step theirs
-        self.num_envs = self.settings.train.num_envs
-        self.vec = make_vector_env(make_env, self.settings.env, self.num_envs, self.settings.parallel)
+        t = self.settings.train
+        self.num_envs, self.lag = t.num_envs, t.policy_lag
+        self.total_rounds = -(-t.total_steps // self.num_envs)
+        self.versions = PolicyVersions(self.agent.policy)
+        self.workers = make_workers(make_env, self.settings.env, self.num_envs, self.settings.parallel)
 
     # ---- the loop -------------------------------------------------------------------------------
     def run(self) -> TrainResult:
@@ -65,25 +130,16 @@ class VectorTrainer(Trainer):
         if self.step == 0:
             self.logger.hyperparameters(flatten(self.config))
         self._clock = (time.perf_counter(), self.step, self.updates)
-        bar = tqdm(total=t.total_steps, initial=self.step, disable=not t.progress, desc="vical-train", unit="step")
+        self.bar = tqdm(total=t.total_steps, initial=self.step, disable=not t.progress, desc="vical-train", unit="step")
         try:
-            episodes = self._resume_episodes() if self._restored_episodes else self._start(range(self.num_envs), None)
-            while self.step < t.total_steps:
-                before = self.step
-                done = self._vector_step(episodes)
-                self._periodic(before)
-                bar.update(self.num_envs)
-                for i in np.flatnonzero(done):
-                    self._log_episode(episodes[i], bar)
-                if done.any() and self.step < t.total_steps:
-                    episodes = self._start(np.flatnonzero(done), episodes)
-                if t.checkpoint_every and self.step // t.checkpoint_every > before // t.checkpoint_every:
-                    self._checkpoint(episodes)
+            self._guarded(self._start)
+            while self.next_round < self.total_rounds:
+                self._guarded(self._advance)
             self._write_agent()
         finally:
-            bar.close()
+            self.bar.close()
             self.logger.close()
-            self._close_workers()
+            self.workers.close(kill=self._worker_died)
             if self._eval_env is not None:
                 self._eval_env.close()
         return TrainResult(
@@ -91,77 +147,132 @@ class VectorTrainer(Trainer):
             self.resumed_from,
         )  # fmt: skip
 
-    def _start(self, envs, episodes: list[RunningEpisode] | None) -> list[RunningEpisode]:
-        """Reset the envs ``envs`` (indices, in order) with seeds drawn from the trainer's generator."""
-        episodes = list(episodes) if episodes is not None else [None] * self.num_envs
-        seeds = [0] * self.num_envs
-        mask = np.zeros(self.num_envs, dtype=bool)
-        for i in envs:
-            seeds[i], mask[i] = int(self.rng.integers(2**31 - 1)), True
-        obs, _ = self._guarded(lambda: self.vec.reset(seed=seeds, options={"reset_mask": mask}))
-        for i in envs:
-            episodes[i] = RunningEpisode([self._checked_obs(obs[i], "reset observation")], seed=seeds[i])
-        return episodes
+    def _start(self) -> None:
+        """Every env at the start of the round after the last one stored: reset, or replayed from a checkpoint."""
+        self.next_round = self.step // self.num_envs  # every round before it is stored and learnt from
+        self.results: dict[int, dict[int, Step]] = {}
+        self.pending_updates = 0
+        if self._restored is None:
+            self.versions.keep(_INITIAL_VERSION, self.agent.policy)
+            self.episodes = [RunningEpisode([]) for _ in range(self.num_envs)]
+            self.live = [Worker(0, None, 0) for _ in range(self.num_envs)]
+            for i in range(self.num_envs):
+                self._reset(i)
+        else:
+            self._resume()
 
-    def _vector_step(self, episodes: list[RunningEpisode]) -> np.ndarray:
-        """Act in every env, learn while they step, store their transitions in env order; which envs ended.
+    def _advance(self) -> None:
+        """One unit of work: dispatch the envs that can step, then an update, a stored round or an answer."""
+        self._dispatch()
+        if self.pending_updates:
+            self._take(self.workers.receive(timeout=0))  # answers that arrived keep their envs busy
+            self._update()
+            self.pending_updates -= 1
+            if not self.pending_updates:
+                self._finish_round()
+        elif len(self.results.get(self.next_round, {})) == self.num_envs:
+            self._store_round()
+        else:
+            self._take(self.workers.receive())
 
-        The gradient updates of this vector step run while the envs step in their workers (on the
-        transitions collected before it), so learning and collecting overlap.
-        """
-        warmup = self.step < self.settings.train.warmup_steps
-        actions = [
-            self.rng.uniform(-1.0, 1.0, self.act_dim).astype(np.float32)
-            if warmup
-            else self.agent.act(e.observations[-1])
-            for e in episodes
-        ]
-        env_actions = np.stack([self.actions.to_env(a) for a in actions])
-        self._guarded(lambda: self.vec.step_async(env_actions))
-        self._updates()
-        next_obs, rewards, terminated, truncated, infos = self._guarded(self.vec.step_wait)
-        for i, (episode, info) in enumerate(zip(episodes, per_env_infos(infos, self.num_envs), strict=True)):
-            obs = self._checked_obs(next_obs[i], "observation")
-            if not np.isfinite(rewards[i]):
-                self._diverged("reward", float(rewards[i]), self.step + 1)
-            self.buffer.add(episode.observations[-1], actions[i], float(rewards[i]), obs, bool(terminated[i]))
+    # ---- the workers ----------------------------------------------------------------------------
+    def _dispatch(self) -> None:
+        """Send its next action to every idle env whose round's policy version exists (and is in the run)."""
+        for i, w in enumerate(self.live):
+            if w.obs is None or w.round >= self.total_rounds or w.round - self.lag >= self.next_round:
+                continue
+            action = self._action(i, w.round, w.obs)
+            w.action, w.reset, w.obs = (action, self.actions.to_env(action)), None, None
+            self.workers.send(i, "step", w.action[1])
+
+    def _action(self, i: int, round_: int, obs: np.ndarray) -> np.ndarray:
+        seed = self.settings.seed
+        if round_ * self.num_envs < self.settings.train.warmup_steps:
+            rng = np.random.default_rng([seed, _WARMUP_ACTION, i, round_])
+            return rng.uniform(-1.0, 1.0, self.act_dim).astype(np.float32)
+        key = int(np.random.SeedSequence([seed, _ACTION_NOISE, i, round_]).generate_state(1, np.uint64)[0] >> 1)
+        version = max(round_ - self.lag, _INITIAL_VERSION)
+        return self.versions.sample(version, obs, torch.Generator().manual_seed(key))
+
+    def _reset(self, i: int) -> None:
+        w = self.live[i]
+        key = np.random.SeedSequence([self.settings.seed, _RESET_SEED, i, w.episodes_started])
+        w.reset, w.action = (int(key.generate_state(1)[0] % (2**31 - 1)), w.episodes_started), None
+        w.episodes_started += 1
+        self.workers.send(i, "reset", w.reset[0])
+
+    def _take(self, answers: list[tuple[int, Any]]) -> None:
+        """Record each answer: a reset gives the env its first observation, a step its round's transition."""
+        for i, answer in answers:
+            w = self.live[i]
+            if w.reset is not None:
+                (seed, index), obs = w.reset, self._checked_obs(answer[0], "reset observation")
+                episode = RunningEpisode([obs], seed=seed, index=index)
+                if w.round == 0:  # the run's first episode
+                    self.episodes[i] = episode
+                else:  # after the episode that ended in the env's last step
+                    self.results[w.round - 1][i].reset = episode
+                w.obs = obs
+                continue
+            obs, reward, terminated, truncated, info = answer
+            step = Step(*w.action, self._checked_obs(obs, "observation"), float(reward), bool(terminated),
+                        bool(truncated), dict(info))  # fmt: skip
+            self.results.setdefault(w.round, {})[i] = step
+            w.round += 1
+            if step.ended and w.round < self.total_rounds:
+                self._reset(i)
+            else:
+                w.obs = step.obs
+
+    # ---- the learner ----------------------------------------------------------------------------
+    def _store_round(self) -> None:
+        """Store the next round's transitions in env order and schedule its updates."""
+        round_ = self.results.get(self.next_round)
+        if any(s.ended and s.reset is None and self.next_round + 1 < self.total_rounds for s in round_.values()):
+            self._take(self.workers.receive())  # an env's next reset is still in flight
+            return
+        self.results.pop(self.next_round)
+        self._round_before = self.step
+        for i in range(self.num_envs):
+            step, episode = round_[i], self.episodes[i]
+            if not np.isfinite(step.reward):
+                self._diverged("reward", step.reward, self.step + 1)
+            self.buffer.add(episode.observations[-1], step.action, step.reward, step.obs, step.terminated)
             self.step += 1
-            episode.observations.append(obs)
-            episode.actions.append(actions[i])
-            episode.env_actions.append(env_actions[i])
-            episode.total_reward += float(rewards[i])
-            if ERROR_KEY in info:
+            episode.observations.append(step.obs)
+            episode.actions.append(step.action)
+            episode.env_actions.append(step.env_action)
+            episode.total_reward += step.reward
+            if ERROR_KEY in step.info:
                 log.warning(
-                    "env %d, episode seed %s: %s; the episode was cut short", i, info[SEED_KEY], info[ERROR_KEY]
-                )
-            self.logger.env_info(info, self.step)
-        return np.asarray(terminated) | np.asarray(truncated)
-
-    def _updates(self) -> None:
-        """``num_envs * updates_per_step`` updates once more than ``warmup_steps`` transitions are stored."""
+                    "env %d, episode seed %s: %s; the episode was cut short", i, step.info[SEED_KEY],
+                    step.info[ERROR_KEY],
+                )  # fmt: skip
+            self.logger.env_info(step.info, self.step)
+        self._stored = round_
         t = self.settings.train
-        if self.step > t.warmup_steps:
-            for _ in range(t.updates_per_step * self.num_envs):
-                self._update()
+        self.pending_updates = t.updates_per_step * self.num_envs if self.step > t.warmup_steps else 0
+        if not self.pending_updates:
+            self._finish_round()
 
-    def _periodic(self, before: int) -> None:
-        """Logging and evaluation when the step count crossed a multiple of their interval."""
-        t = self.settings.train
+    def _finish_round(self) -> None:
+        """After a round's updates: its network version, logging, evaluation, episode ends, checkpoint."""
+        t, before, version = self.settings.train, self._round_before, self.next_round
+        self.next_round += 1
+        self.versions.keep(version, self.agent.policy)
+        self.versions.forget_before(version + 1 - self.lag)
         if t.log_every and self.step // t.log_every > before // t.log_every:
             self._log_progress()
         if t.eval_every and self.step // t.eval_every > before // t.eval_every:
             self._evaluate()
-
-    def _close_workers(self) -> None:
-        """Stop the env workers; after one died, the others are terminated (closing politely would wait on it)."""
-        if not self._worker_died:
-            self.vec.close()
-            return
-        for process in getattr(self.vec, "processes", []):  # AsyncVectorEnv's; Ray actors are killed by close
-            process.terminate()
-        with contextlib.suppress(EOFError, BrokenPipeError, ConnectionResetError, OSError):
-            self.vec.close(terminate=True)
-        self.vec.closed = True
+        self.bar.update(self.num_envs)
+        for i, step in sorted(self._stored.items()):
+            if step.ended:
+                self._log_episode(self.episodes[i], self.bar)
+                if step.reset is not None:
+                    self.episodes[i] = step.reset
+        if t.checkpoint_every and self.step // t.checkpoint_every > before // t.checkpoint_every:
+            self._checkpoint()
 
     def _plot_env(self):
         if self._eval_env is None:
@@ -169,66 +280,75 @@ class VectorTrainer(Trainer):
         return self._eval_env
 
     def _guarded(self, call):
-        """A vector-env call; a worker process that died becomes ``WorkerDiedError`` (never a hang)."""
+        """A step of the loop; a worker process that died becomes ``WorkerDiedError`` (never a hang)."""
         try:
             return call()
-        except (EOFError, BrokenPipeError, ConnectionResetError) as err:
+        except WorkerDied as err:
             self._worker_died = True
-            raise WorkerDiedError(self._died_message()) from err
-        except Exception as err:
-            if type(err).__name__ in ("WorkerCrashedError", "RayActorError", "ActorDiedError"):
-                self._worker_died = True
-                raise WorkerDiedError(self._died_message()) from err
-            raise
+            raise WorkerDiedError(self._died_message(err)) from err
 
-    def _died_message(self) -> str:
+    def _died_message(self, err: WorkerDied) -> str:
         if not self.last_checkpoint_step:
             at = "there is no checkpoint yet: start the run again"
         else:
             resume = f"vical-train resume={self.settings.run_dir}"
             at = f"resume from its checkpoint at step {self.last_checkpoint_step}: {resume}"
-        return f"an environment worker process died (killed, or out of memory) at step {self.step}; {at}"
+        return f"an environment worker process died (killed, or out of memory; {err}) at step {self.step}; {at}"
 
     # ---- checkpoints ----------------------------------------------------------------------------
-    def _checkpoint(self, episodes: list[RunningEpisode]) -> None:
+    def _checkpoint(self) -> None:
+        """The state after the last stored round (envs that ran ahead are replayed to it on resume)."""
         self.last_checkpoint_step = self.step
         state = self._state()
         state["episodes"] = [
             {
                 "seed": e.seed,
+                "index": e.index,
                 "total_reward": e.total_reward,
                 "observations": _tensor(e.observations),
                 "actions": _tensor(e.actions),
                 "env_actions": _tensor(e.env_actions),
             }
-            for e in episodes
+            for e in self.episodes
         ]
+        state["policy_versions"] = dict(self.versions.states)
         save_checkpoint(state, self.settings.run_dir / CHECKPOINT)
 
     def _restore(self, state: dict) -> None:
         super()._restore(state)
-        if "episodes" not in state:
-            raise ConfigError(f"{self.settings.resume / CHECKPOINT} holds no env workers' episodes (train.num_envs=1?)")
-        self._restored_episodes = state["episodes"]
+        if "episodes" not in state or "policy_versions" not in state:
+            raise ConfigError(
+                f"{self.settings.resume / CHECKPOINT} holds no env workers' episodes and policy versions (a run with "
+                "train.num_envs=1, or written by an older vical): resume it with its own num_envs, or start again"
+            )
+        self._restored = state
 
-    def _resume_episodes(self) -> list[RunningEpisode]:
+    def _resume(self) -> None:
         """Replay every env's running episode in its worker; check that it reaches the stored observation."""
+        self.versions.states = {int(v): s for v, s in self._restored["policy_versions"].items()}
         saved = [
-            {k: v.numpy() if isinstance(v, torch.Tensor) else v for k, v in s.items()} for s in self._restored_episodes
+            {k: v.numpy() if isinstance(v, torch.Tensor) else v for k, v in s.items()}
+            for s in self._restored["episodes"]
         ]
-        self._guarded(lambda: self.vec.set_attr("replay_script", [(s["seed"], list(s["env_actions"])) for s in saved]))
-        reached = self._guarded(lambda: self.vec.call("replay"))
-        episodes = []
+        self.episodes, self.live = [], []
+        for i, s in enumerate(saved):
+            self.workers.send(i, "replay", int(s["seed"]), list(s["env_actions"]))
+            self.episodes.append(RunningEpisode(
+                list(s["observations"]), list(s["actions"]), s["total_reward"], seed=int(s["seed"]),
+                index=int(s["index"]), env_actions=list(s["env_actions"]),
+            ))  # fmt: skip
+            self.live.append(Worker(self.next_round, None, int(s["index"]) + 1))
+        reached: dict[int, Any] = {}
+        while len(reached) < self.num_envs:
+            reached.update(self.workers.receive())
         for i, s in enumerate(saved):
             if not np.array_equal(np.asarray(reached[i], np.float32).ravel(), s["observations"][-1]):
                 raise ConfigError(
                     f"env {i} did not replay to its checkpointed state (its episode of seed {s['seed']}): the env is "
                     "not deterministic given its seed and actions, so this run cannot resume exactly"
                 )
-            episode = RunningEpisode(list(s["observations"]), list(s["actions"]), s["total_reward"], seed=s["seed"])
-            episode.env_actions = list(s["env_actions"])
-            episodes.append(episode)
-        return episodes
+            self.live[i].obs = s["observations"][-1]
+        self._restored = None
 
 
 def _tensor(rows: list[np.ndarray]) -> torch.Tensor:
