@@ -28,10 +28,10 @@ from typing import Any
 
 import numpy as np
 
-from vical.data import ImuNoise
+from vical.data import ImuNoise, Recording
 from vical.geometry import CameraModel
 from vical.geometry.transforms import invert_transform
-from vical.io.errors import KalibrFormatError, read_text_file
+from vical.io.errors import FormatError, KalibrFormatError, read_text_file
 from vical.io.kalibr import (
     DISTORTION_ALIASES,
     EXTRINSIC_KEYS,
@@ -206,6 +206,30 @@ def _check_chain(chain: CameraChain, path: str) -> None:
                 f"{path} [{camera.name}]: T_cn_cnm1 disagrees with T_cam_imu of {camera.name} and {previous.name} "
                 f"by {np.degrees(angle):.3f} deg and {shift * 1e3:.2f} mm (more than rounding); the file mixes two "
                 "calibrations: keep the one Kalibr wrote, or delete T_cn_cnm1 (it follows from the T_cam_imu)"
+            )
+
+
+def check_chain_fits(chain: CameraChain, path: str | os.PathLike, recording: Recording) -> None:
+    """Refuse a camchain whose cameras the recording lacks, or whose resolution differs from their images'.
+
+    Image sizes come from ``recording.metadata["image_sizes"]`` (EuRoC folders and bags) or the
+    stored images.
+    """
+    missing = [name for name in chain.names if name not in recording.camera_names]
+    if missing:
+        raise FormatError(
+            f"{path} names {missing[0]}, but the recording has only {', '.join(recording.camera_names)}; give the "
+            "recording every camera of the chain (EuRoC camN folders, one bag topic per camera) or a camchain of these"
+        )
+    sizes = recording.metadata.get("image_sizes", {})
+    for camera in chain.cameras:
+        images = recording.frames_of(camera.name).images
+        size = sizes.get(camera.name) or (None if images is None else [images.shape[2], images.shape[1]])
+        expected = [camera.camera.width, camera.camera.height]
+        if size is not None and list(size) != expected:
+            raise FormatError(
+                f"{path} [{camera.name}]: resolution {expected[0]} x {expected[1]} px, but {camera.name}'s images are "
+                f"{size[0]} x {size[1]} px; give the camchain of this camera at this resolution"
             )
 
 
