@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -13,9 +13,9 @@ from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.observations import collect_observations
 from vical.calib.result import CalibrationResult
 from vical.calib.uncertainty import correlations, weak_parameters
-from vical.calib.visual_inertial import ViOptions, run_visual_inertial
+from vical.calib.visual_inertial import CameraInput, ViOptions, run_visual_inertial
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target
-from vical.geometry import CameraModel
+from vical.geometry import CameraModel, invert_transform
 
 
 def calibrate_extrinsics(
@@ -46,7 +46,7 @@ def calibrate_extrinsics(
     return run_visual_inertial(
         "extrinsic", observations, imu, target, camera, imu_noise or ImuNoise(), initial_T_cam_imu,
         initial_time_offset, options or ViOptions(), start,
-    )  # fmt: skip
+    )[0]  # fmt: skip
 
 
 def calibrate_joint(
@@ -76,7 +76,7 @@ def calibrate_joint(
     result = run_visual_inertial(
         "joint", observations, imu, target, intrinsic.camera, imu_noise or ImuNoise(), initial_T_cam_imu,
         initial_time_offset, opts, start,
-    )  # fmt: skip
+    )[0]  # fmt: skip
     coverage = image_coverage_warnings(observations, (intrinsic.camera.width, intrinsic.camera.height))
     return replace(result, warnings=coverage + result.warnings)
 
@@ -131,3 +131,87 @@ def _combine(intrinsic: CalibrationResult, extrinsic: CalibrationResult, elapsed
         solve_time=elapsed,
         warnings=intrinsic.warnings + extrinsic.warnings,
     )
+
+
+@dataclass(frozen=True)
+class RigCalibration:
+    """A camera rig + IMU calibrated in one graph: each camera's result, by Kalibr name, the first camera first.
+
+    Each result holds its camera's intrinsics, ``T_cam_imu``, time offset and their covariance with the
+    shared IMU biases; the relative poses follow (``T_cn_cnm1``).
+    """
+
+    results: dict[str, CalibrationResult]
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.results)
+
+    def T_cn_cnm1(self, name: str) -> np.ndarray | None:
+        """(4, 4) Kalibr's ``T_cn_cnm1`` of camera ``name``: previous camera's points into its frame (None: first)."""
+        index = self.names.index(name)
+        if index == 0:
+            return None
+        previous = self.results[self.names[index - 1]].T_cam_imu
+        return self.results[name].T_cam_imu @ invert_transform(previous)
+
+
+def calibrate_rig(
+    frames: dict[str, CameraFrames],
+    imu: ImuSamples,
+    target: Target,
+    task: str = "joint",
+    model: str = "radtan",
+    image_sizes: dict[str, tuple[int, int]] | None = None,
+    imu_noise: ImuNoise | None = None,
+    cameras: dict[str, CameraModel] | None = None,
+    initial_T_cam_imu: dict[str, np.ndarray] | None = None,
+    initial_time_offsets: dict[str, float] | None = None,
+    options: ViOptions | None = None,
+) -> RigCalibration:
+    """Every camera of a rig and the IMU in one factor graph (``task`` ``"joint"`` or ``"extrinsic"``).
+
+    Args:
+        frames: each camera's frames by name, the first camera (its frames set the IMU states) first;
+            the others' views join the first camera's simultaneous ones (within 5 ms: one trigger).
+        cameras: known intrinsics by name (needed by ``"extrinsic"``; the joint task's initial guess).
+        image_sizes: (W, H) [px] by name, for the joint task's intrinsic initialisation.
+        initial_T_cam_imu, initial_time_offsets: guesses by name (the translation is used; the rotation
+            and offset come in closed form); a camera without one takes its translation from the first
+            camera's guess through their simultaneous views.
+        Other arguments as in ``calibrate_joint``.
+    """
+    start = time.perf_counter()
+    opts = options or ViOptions()
+    if task not in ("joint", "extrinsic"):
+        raise CalibrationError(f"a rig is calibrated by the joint or the extrinsic task, not {task!r}")
+    models = {name: _rig_camera(name, frames[name], target, task, model, image_sizes, cameras, opts) for name in frames}
+    observations = {name: collect_observations(f, target) for name, f in frames.items()}
+    guesses, offsets = initial_T_cam_imu or {}, initial_time_offsets or {}
+    first, *rest = frames
+    others = [CameraInput(n, observations[n], models[n], guesses.get(n), offsets.get(n, 0.0)) for n in rest]
+    results = run_visual_inertial(
+        task, observations[first], imu, target, models[first], imu_noise or ImuNoise(), guesses.get(first),
+        offsets.get(first, 0.0), opts, start, others,
+    )  # fmt: skip
+    if task == "joint":
+        results = [
+            replace(
+                r, warnings=image_coverage_warnings(observations[n], (r.camera.width, r.camera.height)) + r.warnings
+            )
+            for n, r in zip(frames, results, strict=True)
+        ]
+    return RigCalibration(dict(zip(frames, results, strict=True)))
+
+
+def _rig_camera(name, frames, target, task, model, image_sizes, cameras, opts) -> CameraModel:
+    """A camera's known intrinsics (extrinsic task) or its intrinsic calibration (joint task's start)."""
+    known = (cameras or {}).get(name)
+    if task == "extrinsic":
+        if known is None:
+            raise CalibrationError(f"the extrinsic task needs the intrinsics of every camera; {name} has none")
+        return known
+    size = (image_sizes or {}).get(name)
+    return calibrate_intrinsics(
+        frames, target, model, size, known, opts.pixel_sigma, opts.huber_k, frame_stride=opts.frame_stride
+    ).camera

@@ -49,6 +49,8 @@ class CornerKeys:
         extrinsic: ``Pose3`` key of ``T_imu_cam``.
         delta: ``Vector1`` key [s] of the time-offset correction.
         camera: ``Vector8`` key of the camera parameters.
+        shifts: (F,) [s] constant time from each frame's state to its exposure (another camera of a
+            rig, whose frames join the first camera's states), added to ``delta``; needs ``delta``.
     """
 
     poses: Sequence[int]
@@ -57,6 +59,7 @@ class CornerKeys:
     extrinsic: int | None = None
     delta: int | None = None
     camera: int | None = None
+    shifts: np.ndarray | None = None
 
 
 def _se3_exp(xi: np.ndarray) -> np.ndarray:
@@ -152,6 +155,8 @@ class CornerFactors:
             raise ValueError("one pose key per observed frame")
         if (keys.delta is None) != (keys.velocities is None) or (keys.delta is None) != (keys.omegas is None):
             raise ValueError("the time-offset correction needs the velocities and the gyro rates, and only it")
+        if keys.shifts is not None and (keys.delta is None or len(keys.shifts) != len(keys.poses)):
+            raise ValueError("per-frame time shifts need the time-offset correction and one shift per frame")
         self.camera, self.keys = camera, keys
         self.sigma_px, self.huber_k = float(sigma_px), huber_k
         self.points = np.concatenate([o.points for o in observations])
@@ -225,7 +230,12 @@ class CornerFactors:
         if self.keys.delta is None:
             return np.tile(np.eye(4), (F, 1, 1))
         twist = self._twists(inputs)
-        return _se3_exp(twist * inputs.delta)
+        return _se3_exp(twist * self._times(inputs)[:, None])
+
+    def _times(self, inputs: _Inputs) -> np.ndarray:
+        """(F,) [s] time from each frame's state to its exposure: the correction plus the frame's shift."""
+        shifts = np.zeros(len(inputs.poses)) if self.keys.shifts is None else self.keys.shifts
+        return shifts + inputs.delta
 
     def _twists(self, inputs: _Inputs) -> np.ndarray:
         body_velocity = np.einsum("nji,nj->ni", inputs.poses[:, :3, :3], inputs.velocities)
@@ -273,10 +283,11 @@ class CornerFactors:
         # and with v; either change shifts the exposure pose by delta times it.
         twist_from_pose = np.zeros((len(twist), 6, 6))
         twist_from_pose[:, 3:, :3] = skew_batch(body_velocity)
-        result.to_pose = result.to_pose + inputs.delta * (to_camera @ twist_from_pose)
+        dt = self._times(inputs)[:, None, None]
+        result.to_pose = result.to_pose + dt * (to_camera @ twist_from_pose)
         twist_from_velocity = np.zeros((len(twist), 6, 3))
         twist_from_velocity[:, 3:, :] = R_T
-        result.to_velocity = inputs.delta * (to_camera @ twist_from_velocity)
+        result.to_velocity = dt * (to_camera @ twist_from_velocity)
         result.to_delta = to_camera @ twist[:, :, None]
 
     def _huber(self, raw: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:

@@ -184,15 +184,19 @@ def _rolling_shutter(
     target: Target,
     excitation: Excitation,
     T_cam_imu: np.ndarray,
+    T_rig_cam_imu: np.ndarray,
     T_world_target: np.ndarray,
     t: float,
     uv: np.ndarray,
     ids: np.ndarray,
     readout: float,
 ) -> np.ndarray:
-    """Pixels (K, 2) of corners ``ids`` each seen at its row's exposure time (one fixed-point step from ``uv``)."""
+    """Pixels (K, 2) of corners ``ids`` each seen at its row's exposure time (one fixed-point step from ``uv``).
+
+    ``T_rig_cam_imu`` is the extrinsic of the camera whose motion the excitation describes (the first one).
+    """
     times = t + readout * (uv[:, 1] / camera.height - 0.5)
-    T_world_cam = imu_kinematics(excitation, target, T_cam_imu, times)[0] @ np.linalg.inv(T_cam_imu)
+    T_world_cam = imu_kinematics(excitation, target, T_rig_cam_imu, times)[0] @ np.linalg.inv(T_cam_imu)
     T_cam_target = np.linalg.inv(T_world_cam) @ T_world_target  # (K, 4, 4)
     p = np.einsum("kij,kj->ki", T_cam_target[:, :3, :3], target.points[ids]) + T_cam_target[:, :3, 3]
     return camera.project(p)[0]
@@ -233,6 +237,7 @@ def make_recording(
     camera_rate_hz: float = 10.0,
     seed: int = 0,
     rolling_shutter: float = 0.0,
+    other_cameras: dict[str, RigCamera] | None = None,
 ) -> Recording:
     """A camera + IMU recording of the analytic motion, optionally noisy.
 
@@ -252,6 +257,8 @@ def make_recording(
         rolling_shutter: [s] readout time of a rolling shutter (0: global shutter): image row ``v``
             is exposed ``rolling_shutter * (v / height - 0.5)`` after the frame's timestamp, an effect
             the calibrator does not model.
+        other_cameras: a rig's other cameras (``cam1``, ...) on the same trigger: each one's frames
+            carry the same stamps and show the scene at IMU time ``t_cam + its time_offset``.
     """
     if abs(time_offset) >= 0.1:
         raise ValueError(f"time_offset must be within +-0.1 s for this generator, got {time_offset}")
@@ -275,18 +282,10 @@ def make_recording(
     t_cam_ns = np.arange(
         int(0.1 * NS_PER_S), int((duration - 0.1) * NS_PER_S) + 1, round(NS_PER_S / camera_rate_hz), dtype=np.int64
     )
-    t_exposure = t_cam_ns / NS_PER_S + time_offset
-    T_wi_exposure = imu_kinematics(excitation, target, T_cam_imu, t_exposure)[0]
     T_world_target = _T_world_target(target)
-    T_imu_cam = np.linalg.inv(T_cam_imu)
-    corners, ids = [], []
-    for t, T in zip(t_exposure, T_wi_exposure, strict=True):
-        uv, i = _observe(camera, target, T @ T_imu_cam, T_world_target)
-        if rolling_shutter and len(i):
-            uv = _rolling_shutter(camera, target, excitation, T_cam_imu, T_world_target, t, uv, i, rolling_shutter)
-        corners.append(uv + rng.normal(0.0, pixel_sigma, size=uv.shape) if pixel_sigma > 0 else uv)
-        ids.append(i)
-
+    scene = (excitation, target, T_cam_imu, T_world_target, pixel_sigma, rolling_shutter, rng)
+    corners, ids = _camera_frames(scene, RigCamera(camera, T_cam_imu, time_offset), t_cam_ns)
+    others = {name: _camera_frames(scene, rig, t_cam_ns) for name, rig in (other_cameras or {}).items()}
     truth = SensorTruth(camera, T_cam_imu, float(time_offset), noise, gb, ab)
     trajectory = Trajectory(EPOCH_NS + t_imu_ns, T_wi, v_w, gyro_true)
     return Recording(
@@ -299,4 +298,42 @@ def make_recording(
         path_length=float(np.sum(np.linalg.norm(np.diff(T_wi[:, :3, 3], axis=0), axis=1))),
         duration=float(duration),
         metadata={"source": "vical.calib.synthetic", "seed": int(seed), "pixel_sigma": float(pixel_sigma)},
+        other_frames={name: CameraFrames(EPOCH_NS + t_cam_ns, *frames) for name, frames in others.items()},
+        other_truths={
+            name: SensorTruth(rig.camera, rig.T_cam_imu, float(rig.time_offset), noise, gb, ab)
+            for name, rig in (other_cameras or {}).items()
+        },
     )
+
+
+@dataclass(frozen=True)
+class RigCamera:
+    """One camera of a rig: its model, ``T_cam_imu`` (4, 4) and time offset [s] (Kalibr's sign), |.| < 0.1 s."""
+
+    camera: CameraModel
+    T_cam_imu: np.ndarray
+    time_offset: float = 0.0
+
+
+def _camera_frames(scene: tuple, rig: RigCamera, t_cam_ns: np.ndarray) -> tuple[list, list]:
+    """Corners (K, 2) [px] and ids (K,) per frame of one camera at stamps ``t_cam_ns`` [ns since the start].
+
+    The excitation moves the first camera (``T_rig_cam_imu``); every camera rides on the IMU pose it gives.
+    """
+    excitation, target, T_rig_cam_imu, T_world_target, pixel_sigma, rolling_shutter, rng = scene
+    if abs(rig.time_offset) >= 0.1:
+        raise ValueError(f"time_offset must be within +-0.1 s for this generator, got {rig.time_offset}")
+    T_cam_imu = np.asarray(rig.T_cam_imu, float)
+    t_exposure = t_cam_ns / NS_PER_S + rig.time_offset
+    T_wi_exposure = imu_kinematics(excitation, target, T_rig_cam_imu, t_exposure)[0]
+    T_imu_cam = np.linalg.inv(T_cam_imu)
+    corners, ids = [], []
+    for t, T in zip(t_exposure, T_wi_exposure, strict=True):
+        uv, i = _observe(rig.camera, target, T @ T_imu_cam, T_world_target)
+        if rolling_shutter and len(i):
+            uv = _rolling_shutter(
+                rig.camera, target, excitation, T_cam_imu, T_rig_cam_imu, T_world_target, t, uv, i, rolling_shutter
+            )
+        corners.append(uv + rng.normal(0.0, pixel_sigma, size=uv.shape) if pixel_sigma > 0 else uv)
+        ids.append(i)
+    return corners, ids

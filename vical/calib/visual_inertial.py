@@ -7,6 +7,8 @@ Layout (navigation frame = target frame, so no gauge prior is needed):
 - shared: ``E`` = ``T_imu_cam`` (``Pose3``), gravity direction ``G`` (``Unit3``, target frame),
   time-offset correction ``D`` [s] (``tau = tau0 + D``), and in the joint task the camera
   parameters ``K`` (``Vector8``);
+- a rig's other cameras ``c`` (``vical.calib.rig``): their own ``E_c``, ``D_c`` (and ``K_c``); their frames
+  join the states of the first camera's simultaneous frames;
 - factors: one corner factor per frame on ``(X_i, V_i, E, D[, K])``, which projects the known
   target points from the pose at the exposure instant ``X_i Exp([omega_i; R_i^T V_i] D) E``
   (``vical.calib.corner_factors``), ``CombinedImuFactorWithGravityDirection`` between consecutive
@@ -20,7 +22,7 @@ velocities by finite differences; gravity from the mean specific force.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import gtsam
 import numpy as np
@@ -35,6 +37,7 @@ from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.observations import FrameObservation
 from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats
+from vical.calib.rig import OtherCamera, initialise_other, pair, prepare_other
 from vical.calib.robust_covariance import robust_covariance, widen
 from vical.calib.solver import covariance_or_unobservable, optimize
 from vical.calib.time_alignment import align, rotation_increments
@@ -138,6 +141,7 @@ class _Problem:
     sigma_px: float = 1.0
     imu_noise_scale: float = 1.0  # a posteriori / declared IMU noise (the variance factors' product)
     warnings: list[str] = field(default_factory=list)
+    others: list[OtherCamera] = field(default_factory=list)  # a rig's other cameras
 
 
 @dataclass
@@ -229,6 +233,9 @@ class _Graph:
     state_times: np.ndarray  # (S,) [s] IMU clock
     corners: CornerFactors
     first_corner_factor: int  # index in the graph of the first corner factor (the IMU factors come first)
+    # per other camera: (camera, its corner factors, their states, their recording frame indices)
+    others: list[tuple[OtherCamera, CornerFactors, np.ndarray, np.ndarray]] = field(default_factory=list)
+    factor_states: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # state of each factor, -1: none
 
 
 def _states_inside_imu(problem: _Problem, tau0: float) -> list[int]:
@@ -305,7 +312,49 @@ def _build(problem: _Problem, est: _Estimate, joint: bool) -> _Graph:
     first_corner_factor = graph.size()
     for factor in corners.factors():
         graph.add(factor)
-    return _Graph(graph, values, states, imu_factors, times, corners, first_corner_factor)
+    factor_states = [*range(len(imu_factors)), -1, *range(len(states))]
+    others = []
+    for other in problem.others:
+        factors, paired, frames = _other_corner_factors(problem, other, states, times, est, joint, values)
+        for factor in factors.factors():
+            graph.add(factor)
+        factor_states += paired.tolist()
+        if not problem.options.estimate_time_offset:  # its offset stays at the guess
+            graph.add(
+                gtsam.PriorFactorVector(_key("d", other.index), np.zeros(1), gtsam.noiseModel.Isotropic.Sigma(1, 1e-9))
+            )
+            factor_states.append(-1)
+        others.append((other, factors, paired, np.array([other.observations[j].index for j in frames], np.int64)))
+    return _Graph(
+        graph, values, states, imu_factors, times, corners, first_corner_factor, others, np.array(factor_states)
+    )
+
+
+def _other_corner_factors(
+    problem: _Problem, other: OtherCamera, states: list[int], times: np.ndarray, est: _Estimate, joint: bool, values
+) -> tuple[CornerFactors, np.ndarray, np.ndarray]:
+    """Another camera's variables and corner factors on the states of its simultaneous first-camera frames."""
+    values.insert(_key("e", other.index), gtsam.Pose3(invert_transform(other.T_cam_imu)))
+    values.insert(_key("d", other.index), np.zeros(1))
+    if joint:
+        values.insert(_key("k", other.index), other.camera.parameters)
+    paired, frames = pair(problem.frame_times[states], other.frame_times)
+    if len(paired) < 3:
+        raise CalibrationError(
+            f"{other.name}: only {len(paired)} of its views were taken with a view of the first camera inside the IMU "
+            "span; the cameras of a rig are calibrated together when they are triggered together"
+        )
+    keys = CornerKeys(
+        poses=[_key("x", n) for n in paired],
+        velocities=[_key("v", n) for n in paired],
+        omegas=interpolate(problem.t_imu, problem.gyro, times[paired]) - est.gyro_bias,
+        extrinsic=_key("e", other.index),
+        delta=_key("d", other.index),
+        camera=_key("k", other.index) if joint else None,
+        shifts=other.frame_times[frames] + other.tau0 - times[paired],
+    )
+    observations = [other.observations[j] for j in frames]
+    return CornerFactors(observations, other.camera, keys, other.sigma_px, problem.options.huber_k), paired, frames
 
 
 # ---------------------------------------------------------------------------------------- solve
@@ -330,6 +379,8 @@ def _solve_rounds(problem: _Problem, est: _Estimate, joint: bool):
         new = _estimate_of(solution.values, est)
         correction = new.tau0 - est.tau0
         problem.camera = _camera_of(solution.values, problem, joint)
+        for other in problem.others:
+            _update_other(other, solution.values, joint)
         if not problem.options.estimate_time_offset or abs(correction) < RECENTRE_OFFSET:
             return g, solution, new, iterations
         est = new
@@ -337,15 +388,26 @@ def _solve_rounds(problem: _Problem, est: _Estimate, joint: bool):
     return g, solution, new, iterations
 
 
+def _update_other(other: OtherCamera, values: gtsam.Values, joint: bool) -> None:
+    """Another camera's estimates from the solution: its extrinsic, offset (the correction folded in), camera."""
+    other.T_cam_imu = invert_transform(values.atPose3(_key("e", other.index)).matrix())
+    other.tau0 += float(values.atVector(_key("d", other.index))[0])
+    if joint:
+        other.camera = other.camera.with_parameters(values.atVector(_key("k", other.index)))
+
+
 def _noise_factors(g: _Graph, values: gtsam.Values) -> tuple[float, float]:
-    """(camera, IMU): the sensors' a posteriori noise over the noise they were weighted with."""
+    """(cameras, IMU): the sensors' a posteriori noise over the noise they were weighted with."""
     linear = g.graph.linearize(values)
     ordering = gtsam.Ordering.ColamdGaussianFactorGraph(linear)
     imu = range(len(g.imu_factors))
-    corners = range(g.first_corner_factor, linear.size())
+    corners = np.flatnonzero(g.factor_states >= 0)
+    corners = corners[corners >= g.first_corner_factor]
     chi2_imu = 2.0 * sum(f.error(values) for _, f, _ in g.imu_factors)
     s2_imu = variance_factor(chi2_imu, IMU_RESIDUAL_DIM * len(imu), used_dof(linear, imu, ordering))
-    s2_camera = variance_factor(g.corners.chi2(values), 2 * len(g.corners.points), used_dof(linear, corners, ordering))
+    all_corners = [g.corners] + [entry[1] for entry in g.others]
+    chi2 = sum(c.chi2(values) for c in all_corners)
+    s2_camera = variance_factor(chi2, 2 * sum(len(c.points) for c in all_corners), used_dof(linear, corners, ordering))
     return float(np.sqrt(s2_camera)), float(np.sqrt(s2_imu))
 
 
@@ -370,6 +432,8 @@ def _reweighted_solve(problem: _Problem, g: _Graph, solution, est: _Estimate, jo
         # s^2 (s < 1) and s^1.5 (s > 1) reach the truth in two or three rounds; an overshoot comes back.
         step = s_imu ** (REWEIGHT_EXPONENT_DOWN if s_imu < 1 else REWEIGHT_EXPONENT_UP)
         problem.sigma_px *= s_camera
+        for other in problem.others:
+            other.sigma_px *= s_camera
         problem.noise = problem.noise.scaled(step)
         problem.imu_noise_scale *= step
         g, solution, est, more = _solve_rounds(problem, est, joint)
@@ -426,28 +490,32 @@ def _extrinsic_jacobian(T_cam_imu: np.ndarray) -> np.ndarray:
 
 
 def _clusters(g: _Graph, num_factors: int) -> np.ndarray:
-    """The time window (``CLUSTER_SECONDS``) of every factor of the graph; -1 for the bias prior."""
+    """The time window (``CLUSTER_SECONDS``) of every factor of the graph; -1 for the priors.
+
+    IMU factor n joins states n and n + 1 (window of state n); a corner factor, its frame's state's.
+    """
     window = np.floor((g.state_times - g.state_times[0]) / CLUSTER_SECONDS).astype(np.int64)
-    clusters = np.full(num_factors, -1, dtype=np.int64)
-    clusters[: len(g.imu_factors)] = window[:-1]  # IMU factor n joins states n and n + 1
-    clusters[g.first_corner_factor :] = window  # corner factor n: the frame of state n
-    return clusters
+    states = g.factor_states[:num_factors]
+    return np.where(states >= 0, window[np.maximum(states, 0)], -1)
 
 
-def _parameter_covariance(g: _Graph, values: gtsam.Values, est: _Estimate, joint: bool, fixed_offset: bool):
+def _parameter_covariance(
+    g: _Graph, values: gtsam.Values, T_cam_imu: np.ndarray, joint: bool, fixed_offset: bool, index: int = 0
+):
     """(P, P) covariance in the order of the result's parameter names and its widening (P,) over the noise model's.
 
-    The noise model's covariance widened wherever the cluster-robust one (``vical.calib.robust_covariance``)
-    is larger; a fixed time offset gets zero variance.
+    Of camera ``index``'s variables (0: the first camera's) and the first bias. The noise model's covariance
+    widened wherever the cluster-robust one (``vical.calib.robust_covariance``) is larger; a fixed time offset
+    gets zero variance.
     """
-    offset_keys = [] if fixed_offset else [D_KEY]
-    keys = ([K_KEY] if joint else []) + [E_KEY, *offset_keys, _key("b", 0)]
+    offset_keys = [] if fixed_offset else [_key("d", index)]
+    keys = ([_key("k", index)] if joint else []) + [_key("e", index), *offset_keys, _key("b", 0)]
     linear = g.graph.linearize(values)
     model = covariance_or_unobservable(linear, values, keys)
     robust = robust_covariance(linear, values, keys, _clusters(g, linear.size()))
     cov = model if robust is None else widen(model, robust)
     offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
-    blocks = ([np.eye(8)] if joint else []) + [_extrinsic_jacobian(est.T_cam_imu), offset_block, np.eye(6)]
+    blocks = ([np.eye(8)] if joint else []) + [_extrinsic_jacobian(T_cam_imu), offset_block, np.eye(6)]
     J = np.zeros((sum(b.shape[0] for b in blocks), cov.shape[0]))
     r = c = 0
     for b in blocks:
@@ -501,7 +569,9 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
     joint = task == "joint"
     values = solution.values
     camera = problem.camera
-    covariance, widening = _parameter_covariance(g, values, est, joint, not problem.options.estimate_time_offset)
+    covariance, widening = _parameter_covariance(
+        g, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset
+    )
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
     found = correlations(names, covariance)
     problem.warnings += _widening_warning(names, widening) + correlation_warnings(found)
@@ -539,6 +609,62 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
     )
 
 
+def _other_result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, entry, first: CalibrationResult):
+    """Another camera's result: its parameters with the shared biases, its residuals, the shared IMU residuals."""
+    other, factors, paired, frame_index = entry
+    joint = task == "joint"
+    values = solution.values
+    covariance, widening = _parameter_covariance(
+        g, values, other.T_cam_imu, joint, not problem.options.estimate_time_offset, other.index
+    )
+    camera = other.camera
+    names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
+    found = correlations(names, covariance)
+    notes = other.warnings + _widening_warning(names, widening) + correlation_warnings(found)
+    dropped = len(other.observations) - len(paired)
+    if dropped:
+        notes.append(f"{other.name}: {dropped} views without a simultaneous view of the first camera were not used")
+    estimate = np.concatenate(
+        ([camera.intrinsics, camera.dist] if joint else [])
+        + [np.zeros(3), other.T_cam_imu[:3, 3], [other.tau0], est.accel_bias, est.gyro_bias]
+    )
+    residuals = factors.residuals(values)
+    return replace(
+        first,
+        camera=camera,
+        T_cam_imu=other.T_cam_imu,
+        time_offset=other.tau0,
+        estimate=estimate,
+        covariance=covariance,
+        weak_parameters=weak_parameters(names, covariance, camera),
+        correlations=found,
+        reprojection=ResidualStats.of(residuals),
+        reprojection_residuals=residuals,
+        reprojection_frames=frame_index[factors.frame_of],
+        pixel_sigma=other.sigma_px,
+        num_frames=len(paired),
+        warnings=notes + unobservable_warnings(names, covariance),
+    )
+
+
+@dataclass(frozen=True)
+class CameraInput:
+    """One camera of a rig for the camera-IMU solve.
+
+    Attributes:
+        name: its Kalibr name (``cam1``, ...).
+        observations: its frames' detections; camera: its model (the intrinsic stage's, or known).
+        initial_T_cam_imu: (4, 4) guess whose translation is used, or None (from the first camera's).
+        initial_time_offset: [s] centre of its time-offset scan.
+    """
+
+    name: str
+    observations: list[FrameObservation]
+    camera: CameraModel
+    initial_T_cam_imu: np.ndarray | None = None
+    initial_time_offset: float = 0.0
+
+
 def run_visual_inertial(
     task: str,
     observations: list[FrameObservation],
@@ -550,23 +676,47 @@ def run_visual_inertial(
     initial_time_offset: float,
     options: ViOptions,
     start: float,
-) -> CalibrationResult:
-    """Shared pipeline of the extrinsic (``task="extrinsic"``) and joint (``task="joint"``) solves."""
-    check_model(camera.distortion)
-    if camera.distortion_center_offset.any():
-        raise CalibrationError("the calibrator's camera models have the distortion centre at the principal point")
+    others: list[CameraInput] | None = None,
+) -> list[CalibrationResult]:
+    """Shared pipeline of the extrinsic (``task="extrinsic"``) and joint (``task="joint"``) solves.
+
+    Returns the first camera's result, then one per camera of ``others`` (a rig in one graph).
+    """
+    others = others or []
+    for c in [camera] + [o.camera for o in others]:
+        check_model(c.distortion)
+        if c.distortion_center_offset.any():
+            raise CalibrationError("the calibrator's camera models have the distortion centre at the principal point")
     T_guess = nominal_T_cam_imu() if initial_T_cam_imu is None else np.asarray(initial_T_cam_imu, float)
     if T_guess.shape != (4, 4):
         raise CalibrationError(f"initial_T_cam_imu must be a 4 x 4 transform, got shape {T_guess.shape}")
     noise_warnings = check_imu_noise(imu_noise)
     observations = observations[:: options.frame_stride]
-    corners = sum(len(o.ids) for o in observations)
-    check_memory(len(observations), corners, options.memory_limit_mb, options.frame_stride)
+    frames = len(observations) + sum(len(o.observations[:: options.frame_stride]) for o in others)
+    corners = sum(len(o.ids) for o in observations) + sum(len(f.ids) for o in others for f in o.observations)
+    check_memory(frames, corners, options.memory_limit_mb, options.frame_stride)
     problem = _prepare(observations, imu, camera, target, imu_noise, options, float(initial_time_offset))
     problem.warnings += noise_warnings
     est = _initial_estimate(problem, T_guess, float(initial_time_offset))
-    g, solution, est, iterations = _solve_rounds(problem, est, task == "joint")
-    g, solution, est, more = _reweighted_solve(problem, g, solution, est, task == "joint")
+    problem.others = [_initial_other(problem, est, index, other) for index, other in enumerate(others, start=1)]
+    joint = task == "joint"
+    g, solution, est, iterations = _solve_rounds(problem, est, joint)
+    g, solution, est, more = _reweighted_solve(problem, g, solution, est, joint)
     problem.warnings += _span_warnings(problem, g) + _gap_warnings(g.state_times)
     problem.warnings += _imu_noise_warning(problem.imu_noise_scale)
-    return _result(task, problem, g, solution, est, iterations + more, start)
+    first = _result(task, problem, g, solution, est, iterations + more, start)
+    return [first] + [_other_result(task, problem, g, solution, est, entry, first) for entry in g.others]
+
+
+def _initial_other(problem: _Problem, est: _Estimate, index: int, given: CameraInput) -> OtherCamera:
+    """Another camera's views, PnP poses and closed-form guesses (``vical.calib.rig``)."""
+    opts = problem.options
+    other = prepare_other(
+        given.name, index, given.observations[:: opts.frame_stride], given.camera, problem.target,
+        problem.t0_ns, opts.pixel_sigma, given.initial_T_cam_imu,
+    )  # fmt: skip
+    initialise_other(
+        other, problem.frame_times, problem.T_target_cam, est.T_cam_imu, (problem.t_imu, problem.gyro),
+        opts.max_time_offset, float(given.initial_time_offset), opts.estimate_time_offset,
+    )  # fmt: skip
+    return other

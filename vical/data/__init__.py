@@ -2,6 +2,7 @@
 
 from vical.data.target import Target, TargetError
 from vical.data.types import (
+    FIRST_CAMERA,
     NS_PER_S,
     CameraFrames,
     DataError,
@@ -15,6 +16,7 @@ from vical.data.types import (
 )
 
 __all__ = [
+    "FIRST_CAMERA",
     "NS_PER_S",
     "CameraFrames",
     "DataError",

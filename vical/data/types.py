@@ -7,6 +7,7 @@ Frames follow ``docs/conventions.md``: ``T_a_b`` maps frame-b points into frame 
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -16,6 +17,8 @@ from vical.data.target import Target
 from vical.geometry.camera import CameraModel
 
 NS_PER_S = 1_000_000_000
+FIRST_CAMERA = "cam0"
+CAMERA_NAME = re.compile(r"cam(\d+)")
 
 
 class DataError(ValueError):
@@ -320,6 +323,10 @@ class Recording:
         metadata: free-form YAML-serialisable information (seed, config, source).
         path_profile: the end effector's path over time (None when unknown); needed to cut the
             recording at a path budget (``until_path``).
+        other_frames: the frames of a rig's other cameras, by Kalibr name (``cam1``, ``cam2``, ...;
+            ``frames`` are ``cam0``'s), each on its own clock and at its own rate.
+        other_truths: those cameras' true parameters (their ``T_cam_imu`` and ``time_offset``
+            relative to the same IMU), by name; empty for real data.
     """
 
     imu: ImuSamples
@@ -332,11 +339,43 @@ class Recording:
     duration: float = 0.0
     metadata: dict[str, Any] = field(default_factory=dict)
     path_profile: PathProfile | None = None
+    other_frames: dict[str, CameraFrames] = field(default_factory=dict)
+    other_truths: dict[str, SensorTruth] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        names = list(self.other_frames)
+        numbers = sorted(int(m.group(1)) for n in names if (m := CAMERA_NAME.fullmatch(n)))
+        if len(numbers) != len(names) or numbers != list(range(1, len(names) + 1)):
+            raise DataError(
+                f"a rig's other cameras are named cam1, cam2, ... without gaps (cam0 is frames), got {names}"
+            )
+        object.__setattr__(self, "other_frames", {f"cam{n}": self.other_frames[f"cam{n}"] for n in numbers})
+        unknown = sorted(set(self.other_truths) - set(names))
+        if unknown:
+            raise DataError(f"other_truths names {unknown[0]}, which has no frames (cameras: {self.camera_names})")
+
+    @property
+    def camera_names(self) -> list[str]:
+        """``cam0`` (``frames``), then the other cameras in order."""
+        return [FIRST_CAMERA, *self.other_frames]
+
+    def frames_of(self, name: str) -> CameraFrames:
+        """The frames of camera ``name``; a ``DataError`` names the cameras the recording has."""
+        if name == FIRST_CAMERA:
+            return self.frames
+        if name not in self.other_frames:
+            raise DataError(f"the recording has no camera {name!r}; it has {self.camera_names}")
+        return self.other_frames[name]
+
+    def truth_of(self, name: str) -> SensorTruth | None:
+        """The true parameters of camera ``name`` (None when unknown)."""
+        self.frames_of(name)
+        return self.truth if name == FIRST_CAMERA else self.other_truths.get(name)
 
     @property
     def t0(self) -> int:
         """Earliest timestamp [ns] of the recording (reference for relative seconds)."""
-        starts = [int(x.t[0]) for x in (self.imu, self.frames) if len(x)]
+        starts = [int(x.t[0]) for x in (self.imu, self.frames, *self.other_frames.values()) if len(x)]
         if not starts:
             raise DataError("recording holds neither IMU samples nor camera frames")
         return min(starts)
@@ -344,7 +383,7 @@ class Recording:
     @property
     def t_end(self) -> int:
         """Latest timestamp [ns] of the recording."""
-        ends = [int(x.t[-1]) for x in (self.imu, self.frames) if len(x)]
+        ends = [int(x.t[-1]) for x in (self.imu, self.frames, *self.other_frames.values()) if len(x)]
         if not ends:
             raise DataError("recording holds neither IMU samples nor camera frames")
         return max(ends)
@@ -361,6 +400,7 @@ class Recording:
             self,
             imu=self.imu.slice_time(np.iinfo(np.int64).min, t_end),
             frames=self.frames.select(self.frames.t <= t_end),
+            other_frames={name: f.select(f.t <= t_end) for name, f in self.other_frames.items()},
             trajectory=None if trajectory is None else trajectory.select(trajectory.t <= t_end),
             path_profile=None if profile is None else profile.select(profile.t <= t_end),
             path_length=self.path_length if profile is None else profile.length_at(t_end),

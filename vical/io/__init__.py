@@ -23,15 +23,27 @@ from vical.io.kalibr import (
     write_imu_yaml,
     write_target_yaml,
 )
+from vical.io.kalibr_chain import (
+    CameraChain,
+    ChainCamera,
+    ImuFile,
+    read_chain,
+    read_imu_file,
+    write_chain,
+    write_imu_file,
+)
 from vical.io.recording import is_recording_dir, load_recording, save_recording
 from vical.io.sources import detect_source, open_recording
 
 __all__ = [
     "BagFormatError",
+    "CameraChain",
+    "ChainCamera",
     "CsvFormatError",
     "FormatError",
     "FormatWarning",
     "ImageDetector",
+    "ImuFile",
     "KalibrFormatError",
     "RecordingFormatError",
     "detect_source",
@@ -40,18 +52,22 @@ __all__ = [
     "open_recording",
     "read_bag",
     "read_camchain",
+    "read_chain",
     "read_corners_csv",
     "read_euroc",
     "read_image_folder",
     "read_imu_csv",
+    "read_imu_file",
     "read_imu_yaml",
     "read_target_yaml",
     "save_recording",
     "write_bag",
     "write_camchain_imucam",
+    "write_chain",
     "write_corners_csv",
     "write_euroc",
     "write_imu_csv",
+    "write_imu_file",
     "write_imu_yaml",
     "write_target_yaml",
 ]

@@ -5,7 +5,8 @@ Writes ``sensor_msgs/Image`` (``mono8``) on ``/cam0/image_raw`` and ``sensor_msg
 [m/s^2], ``orientation_covariance[0] = -1``: no orientation), stamped in ``header.stamp`` and the
 bag time with the exact ns timestamps, which ``kalibr_calibrate_imu_camera`` reads. Reading
 takes the same topics (configurable), decodes ``mono8``/``rgb8``/``bgr8``/``bgra8``/``rgba8``
-images and ``sensor_msgs/CompressedImage`` to grey, and stamps with ``header.stamp``.
+images and ``sensor_msgs/CompressedImage`` to grey, and stamps with ``header.stamp``. A rig's
+cameras are several image topics: ``cam0``'s first (``/cam0/image_raw``, ``/cam1/image_raw``, ...).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import functools
 import os
 import shutil
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +28,7 @@ from tqdm import tqdm
 
 from vical.data import NS_PER_S, CameraFrames, DataError, ImuSamples, Recording, Target
 from vical.io.atomic import remove_stale_temporaries, temporary_prefix
-from vical.io.checks import check_sampling, scale_imu, sort_and_dedupe
+from vical.io.checks import check_camera_rates, check_sampling, scale_imu, sort_and_dedupe
 from vical.io.errors import BagFormatError, FormatError, UnitError
 from vical.io.images import ImageDetector, check_size, run_detector, to_gray
 
@@ -45,17 +47,33 @@ def ros1_typestore() -> Typestore:
     return get_typestore(Stores.ROS1_NOETIC)
 
 
+def camera_topics(image_topic: str | Sequence[str], count: int) -> list[str]:
+    """The image topics of ``count`` cameras: the given ones, or one topic (cam0's) and ``/camN/image_raw``."""
+    topics = [image_topic] if isinstance(image_topic, str) else list(image_topic)
+    topics += [f"/cam{n}/image_raw" for n in range(len(topics), count)]
+    if len(set(topics)) != len(topics):
+        raise FormatError(f"image topics {topics} repeat a topic; give each camera its own")
+    return topics
+
+
 # ------------------------------------------------------------------------------------ write
 def write_bag(
     recording: Recording,
     path: str | os.PathLike,
-    image_topic: str = "/cam0/image_raw",
+    image_topic: str | Sequence[str] = "/cam0/image_raw",
     imu_topic: str = "/imu0",
     overwrite: bool = False,
 ) -> Path:
-    """Write ``recording`` (it must carry images) as a ROS1 bag Kalibr can read, atomically."""
-    if recording.frames.images is None:
-        raise FormatError("a calibration bag holds images, but the recording has none; record it with images")
+    """Write ``recording`` (its cameras must carry images) as a ROS1 bag Kalibr can read, atomically.
+
+    ``image_topic``: cam0's topic, or one per camera (the other cameras default to ``/camN/image_raw``).
+    """
+    for name in recording.camera_names:
+        if recording.frames_of(name).images is None:
+            raise FormatError(
+                f"a calibration bag holds images, but the recording's {name} has none; record it with images"
+            )
+    topics = camera_topics(image_topic, len(recording.camera_names))
     final = Path(path)
     if final.exists() and (not overwrite or final.is_dir()):
         raise FileExistsError(f"{final} already exists; pass overwrite=True to replace it")
@@ -63,26 +81,29 @@ def write_bag(
     remove_stale_temporaries(final.parent, final.name)
     tmp_dir = Path(tempfile.mkdtemp(prefix=temporary_prefix(final), dir=final.parent))
     try:
-        _write_messages(recording, tmp_dir / final.name, image_topic, imu_topic)
+        _write_messages(recording, tmp_dir / final.name, topics, imu_topic)
         os.replace(tmp_dir / final.name, final)
     finally:
         shutil.rmtree(tmp_dir, ignore_errors=True)
     return final
 
 
-def _write_messages(rec: Recording, path: Path, image_topic: str, imu_topic: str) -> None:
-    events = [(int(t), 1, k) for k, t in enumerate(rec.imu.t)] + [(int(t), 0, k) for k, t in enumerate(rec.frames.t)]
+def _write_messages(rec: Recording, path: Path, image_topics: list[str], imu_topic: str) -> None:
+    events = [(int(t), 0, -1, k) for k, t in enumerate(rec.imu.t)]
+    for c, name in enumerate(rec.camera_names):
+        events += [(int(t), 1, c, k) for k, t in enumerate(rec.frames_of(name).t)]
     events.sort()
     with Writer(path) as writer:
-        cam = writer.add_connection(image_topic, IMAGE_TYPE, typestore=ros1_typestore())
+        cams = [writer.add_connection(topic, IMAGE_TYPE, typestore=ros1_typestore()) for topic in image_topics]
         imu = writer.add_connection(imu_topic, IMU_TYPE, typestore=ros1_typestore())
-        for t, is_imu, k in tqdm(events, desc=f"writing {path.name}", unit="msg", leave=False):
-            if is_imu:
+        for t, is_image, c, k in tqdm(events, desc=f"writing {path.name}", unit="msg", leave=False):
+            if not is_image:
                 msg = _imu_msg(t, k, rec.imu.gyro[k], rec.imu.accel[k])
                 writer.write(imu, t, ros1_typestore().serialize_ros1(msg, IMU_TYPE))
             else:
-                msg = _image_msg(t, k, rec.frames.images[k])
-                writer.write(cam, t, ros1_typestore().serialize_ros1(msg, IMAGE_TYPE))
+                name = rec.camera_names[c]
+                msg = _image_msg(t, k, rec.frames_of(name).images[k], name)
+                writer.write(cams[c], t, ros1_typestore().serialize_ros1(msg, IMAGE_TYPE))
 
 
 def _header(t_ns: int, seq: int, frame_id: str) -> Any:
@@ -91,10 +112,10 @@ def _header(t_ns: int, seq: int, frame_id: str) -> Any:
     return ros1_typestore().types["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=frame_id)
 
 
-def _image_msg(t_ns: int, seq: int, image: np.ndarray) -> Any:
+def _image_msg(t_ns: int, seq: int, image: np.ndarray, frame_id: str = "cam0") -> Any:
     h, w = image.shape
     return ros1_typestore().types[IMAGE_TYPE](
-        header=_header(t_ns, seq, "cam0"),
+        header=_header(t_ns, seq, frame_id),
         height=h,
         width=w,
         encoding="mono8",
@@ -126,7 +147,7 @@ def read_bag(
     path: str | os.PathLike,
     target: Target,
     detector: ImageDetector | None = None,
-    image_topic: str = "/cam0/image_raw",
+    image_topic: str | Sequence[str] = "/cam0/image_raw",
     imu_topic: str | None = "/imu0",
     keep_images: bool = True,
     gyro_unit: str = "rad/s",
@@ -134,32 +155,41 @@ def read_bag(
 ) -> Recording:
     """Recording from a ROS1 bag: images on ``image_topic`` (corners by ``detector``), IMU on ``imu_topic``.
 
-    ``imu_topic=None`` reads images only (intrinsic calibration). Raises ``BagFormatError``
-    naming the bag and topic when the bag is corrupt or truncated, a topic is missing or has the
-    wrong type, images change size, or timestamps/units are implausible.
+    ``image_topic`` may list several topics, one per camera of a rig (``cam0``, ``cam1``, ... in that
+    order; ``metadata["image_topics"]`` names them, ``metadata["image_sizes"]`` gives each one's
+    (W, H) [px]). ``imu_topic=None`` reads images only (intrinsic calibration). Raises
+    ``BagFormatError`` naming the bag and topic when the bag is corrupt or truncated, a topic is
+    missing or has the wrong type, images change size, or timestamps/units are implausible.
+    Cameras at different frame rates get a ``FormatWarning`` naming them.
     """
     path = Path(path)
+    topics = camera_topics(image_topic, 1)
     if not path.is_file():
         raise BagFormatError(f"{path} does not exist or is not a file")
     try:
         with Reader(path) as reader:
-            connections = _connections(reader, path, image_topic, imu_topic)
+            connections = _connections(reader, path, topics, imu_topic)
             frames, imu = _read_streams(reader, connections, path, target, detector, keep_images)
     except ReaderError as exc:
         raise BagFormatError(f"{path} cannot be read as a ROS1 bag (corrupt or truncated?): {exc}") from exc
     try:
         imu_samples = _imu_samples(imu, f"{path} topic {imu_topic}", gyro_unit, accel_unit)
-        camera_frames = _camera_frames(frames, f"{path} topic {image_topic}", keep_images)
+        cameras = [_camera_frames(frames[topic], f"{path} topic {topic}", keep_images) for topic in topics]
     except UnitError:
         raise  # it names the unit setting to change
     except (FormatError, DataError) as exc:
         raise BagFormatError(str(exc)) from exc
-    return Recording(imu_samples, camera_frames, target, metadata={"source": "rosbag1", "path": str(path.resolve())})
+    names = [f"cam{n}" for n in range(len(topics))]
+    check_camera_rates(f"{path} (topics {', '.join(topics)})", {n: c[0].t for n, c in zip(names, cameras, strict=True)})
+    metadata = {"source": "rosbag1", "path": str(path.resolve()), "image_topics": dict(zip(names, topics, strict=True))}
+    metadata["image_sizes"] = {n: c[1] for n, c in zip(names, cameras, strict=True)}
+    other = {n: c[0] for n, c in zip(names[1:], cameras[1:], strict=True)}
+    return Recording(imu_samples, cameras[0][0], target, metadata=metadata, other_frames=other)
 
 
-def _connections(reader: Reader, path: Path, image_topic: str, imu_topic: str | None) -> dict[str, Any]:
+def _connections(reader: Reader, path: Path, image_topics: list[str], imu_topic: str | None) -> dict[str, Any]:
     topics = {c.topic: c for c in reader.connections}
-    wanted = {image_topic: (IMAGE_TYPE, COMPRESSED_TYPE)}
+    wanted = dict.fromkeys(image_topics, (IMAGE_TYPE, COMPRESSED_TYPE))
     if imu_topic is not None:
         wanted[imu_topic] = (IMU_TYPE,)
     found = {}
@@ -180,9 +210,10 @@ def _read_streams(
     target: Target,
     detector: ImageDetector | None,
     keep_images: bool,
-) -> tuple[list, list]:
-    """Decode every message of the chosen connections (tqdm progress): frame tuples and IMU rows."""
-    frames, imu, size = [], [], None
+) -> tuple[dict[str, list], list]:
+    """Decode every message of the chosen connections (tqdm progress): frame tuples by topic and IMU rows."""
+    frames: dict[str, list] = {topic: [] for topic, c in connections.items() if c.msgtype != IMU_TYPE}
+    imu, sizes = [], {}
     total = sum(c.msgcount for c in connections.values())
     messages = reader.messages(connections=list(connections.values()))
     for index, (conn, _, raw) in enumerate(tqdm(messages, total=total, desc=path.name, unit="msg", leave=False)):
@@ -194,10 +225,10 @@ def _read_streams(
             imu.append((t, index, (w.x, w.y, w.z, a.x, a.y, a.z)))
             continue
         image = _decode_image(msg, conn.msgtype, where)
-        size = check_size(image, size, where)
+        sizes[conn.topic] = check_size(image, sizes.get(conn.topic), where)
         corners, ids = run_detector(detector, image, target, where) if detector else (np.zeros((0, 2)), np.zeros(0))
         digest = hash(image.tobytes())  # tells repeated messages from conflicting ones with one stamp
-        frames.append((t, index, image if keep_images else None, corners, ids, digest))
+        frames[conn.topic].append((t, index, image if keep_images else None, corners, ids, digest, image.shape))
     return frames, imu
 
 
@@ -231,7 +262,8 @@ def _imu_samples(rows: list, where: str, gyro_unit: str, accel_unit: str) -> Imu
     return ImuSamples(t[order], gyro, accel)
 
 
-def _camera_frames(frames: list, where: str, keep_images: bool) -> CameraFrames:
+def _camera_frames(frames: list, where: str, keep_images: bool) -> tuple[CameraFrames, list[int]]:
+    """One topic's frames and its image size [W, H]."""
     if not frames:
         raise BagFormatError(f"{where}: no image messages")
     t = np.array([f[0] for f in frames], dtype=np.int64)
@@ -239,4 +271,5 @@ def _camera_frames(frames: list, where: str, keep_images: bool) -> CameraFrames:
     order = sort_and_dedupe(t, digest, where, np.array([f[1] for f in frames]))
     check_sampling(t[order], where)
     images = np.stack([frames[k][2] for k in order]) if keep_images else None
-    return CameraFrames(t[order], [frames[k][3] for k in order], [frames[k][4] for k in order], images)
+    height, width = frames[0][6]
+    return CameraFrames(t[order], [frames[k][3] for k in order], [frames[k][4] for k in order], images), [width, height]

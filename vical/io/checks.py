@@ -150,3 +150,21 @@ def _check_accel_unit(norm: float, unit: str, where: str) -> None:
         if other != unit and low <= as_written * scale <= high:
             raise UnitError(f"{message}; the data look like {other}: pass {{fix}}", "accel_unit", repr(other), other)
     raise FormatError(f"{message}; check the accelerometer's unit and scale")
+
+
+# Cameras of one rig whose frame rates differ by more than this fraction are named in a warning.
+RATE_TOLERANCE = 0.01
+
+
+def check_camera_rates(where: str, stamps: dict[str, np.ndarray]) -> None:
+    """Warn when the cameras of one rig (timestamps [ns] by name) run at different frame rates."""
+    rates = {name: NS_PER_S / float(np.median(np.diff(t))) for name, t in stamps.items() if len(t) > 1}
+    if len(rates) < 2:
+        return
+    first, *others = rates.items()
+    for name, rate in others:
+        if abs(rate - first[1]) > RATE_TOLERANCE * first[1]:
+            warn(
+                f"{where}: {name} runs at {rate:.3g} Hz but {first[0]} at {first[1]:.3g} Hz; the cameras of one rig "
+                "usually share a trigger: check that these streams belong together"
+            )

@@ -9,14 +9,17 @@ Layout (as the EuRoC MAV dataset ships it; ``<root>/mav0`` or the ``mav0`` folde
     mav0/imu0/data.csv          #timestamp [ns],w_RS_S_x [rad s^-1],...,a_RS_S_z [m s^-2]
     mav0/imu0/sensor.yaml       IMU noise densities, random walks, rate_hz
 
-vical writes ``timeshift_cam_imu`` [s] (Kalibr's sign) into ``cam0/sensor.yaml`` when the time
-offset is known. The reference calibration in the ``sensor.yaml`` files, when complete, becomes
-the recording's ``truth``.
+A rig's other cameras lie beside ``cam0`` as ``cam1``, ``cam2``, ... with the same layout (EuRoC
+ships cam0 + cam1); they become the recording's ``other_frames``. vical writes
+``timeshift_cam_imu`` [s] (Kalibr's sign) into ``camN/sensor.yaml`` when the time offset is known.
+The reference calibration in the ``sensor.yaml`` files, when complete, becomes the recording's
+``truth`` (``other_truths`` for the other cameras).
 """
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import warnings
 from pathlib import Path
@@ -27,7 +30,7 @@ import numpy as np
 from vical.data import NS_PER_S, CameraFrames, ImuNoise, ImuSamples, Recording, SensorTruth, Target
 from vical.geometry.transforms import invert_transform
 from vical.io.atomic import atomic_directory, atomic_file, check_can_write_dir, write_text_atomic
-from vical.io.checks import check_sampling, sort_and_dedupe, warn
+from vical.io.checks import check_camera_rates, check_sampling, sort_and_dedupe, warn
 from vical.io.csvfiles import (
     CORNER_HEADER,
     IMU_HEADER,
@@ -46,6 +49,7 @@ from vical.io.kalibr import read_camchain, read_imu_yaml
 from vical.io.yamlfile import as_floats, dump_yaml, load_mapping
 
 EUROC_DISTORTION_NAMES = {"radtan": "radial-tangential", "equidistant": "equidistant"}
+CAMERA_FOLDER = re.compile(r"cam\d+")
 
 
 def find_euroc_root(path: str | os.PathLike) -> Path | None:
@@ -58,22 +62,27 @@ def find_euroc_root(path: str | os.PathLike) -> Path | None:
 
 # ------------------------------------------------------------------------------------ write
 def write_euroc(recording: Recording, path: str | os.PathLike, overwrite: bool = False) -> Path:
-    """Write ``recording`` as an EuRoC folder ``path/mav0/...`` atomically; return ``path``.
+    """Write ``recording`` as an EuRoC folder ``path/mav0/...`` atomically (every camera); return ``path``.
 
-    The frames must carry images. Detections go to ``cam0/corners.csv``; the truth (if any) to
+    The frames must carry images. Detections go to ``camN/corners.csv``; the truth (if any) to
     the ``sensor.yaml`` files.
     """
-    frames = recording.frames
-    if frames.images is None:
-        raise FormatError("an EuRoC folder holds images, but the recording has none; record it with images")
+    for name in recording.camera_names:
+        if recording.frames_of(name).images is None:
+            raise FormatError(
+                f"an EuRoC folder holds images, but the recording's {name} has none; record it with images"
+            )
     with atomic_directory(path, overwrite=overwrite) as tmp:
-        cam, imu = tmp / "mav0" / "cam0", tmp / "mav0" / "imu0"
-        (cam / "data").mkdir(parents=True)
+        imu = tmp / "mav0" / "imu0"
         imu.mkdir(parents=True)
-        _write_images(frames, cam)
-        write_corners_csv(frames, cam / "corners.csv")
+        for name in recording.camera_names:
+            cam = tmp / "mav0" / name
+            (cam / "data").mkdir(parents=True)
+            frames = recording.frames_of(name)
+            _write_images(frames, cam)
+            write_corners_csv(frames, cam / "corners.csv")
+            dump_yaml(cam / "sensor.yaml", _camera_sensor_yaml(frames, recording.truth_of(name)))
         write_imu_csv(recording.imu, imu / "data.csv")
-        dump_yaml(cam / "sensor.yaml", _camera_sensor_yaml(recording))
         dump_yaml(imu / "sensor.yaml", _imu_sensor_yaml(recording))
     return Path(path)
 
@@ -94,24 +103,24 @@ def _matrix(T: np.ndarray) -> dict[str, Any]:
     return {"cols": 4, "rows": 4, "data": [float(v) for v in np.asarray(T).reshape(-1)]}
 
 
-def _camera_sensor_yaml(rec: Recording) -> dict[str, Any]:
-    height, width = rec.frames.images.shape[1:]
-    data: dict[str, Any] = {"sensor_type": "camera", "comment": "written by vical", "rate_hz": _rate_hz(rec.frames.t)}
+def _camera_sensor_yaml(frames: CameraFrames, truth: SensorTruth | None) -> dict[str, Any]:
+    height, width = frames.images.shape[1:]
+    data: dict[str, Any] = {"sensor_type": "camera", "comment": "written by vical", "rate_hz": _rate_hz(frames.t)}
     data["resolution"] = [int(width), int(height)]
-    if rec.truth is not None:
-        cam = rec.truth.camera
+    if truth is not None:
+        cam = truth.camera
         if np.any(cam.distortion_center_offset != 0):
             warnings.warn(
                 "EuRoC's pinhole models have the distortion centre at the principal point; the camera's "
                 f"distortion_center_offset {cam.distortion_center_offset.tolist()} px is not written",
                 stacklevel=3,
             )
-        data["T_BS"] = _matrix(invert_transform(rec.truth.T_cam_imu))
+        data["T_BS"] = _matrix(invert_transform(truth.T_cam_imu))
         data["camera_model"] = "pinhole"
         data["intrinsics"] = [float(v) for v in cam.intrinsics]
         data["distortion_model"] = EUROC_DISTORTION_NAMES[cam.distortion]
         data["distortion_coefficients"] = [float(v) for v in cam.dist]
-        data["timeshift_cam_imu"] = float(rec.truth.time_offset)
+        data["timeshift_cam_imu"] = float(truth.time_offset)
     return data
 
 
@@ -240,32 +249,60 @@ def read_euroc(
     gyro_unit: str = "rad/s",
     accel_unit: str = "m/s^2",
 ) -> Recording:
-    """Read an EuRoC folder (``path`` or ``path/mav0``).
+    """Read an EuRoC folder (``path`` or ``path/mav0``) with every camera folder in it (``cam0``, ``cam1``, ...).
 
-    Corners come from ``detector`` when given, else from ``cam0/corners.csv`` when present,
-    else the frames have no detections. Images are checked against the resolution in
-    ``cam0/sensor.yaml`` (or the first image), which becomes ``metadata["image_size"]`` (W, H) [px];
-    every image is decoded for that check (and for detection). ``keep_images=False`` drops each
-    decoded image after use, bounding memory on long sequences.
+    Corners come from ``detector`` when given, else from ``camN/corners.csv`` when present,
+    else the frames have no detections. Images are checked against the resolution in their
+    ``camN/sensor.yaml`` (or their first image); ``metadata["image_sizes"]`` holds each camera's
+    (W, H) [px] and ``metadata["image_size"]`` cam0's. Every image is decoded for that check (and
+    for detection). ``keep_images=False`` drops each decoded image after use, bounding memory on
+    long sequences. Cameras at different frame rates get a ``FormatWarning`` naming them.
     """
     root = find_euroc_root(path)
     if root is None:
         raise FormatError(f"{path} is not an EuRoC folder: neither it nor its mav0/ holds cam0/data.csv")
-    truth, resolution = _read_reference(root)
-    t, files = _read_image_list(root / "cam0")
-    images = ((str(p), read_gray(p)) for p in files)
-    frames = frames_from_images(t, images, target, detector, keep_images, resolution, desc="EuRoC cam0")
-    if detector is None and (root / "cam0" / "corners.csv").is_file():
-        frames = _attach_corners(frames, read_corners_csv(root / "cam0" / "corners.csv", target), root)
-    # Every image was checked against this size, so the frames' corners belong to it.
-    width, height = resolution or read_gray(files[0]).shape[::-1]
+    cameras = {name: _read_camera(root, name, target, detector, keep_images) for name in camera_folders(root)}
+    check_camera_rates(str(root), {name: frames.t for name, (frames, _, _) in cameras.items()})
+    frames, truth, size = cameras.pop("cam0")
+    sizes = {"cam0": size} | {name: c[2] for name, c in cameras.items()}
     return Recording(
         imu=_read_imu(root, gyro_unit, accel_unit),
         frames=frames,
         target=target,
         truth=truth,
-        metadata={"source": "euroc", "path": str(Path(path).resolve()), "image_size": [int(width), int(height)]},
+        metadata={"source": "euroc", "path": str(Path(path).resolve()), "image_size": size, "image_sizes": sizes},
+        other_frames={name: c[0] for name, c in cameras.items()},
+        other_truths={name: c[1] for name, c in cameras.items() if c[1] is not None},
     )
+
+
+def camera_folders(root: Path) -> list[str]:
+    """The camera folders of an EuRoC ``mav0`` (``cam0``, ``cam1``, ... holding ``data.csv``), in order."""
+    numbers = sorted(
+        int(d.name[3:]) for d in root.iterdir() if CAMERA_FOLDER.fullmatch(d.name) and (d / "data.csv").is_file()
+    )
+    missing = sorted(set(range(numbers[-1] + 1)) - set(numbers))
+    if missing:
+        raise FormatError(
+            f"{root}: camera folders {', '.join(f'cam{n}' for n in numbers)} but no cam{missing[0]}/data.csv; "
+            "number the cameras cam0, cam1, ... without gaps"
+        )
+    return [f"cam{n}" for n in numbers]
+
+
+def _read_camera(
+    root: Path, name: str, target: Target, detector: ImageDetector | None, keep_images: bool
+) -> tuple[CameraFrames, SensorTruth | None, list[int]]:
+    """One camera folder's frames, its reference calibration (or None) and its image size [W, H]."""
+    truth, resolution = _read_reference(root, name)
+    t, files = _read_image_list(root / name)
+    images = ((str(p), read_gray(p)) for p in files)
+    frames = frames_from_images(t, images, target, detector, keep_images, resolution, desc=f"EuRoC {name}")
+    if detector is None and (root / name / "corners.csv").is_file():
+        frames = _attach_corners(frames, read_corners_csv(root / name / "corners.csv", target), root / name)
+    # Every image was checked against this size, so the frames' corners belong to it.
+    width, height = resolution or read_gray(files[0]).shape[::-1]
+    return frames, truth, [int(width), int(height)]
 
 
 def _read_image_list(cam: Path) -> tuple[np.ndarray, list[Path]]:
@@ -295,9 +332,9 @@ def _read_imu(root: Path, gyro_unit: str, accel_unit: str) -> ImuSamples:
     return ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
 
 
-def _read_reference(root: Path) -> tuple[SensorTruth | None, tuple[int, int] | None]:
-    """Reference calibration from the sensor.yaml files (None unless complete) and the resolution."""
-    cam_yaml, imu_yaml = root / "cam0" / "sensor.yaml", root / "imu0" / "sensor.yaml"
+def _read_reference(root: Path, name: str) -> tuple[SensorTruth | None, tuple[int, int] | None]:
+    """Reference calibration of camera ``name`` from the sensor.yaml files (None unless complete) and its resolution."""
+    cam_yaml, imu_yaml = root / name / "sensor.yaml", root / "imu0" / "sensor.yaml"
     if not cam_yaml.is_file():
         return None, None
     data = load_mapping(cam_yaml, KalibrFormatError)
@@ -316,12 +353,12 @@ def _read_reference(root: Path) -> tuple[SensorTruth | None, tuple[int, int] | N
     return truth, (camera.width, camera.height)
 
 
-def _attach_corners(frames: CameraFrames, detections: CameraFrames, root: Path) -> CameraFrames:
+def _attach_corners(frames: CameraFrames, detections: CameraFrames, cam: Path) -> CameraFrames:
     """``frames`` with the corner CSV's detections matched by timestamp (frames not listed: none)."""
     index = {t: k for k, t in enumerate(detections.t.tolist())}
     unknown = sorted(set(index) - set(frames.t.tolist()))
     if unknown:
-        raise CsvFormatError(f"{root / 'cam0' / 'corners.csv'}: timestamp {unknown[0]} ns matches no image in data.csv")
+        raise CsvFormatError(f"{cam / 'corners.csv'}: timestamp {unknown[0]} ns matches no image in data.csv")
     empty = (np.zeros((0, 2)), np.zeros(0, np.int64))
     pairs = [
         (detections.corners[index[t]], detections.ids[index[t]]) if t in index else empty for t in frames.t.tolist()

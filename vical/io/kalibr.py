@@ -206,9 +206,18 @@ def write_imu_yaml(path: str | os.PathLike, noise: ImuNoise, rostopic: str = "/i
 
 def read_imu_yaml(path: str | os.PathLike) -> ImuNoise:
     """``ImuNoise`` from a Kalibr IMU file, Kalibr's ``imu-*.yaml`` result (``imu0`` section) or EuRoC's
-    ``imu0/sensor.yaml`` (``rate_hz`` instead of ``update_rate``)."""
+    ``imu0/sensor.yaml`` (``rate_hz`` instead of ``update_rate``).
+
+    IMU intrinsics that vical would not apply (``refuse_imu_intrinsics``) are refused.
+    """
     data = load_mapping(path, KalibrFormatError)
     entry, where = (data["imu0"], f"{path} [imu0]") if isinstance(data.get("imu0"), dict) else (data, str(path))
+    refuse_imu_intrinsics(entry, where)
+    return imu_noise_of(entry, where)
+
+
+def imu_noise_of(entry: dict[str, Any], where: str) -> ImuNoise:
+    """``ImuNoise`` from an IMU section's noise keys and rate (``update_rate`` or ``rate_hz``)."""
     rate_key = "update_rate" if "update_rate" in entry else "rate_hz"
     keys = {
         "accel_noise_density": "accelerometer_noise_density",
@@ -224,6 +233,53 @@ def read_imu_yaml(path: str | os.PathLike) -> ImuNoise:
             raise KalibrFormatError(f"{where}: {key} must be a positive finite number, got {value}")
         values[field_name] = float(value)
     return ImuNoise(**values)
+
+
+# IMU models of Kalibr's result files and OpenVINS's configs; vical calibrates an ideal IMU.
+IMU_MODELS = ("calibrated", "kalibr", "rpng", "scale-misalignment", "scale-misalignment-size-effect")
+# (path of the key, the value of an ideal IMU): Kalibr's scale-misalignment model, then OpenVINS's.
+IDEAL_IMU = (
+    (("accelerometers", "M"), np.eye(3)),
+    (("gyroscopes", "M"), np.eye(3)),
+    (("gyroscopes", "A"), np.zeros((3, 3))),
+    (("gyroscopes", "C_gyro_i"), np.eye(3)),
+    (("accelerometers", "rx_i"), np.zeros(3)),
+    (("accelerometers", "ry_i"), np.zeros(3)),
+    (("accelerometers", "rz_i"), np.zeros(3)),
+    (("Tw",), np.eye(3)),
+    (("Ta",), np.eye(3)),
+    (("Tg",), np.zeros((3, 3))),
+    (("R_IMUtoGYRO",), np.eye(3)),
+    (("R_IMUtoACC",), np.eye(3)),
+    (("T_i_b",), np.eye(4)),
+    (("time_offset",), np.zeros(1)),
+)
+
+
+def refuse_imu_intrinsics(entry: dict[str, Any], where: str) -> None:
+    """Refuse IMU intrinsics other than an ideal IMU's: vical's solve would use the raw samples uncorrected.
+
+    ``T_i_b`` (the IMU in the body frame) and ``time_offset`` (to the reference IMU) describe a second
+    IMU of a Kalibr chain; vical calibrates one IMU, the reference (identity, 0).
+    """
+    model = entry.get("model", "calibrated")
+    if model not in IMU_MODELS:
+        raise KalibrFormatError(f"{where}: model {model!r} is not a Kalibr or OpenVINS IMU model {list(IMU_MODELS)}")
+    for path, ideal in IDEAL_IMU:
+        value: Any = entry
+        for key in path:
+            value = value.get(key) if isinstance(value, dict) else None
+        if value is None:
+            continue
+        name = ".".join(path)
+        values = as_floats(value, ideal.size, name, where, KalibrFormatError).reshape(ideal.shape)
+        if not np.allclose(values, ideal, rtol=0.0, atol=1e-12):
+            what = "the reference IMU's" if path[0] in ("T_i_b", "time_offset") else "an ideal IMU's"
+            raise KalibrFormatError(
+                f"{where}: {name} differs from {what} ({'identity' if ideal.any() else 'zero'}); vical calibrates "
+                "one ideal IMU (no scale, misalignment, g-sensitivity or second-IMU pose) and would use the samples "
+                f"uncorrected: correct the samples with {name} first, or give an imu.yaml without it"
+            )
 
 
 # ------------------------------------------------------------------------------- targets

@@ -13,6 +13,8 @@ Layout of a recording directory (format version 1)::
     extra.npz         T_world_target (4, 4)             (only when the target pose is known)
     path.npz          t (K,) int64 [ns], length (K,) [m] end-effector path so far
                                                         (only when the path profile is known)
+    frames_camN.npz   a rig's other cameras (cam1, cam2, ...), as frames.npz; images_camN.npz their images;
+                      their truths under ``other_truths`` in recording.yaml
 
 Arrays keep their dtype, so timestamps stay exact int64 ns and floats bit-exact. The directory
 is written into a temporary sibling and renamed into place (``vical.io.atomic``), so a partial
@@ -60,7 +62,7 @@ def write_recording_files(recording: Recording, directory: Path) -> None:
     manifest = _manifest(recording)
     files = {}
     for name, arrays in _array_files(recording).items():
-        files[name] = _write_npz(directory / name, arrays, compress=name == "images.npz")
+        files[name] = _write_npz(directory / name, arrays, compress=name.startswith("images"))
     manifest["files"] = files
     (directory / MANIFEST).write_text(yaml.safe_dump(manifest, sort_keys=False), encoding="utf-8")
 
@@ -71,7 +73,7 @@ def _manifest(recording: Recording) -> dict[str, Any]:
         yaml.safe_dump(metadata)
     except yaml.YAMLError as exc:
         raise RecordingFormatError(f"recording metadata is not YAML-serialisable ({exc}); use plain types") from exc
-    return {
+    manifest = {
         "format_version": FORMAT_VERSION,
         "target": recording.target.to_dict(),
         "truth": None if recording.truth is None else recording.truth.to_dict(),
@@ -79,6 +81,9 @@ def _manifest(recording: Recording) -> dict[str, Any]:
         "duration": float(recording.duration),
         "metadata": metadata,
     }
+    if recording.other_truths:
+        manifest["other_truths"] = {name: truth.to_dict() for name, truth in recording.other_truths.items()}
+    return manifest
 
 
 def _plain(value: Any) -> Any:
@@ -96,20 +101,23 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _array_files(rec: Recording) -> dict[str, dict[str, np.ndarray]]:
-    frames = rec.frames
-    counts = frames.num_detections
-    files = {
-        "imu.npz": {"t": rec.imu.t, "gyro": rec.imu.gyro, "accel": rec.imu.accel},
-        "frames.npz": {
-            "t": frames.t,
-            "counts": counts,
-            "corners": np.concatenate([np.zeros((0, 2)), *frames.corners]).astype(np.float64),
-            "ids": np.concatenate([np.zeros(0, np.int64), *frames.ids]).astype(np.int64),
-        },
+def _frame_arrays(frames: CameraFrames) -> dict[str, np.ndarray]:
+    return {
+        "t": frames.t,
+        "counts": frames.num_detections,
+        "corners": np.concatenate([np.zeros((0, 2)), *frames.corners]).astype(np.float64),
+        "ids": np.concatenate([np.zeros(0, np.int64), *frames.ids]).astype(np.int64),
     }
-    if frames.images is not None:
-        files["images.npz"] = {"images": frames.images}
+
+
+def _array_files(rec: Recording) -> dict[str, dict[str, np.ndarray]]:
+    files = {"imu.npz": {"t": rec.imu.t, "gyro": rec.imu.gyro, "accel": rec.imu.accel}}
+    for name in rec.camera_names:
+        suffix = "" if name == "cam0" else f"_{name}"
+        frames = rec.frames_of(name)
+        files[f"frames{suffix}.npz"] = _frame_arrays(frames)
+        if frames.images is not None:
+            files[f"images{suffix}.npz"] = {"images": frames.images}
     if rec.trajectory is not None:
         tr = rec.trajectory
         files["trajectory.npz"] = {
@@ -209,6 +217,8 @@ def _assemble(manifest: dict[str, Any], arrays: dict[str, dict[str, np.ndarray]]
     extra = arrays.get("extra.npz", {})
     path = arrays.get("path.npz")
     truth = manifest.get("truth")
+    other_truths = manifest.get("other_truths") or {}
+    others = [n[len("frames_") : -len(".npz")] for n in arrays if n.startswith("frames_")]
     return Recording(
         imu=ImuSamples(imu["t"], imu["gyro"], imu["accel"]),
         frames=_frames(arrays["frames.npz"], arrays.get("images.npz")),
@@ -220,6 +230,8 @@ def _assemble(manifest: dict[str, Any], arrays: dict[str, dict[str, np.ndarray]]
         duration=float(manifest.get("duration", 0.0)),
         metadata=manifest.get("metadata") or {},
         path_profile=None if path is None else PathProfile(path["t"], path["length"]),
+        other_frames={n: _frames(arrays[f"frames_{n}.npz"], arrays.get(f"images_{n}.npz")) for n in others},
+        other_truths={n: SensorTruth.from_dict(t) for n, t in other_truths.items()},
     )
 
 

@@ -12,6 +12,7 @@ Recognised, in this order:
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +57,7 @@ def open_recording(
     target: Target | None = None,
     detector: ImageDetector | None = None,
     imu_csv: str | os.PathLike | None = None,
-    image_topic: str = "/cam0/image_raw",
+    image_topic: str | Sequence[str] = "/cam0/image_raw",
     imu_topic: str | None = "/imu0",
     rate_hz: float = 10.0,
     keep_images: bool = False,
@@ -71,7 +72,8 @@ def open_recording(
         detector: ``detector(image) -> (corners (K, 2), ids (K,))`` for sources with images.
             EuRoC folders written by vical fall back to their ``cam0/corners.csv``.
         imu_csv: EuRoC-format IMU CSV to pair with a corner CSV.
-        image_topic, imu_topic: bag topics (``imu_topic=None``: images only).
+        image_topic, imu_topic: bag topics (``imu_topic=None``: images only); several image topics
+            for a rig's cameras (cam0's first). An EuRoC folder's camera folders are all read.
         rate_hz: frame rate [Hz] that timestamps an image folder.
         keep_images: keep decoded images in memory (EuRoC, bag, image folder).
         gyro_unit, accel_unit: units of IMU values in CSVs and bags (``"deg/s"``, ``"g"`` convert).
