@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 
 from vical.apps.calibrate import main
+from vical.calib.checks import check_memory
+from vical.calib.errors import CalibrationSettingError
 from vical.calib.synthetic import Excitation, make_recording
 from vical.data import ImuNoise, ImuSamples
 from vical.geometry import CameraModel, transform_error
@@ -97,7 +99,9 @@ def test_a_gyro_logged_in_deg_per_s_fails_naming_the_flag_and_keeps_its_files_ma
     assert (
         "the gyro reads 5" in line and "x the rotation the camera sees: it logs deg/s; pass --gyro-unit deg/s" in line
     )
-    assert sorted(p.name for p in out.iterdir()) == ["camchain-imucam.failed.yaml", "imu.yaml", "results.txt"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "camchain-imucam.failed.yaml", "frames.csv", "imu.yaml", "results.txt"
+    ]  # fmt: skip
     assert (out / "results.txt").read_text().startswith("FAILED: the calibration failed: the IMU residuals")
 
     fixed = tmp_path / "fixed"
@@ -117,7 +121,7 @@ def test_an_out_with_files_is_refused_and_replaced_whole_with_overwrite(recordin
     assert f"--out {out} already holds files; choose another directory or pass --overwrite" in capsys.readouterr().err
     assert (out / "reprojection.png").exists() and (out / "mine.txt").exists()
     assert main([*argv, "--overwrite"]) == 0
-    assert sorted(p.name for p in out.iterdir()) == ["camchain.yaml", "results.txt"]  # no plots of the first run
+    assert sorted(p.name for p in out.iterdir()) == ["camchain.yaml", "frames.csv", "results.txt"]  # no plots
     assert sorted(p.name for p in tmp_path.iterdir()) == ["calib"]  # no temporary left beside it
     assert main([*argv, "--overwrite", "--out", str(path.parent)]) == 2  # never replaces its input
     assert "holds the input" in capsys.readouterr().err and path.is_dir()
@@ -133,3 +137,25 @@ def test_intrinsics_of_another_resolution_are_refused(recording_dir, tmp_path, c
     (line,) = capsys.readouterr().err.splitlines()
     assert f"--intrinsics {tmp_path / 'big.yaml'} calibrates 1280 x 960 px images, but the images are 640 x 480" in line
     assert not (tmp_path / "o").exists()
+
+
+def test_messages_spell_the_library_parameters_as_flags(recording_dir, tmp_path, capsys):
+    """The calibrator names its parameters (frame_stride=18, memory_limit_mb), vical-calibrate its flags."""
+    path, rec = recording_dir
+    with pytest.raises(CalibrationSettingError) as refused:
+        check_memory(66, 2772, 0.5, 1)
+    assert "keep one frame in 18 (frame_stride=18) or raise the limit (memory_limit_mb)" in str(refused.value)
+    assert main([str(path), "--memory-limit", "0.5", "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err
+    assert "keep one frame in 18 (--frame-stride 18) or raise the limit (--memory-limit)" in err
+    assert "frame_stride" not in err and "memory_limit_mb" not in err
+
+    write_corners_csv(rec.frames, tmp_path / "corners.csv")
+    assert main([str(tmp_path / "corners.csv"), "--task", "intrinsic", "--out", str(tmp_path / "b")]) == 2
+    assert "give the calibration target as --target target.yaml" in capsys.readouterr().err
+    write_target_yaml(tmp_path / "target.yaml", rec.target)
+    argv = [str(tmp_path / "corners.csv"), "--target", str(tmp_path / "target.yaml"), "--task", "intrinsic"]
+    assert main([*argv, "--out", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert "the image size is unknown (no images came with the frames): give it as --image-size W H" in err
+    assert "image_size" not in err

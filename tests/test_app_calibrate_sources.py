@@ -138,7 +138,8 @@ def test_sources_without_imu_or_target_fail_with_the_fix(exports, tmp_path, caps
     assert main([str(root / "corners.csv"), *target, "--out", str(tmp_path / "b")]) == 2
     assert "--imu-csv" in capsys.readouterr().err
     assert main([str(root / "data.bag"), *target, "--imu-topic", "/imu1", "--out", str(tmp_path / "c")]) == 2
-    assert "topic /imu1 is missing" in capsys.readouterr().err
+    assert "topic /imu1 is missing; the bag has: " in (err := capsys.readouterr().err)
+    assert "Choose the topic (--imu-topic)" in err
     assert main([str(root / "euroc"), "--out", str(tmp_path / "d")]) == 2
-    assert "give the calibration target" in capsys.readouterr().err
+    assert "give the calibration target as --target target.yaml (a Kalibr target YAML)" in capsys.readouterr().err
     assert not (tmp_path / "a").exists() and not (tmp_path / "d").exists()

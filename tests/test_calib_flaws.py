@@ -105,3 +105,27 @@ def test_cli_prints_and_writes_the_flaws(flawed, tmp_path, capsys):
         and "IMU factor bridges the gap" in written
         and "are outliers and were left out" in written
     )
+
+
+def test_the_frame_log_gives_each_damaged_frame_its_reason(flawed):
+    """Every frame is accounted for: the gap's frames saw no board, the frames before the IMU started lie outside
+    its span, the scrambled frame is an outlier, the shifted frames lost exactly their five corners."""
+    rec, shifted, scrambled = flawed
+    result = calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, rec.truth.imu_noise)
+    log = result.frame_log
+    assert [r.index for r in log.records] == list(range(len(rec.frames)))
+    reasons = [r.reason for r in log.records]
+    t_s = (rec.frames.t - rec.frames.t[0]) / NS_PER_S
+    in_gap = np.flatnonzero((t_s > GAP_S[0]) & (t_s < GAP_S[1]))
+    assert len(in_gap) >= 11 and all(reasons[k] == "no_board" for k in in_gap)
+    seen = rec.frames.num_detections > 0
+    early = np.flatnonzero(seen & (t_s < IMU_START_S - 0.05))  # well before the IMU's first sample (offset 8 ms)
+    assert len(early) >= 4 and all(reasons[k] == "outside_imu" for k in early)
+    assert reasons[scrambled] == "outlier" and log.records[scrambled].used == 0
+    for k in shifted:
+        assert reasons[k] == "outlier_corners" and log.records[k].used == log.records[k].found - 5
+    assert len(log.used) == result.num_frames and log.corners_used == len(result.reprojection_residuals)
+    assert log.corners_found == int(rec.frames.num_detections.sum())
+    used_frames = {r.index for r in log.used}
+    assert used_frames == set(result.reprojection_frames.tolist())
+    assert all(reasons[k] in ("", "outlier_corners") for k in used_frames)

@@ -93,7 +93,7 @@ def test_redundancies_add_up_to_the_number_of_parameters():
 
 
 def test_memory_bound_is_checked_before_solving_and_names_the_stride():
-    with pytest.raises(CalibrationError, match=r"frame_stride=3, vical-calibrate --frame-stride 3"):
+    with pytest.raises(CalibrationError, match=r"keep one frame in 3 \(frame_stride=3\) or raise the limit"):
         check_memory(12_000, 1_500_000, limit_mb=1500.0, stride=1)
     assert estimated_memory_mb(600, 80_000) < 300  # a real 30 s recording: far below the default limit
     rec = recording()

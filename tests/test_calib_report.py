@@ -1,10 +1,17 @@
 """Results text, plots and weak-parameter hints of real calibrations."""
 
-import numpy as np
+import re
+import zlib
 
+import numpy as np
+import pytest
+
+from vical.calib.calibrate import calibrate_joint
 from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.metrics import calibration_errors
 from vical.calib.report import results_text, summary_table, write_report
 from vical.calib.synthetic import Excitation, make_recording
+from vical.data import ImuNoise
 
 SIZE = (640, 480)
 
@@ -30,3 +37,68 @@ def test_well_excited_views_flag_no_intrinsic_but_report_the_numbers(tmp_path):
     written = write_report(tmp_path, result)
     assert [p.name for p in written] == ["reprojection.png", "report.pdf"]
     assert not list(tmp_path.glob(".*tmp*"))  # atomic writes leave no temporaries
+
+
+def pdf_pages_and_text(path) -> tuple[int, str]:
+    """Page count and the text shown on the pages of a PDF written by matplotlib (its TJ operators; "ff" is
+    one glyph there, so words with it are not searchable)."""
+    data = path.read_bytes()
+    pages = len(re.findall(rb"/Type\s*/Page\b", data))
+    shown = []
+    for stream in re.findall(rb"stream\n(.*?)endstream", data, re.S):
+        try:
+            content = zlib.decompress(stream)
+        except zlib.error:  # fonts and images
+            continue
+        for array in re.findall(rb"\[(.*?)\]\s*TJ", content, re.S):
+            pieces = re.findall(rb"\(((?:\\.|[^\\)])*)\)", array)
+            shown.append(re.sub(rb"\\(.)", rb"\1", b"".join(pieces)).decode("latin-1"))
+    return pages, "\n".join(shown)
+
+
+@pytest.fixture(scope="module")
+def joint():
+    rec = make_recording(duration=8.0, time_offset=0.012, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=21)
+    return rec, calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", SIZE, rec.truth.imu_noise)
+
+
+def test_the_pdf_report_has_a_page_per_topic_with_the_parameters_first(joint, tmp_path):
+    rec, result = joint
+    errors = calibration_errors(result, rec.truth)
+    write_report(tmp_path, result, errors)
+    pages, text = pdf_pages_and_text(tmp_path / "report.pdf")
+    titles = ["vical calibration report: joint", "Reprojection residuals", "Coverage: where the board's corners",
+              "Frames: detected, used and not used", "IMU: mean rates per state interval", "IMU residuals: measured",
+              "the camera's rotation rate (in the IMU frame) against the gyro", "Notes"]  # fmt: skip
+    assert pages == len(titles) == 8
+    positions = [text.index(title) for title in titles]
+    assert positions == sorted(positions)  # in this order
+    first_page = " ".join(text[: positions[1]].split())  # spaces squashed
+    assert f"fx {result.camera.fx:.6f} +- {result.sigma('fx'):.4g} px" in first_page
+    assert f"time offset {errors.time_offset_ms:.4f} ms" in first_page and "errors against the truth" in first_page
+    assert "frames: 79 frames, the board detected in 66, 66 used" in first_page
+    assert "warnings:" in text[positions[-1] :]
+
+
+def test_an_intrinsic_report_leaves_out_the_imu_pages(tmp_path):
+    rec = make_recording(duration=6.0, pixel_sigma=0.3, seed=8)
+    result = calibrate_intrinsics(rec.frames, rec.target, "radtan", SIZE)
+    write_report(tmp_path, result)
+    pages, text = pdf_pages_and_text(tmp_path / "report.pdf")
+    assert pages == 5 and "IMU" not in text and "rotation rate" not in text
+
+
+def test_the_time_offset_page_shows_the_camera_rates_matching_the_gyro_at_the_offset(joint):
+    _, result = joint
+    trace = result.time_offset_trace
+    best = trace.shifts[np.nanargmin(trace.mismatch)]
+    step = trace.shifts[1] - trace.shifts[0]
+    assert abs(best - result.time_offset) <= step / 2 and abs(best - 0.012) < 1e-3
+    assert np.nanmax(trace.mismatch) > 2 * np.nanmin(trace.mismatch)  # a clear minimum over +-50 ms
+    # The camera's mean rate over each frame pair against the gyro at the pair's middle, shifted by the offset.
+    gyro = np.column_stack(
+        [np.interp(trace.t_camera + result.time_offset, trace.t_imu, trace.gyro[:, i]) for i in range(3)]
+    )
+    rms_rate = np.sqrt(np.mean(np.sum(gyro**2, axis=1)))
+    rms_difference = np.sqrt(np.mean(np.sum((trace.omega_camera - gyro) ** 2, axis=1)))
+    assert rms_rate > 0.5 and rms_difference < 0.05 * rms_rate

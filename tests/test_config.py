@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from vical.config import ConfigError, from_mapping, require_range
+from vical.config import ConfigError, SettingError, from_mapping, require_range
 
 
 @dataclass
@@ -39,3 +39,22 @@ def test_unknown_key_is_listed():
 def test_nan_is_out_of_range():
     with pytest.raises(ConfigError, match="timestep"):
         require_range("sim.physics.timestep", float("nan"), 0.0, 1.0)
+
+
+def test_a_setting_error_spells_every_setting_it_names_for_python_or_a_command_line():
+    err = SettingError(
+        "use every 3rd frame ({fix}) or raise the limit ({memory_limit_mb}) or search further ({max_time_offset})",
+        "frame_stride", "3", "3", {"memory_limit_mb": (None, None), "max_time_offset": ("0.2", "0.2")},
+    )  # fmt: skip
+    assert str(err) == (
+        "use every 3rd frame (frame_stride=3) or raise the limit (memory_limit_mb) or search further "
+        "(max_time_offset=0.2)"
+    )
+    flags = {"frame_stride": "--frame-stride", "memory_limit_mb": "--memory-limit"}
+    assert err.with_flags(flags) == (
+        "use every 3rd frame (--frame-stride 3) or raise the limit (--memory-limit) or search further "
+        "(max_time_offset=0.2)"
+    )
+    assert err.with_flags({"max_time_offset": "--max-time-offset"}).endswith(
+        "(frame_stride=3) or raise the limit (memory_limit_mb) or search further (--max-time-offset 0.2)"
+    )

@@ -16,21 +16,50 @@ class SettingError(ValueError):
     """A problem that changing one setting fixes; the message spells the setting as its caller wrote it.
 
     ``str(err)`` spells the fix as a Python argument (``gyro_unit='deg/s'``); a command-line app
-    spells it as its own flag: ``err.spelled(f"--gyro-unit {err.cli_value}")``. Subclasses add the
-    error family (``vical.io.errors.UnitError`` is also a ``FormatError``).
+    spells it as its own flag: ``err.with_flags({"gyro_unit": "--gyro-unit"})``. The template says
+    ``{fix}`` where the fix goes; a message that names further settings says ``{<setting>}`` for each
+    one of ``others``, spelled by ``spelled``'s ``flags`` (as Python arguments without). Subclasses add
+    the error family (``vical.io.errors.UnitError`` is also a ``FormatError``).
 
     Attributes:
-        setting: the Python argument (``gyro_unit``); cli_value: the suggested value as a command line
-            writes it (``deg/s``, ``640 480``).
+        setting: the Python argument (``gyro_unit``); python_value, cli_value: the suggested value as
+            Python and a command line write it (``'deg/s'``, ``deg/s``), or None when the message names the
+            setting without a value.
+        others: ``{setting: (python_value, cli_value)}`` of the further settings the message names
+            (a value None: the setting alone).
     """
 
-    def __init__(self, template: str, setting: str, python_value: str, cli_value: str) -> None:
-        self.template, self.setting, self.cli_value = template, setting, cli_value
-        super().__init__(self.spelled(f"{setting}={python_value}"))
+    def __init__(
+        self,
+        template: str,
+        setting: str,
+        python_value: str | None,
+        cli_value: str | None,
+        others: Mapping[str, tuple[str | None, str | None]] | None = None,
+    ) -> None:
+        self.template, self.setting, self.python_value, self.cli_value = template, setting, python_value, cli_value
+        self.others = dict(others or {})
+        super().__init__(self.spelled(_spell(setting, python_value, "=")))
 
-    def spelled(self, fix: str) -> str:
-        """The message with the fix written as ``fix`` (where the template says ``{fix}``)."""
-        return self.template.replace("{fix}", fix)
+    def spelled(self, fix: str, flags: Mapping[str, str] | None = None) -> str:
+        """The message with the fix written as ``fix`` (where the template says ``{fix}``) and each of
+        ``others`` as ``flags[setting] cli_value`` (``setting=python_value`` for a setting not in ``flags``)."""
+        text = self.template.replace("{fix}", fix)
+        for name, (python_value, cli_value) in self.others.items():
+            flag = (flags or {}).get(name)
+            spelling = _spell(name, python_value, "=") if flag is None else _spell(flag, cli_value, " ")
+            text = text.replace("{" + name + "}", spelling)
+        return text
+
+    def with_flags(self, flags: Mapping[str, str]) -> str:
+        """The message with every setting that ``flags`` names spelled as its command-line flag."""
+        if self.setting in flags:
+            return self.spelled(_spell(flags[self.setting], self.cli_value, " "), flags)
+        return self.spelled(_spell(self.setting, self.python_value, "="), flags)
+
+
+def _spell(name: str, value: str | None, joiner: str) -> str:
+    return name if value is None else f"{name}{joiner}{value}"
 
 
 def require(ok: bool, key: str, allowed: str, value: Any) -> None:

@@ -30,20 +30,22 @@ import argparse
 import math
 import os
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from vical.apps.cli import ArgumentParser, OutputError, cannot_write, one_line_warnings, report_error
 from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
+from vical.calib.board_size import MAX_SAMPLE, board_size_hint
 from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
 from vical.calib.detection import detect_checkerboard
 from vical.calib.errors import CalibrationError
-from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.intrinsics import MIN_VIEWS, calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.plausibility import gyro_scale, implausibilities, likely_gyro_unit
-from vical.calib.report import summary_table, write_report, write_results_text
+from vical.calib.report import summary_table, write_frames_csv, write_report, write_results_text
 from vical.calib.result import CalibrationResult
 from vical.calib.visual_inertial import ViOptions
 from vical.config import SettingError
@@ -57,8 +59,20 @@ from vical.io.sources import detect_source, open_recording
 
 APP = "vical-calibrate"
 TASKS = ("intrinsic", "extrinsic", "joint", "two_stage")
-# The command line's spelling of the calibrator's and readers' arguments that error messages name.
-FLAGS = {"gyro_unit": "--gyro-unit", "accel_unit": "--accel-unit", "image_size_px": "--image-size"}
+# The command line's spelling of the calibrator's and readers' arguments that error messages name
+# (``vical.config.SettingError``): the one place where library parameters become flags.
+FLAGS = {
+    "gyro_unit": "--gyro-unit",
+    "accel_unit": "--accel-unit",
+    "image_size_px": "--image-size",
+    "frame_stride": "--frame-stride",
+    "memory_limit_mb": "--memory-limit",
+    "max_time_offset": "--max-time-offset",
+    "initial_time_offset": "timeshift_cam_imu in an --intrinsics camchain",
+    "target": "--target",
+    "image_topic": "--image-topic",
+    "imu_topic": "--imu-topic",
+}
 
 
 def _number(low: float, kind: type = float, closed: bool = True):
@@ -124,28 +138,41 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class SizedDetector:
-    """The corner detector of a target's kind, bound to the target; remembers the image size it saw.
+    """The corner detector of a target's kind, bound to the target; remembers the image size it saw
+    and keeps a sample of the images spread over the sequence.
 
     Checkerboards go to ``detect_checkerboard``, aprilgrids to ``detect_aprilgrid`` (one aruco
     detector reused over the sequence). Sources that decode images without keeping them in
-    memory still tell the calibrator the image size this way.
+    memory still tell the calibrator the image size this way, and the sample lets
+    ``board_size_hint`` check the board's size.
     """
 
     def __init__(self, target: Target) -> None:
         self.target = target
         self.size: tuple[int, int] | None = None  # (W, H) [px] of the images seen
+        self.sample: list[np.ndarray] = []  # every ``_step``-th image seen, at most 2 MAX_SAMPLE
+        self._seen, self._step = 0, 1
         self._aruco = make_aprilgrid_detector() if target.kind == "aprilgrid" else None
+
+    def _keep(self, image: np.ndarray) -> None:
+        if self._seen % self._step == 0:
+            self.sample.append(image)
+            if len(self.sample) > 2 * MAX_SAMPLE:  # thin to every other one: the sample stays evenly spread
+                self.sample, self._step = self.sample[::2], 2 * self._step
+        self._seen += 1
 
     def __call__(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Corners (K, 2) [px] and Kalibr point ids (K,) found in a (H, W) uint8 grey image."""
         self.size = (int(image.shape[1]), int(image.shape[0]))
+        self._keep(image)
         if self._aruco is not None:
             return detect_aprilgrid(image, self.target, detector=self._aruco)
         return detect_checkerboard(image, self.target)
 
 
-def load_source(args: argparse.Namespace) -> tuple[Recording, tuple[int, int] | None]:
-    """Open ``args.recording`` (detecting corners in its images) and return it with the image size seen."""
+def load_source(args: argparse.Namespace) -> tuple[Recording, SizedDetector | None]:
+    """Open ``args.recording`` (detecting corners in its images); return it with the detector that saw the
+    images (None for sources whose corners were stored)."""
     target = read_target_yaml(args.target) if args.target else None
     kind = detect_source(args.recording)
     if args.task != "intrinsic" and (kind == "image_folder" or (kind == "corners_csv" and not args.imu_csv)):
@@ -165,7 +192,7 @@ def load_source(args: argparse.Namespace) -> tuple[Recording, tuple[int, int] | 
     )
     if args.task != "intrinsic" and len(rec.imu) < 2:
         raise CalibrationError(_no_imu_message(kind, args))
-    return rec, None if detector is None else detector.size
+    return rec, detector
 
 
 def _no_imu_message(kind: str, args: argparse.Namespace) -> str:
@@ -273,9 +300,10 @@ def run(args: argparse.Namespace) -> CalibrationResult:
     out = Path(args.out)
     inputs = [args.recording, args.target, args.intrinsics, args.imu_yaml, args.imu_csv]
     check_out(out, args.overwrite, inputs)
-    rec, seen = load_source(args)
+    rec, detector = load_source(args)
+    hint = _board_size_hint(args, rec, detector)
     camera, T_guess, shift = _known_intrinsics(args)
-    size = _image_size(args, rec, camera, seen)
+    size = _image_size(args, rec, camera, None if detector is None else detector.size)
     common = {"initial_T_cam_imu": T_guess, "initial_time_offset": shift or 0.0, "options": options}
     noise = None
     if args.task == "intrinsic":
@@ -292,12 +320,27 @@ def run(args: argparse.Namespace) -> CalibrationResult:
             result = calibrate_joint(rec.frames, rec.imu, rec.target, args.model, size, noise, **common)
         else:
             result = calibrate_two_stage(rec.frames, rec.imu, rec.target, args.model, size, noise, **common)
+    if hint:
+        result = replace(result, warnings=[hint, *result.warnings])
     problems = implausibilities(result, nominal_T_cam_imu() if T_guess is None else T_guess)
     failure = _failure_message(problems, result, rec, args) if problems else None
     _write_outputs(out, result, rec, args, noise, failure)
     if failure:
         raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
     return result
+
+
+def _board_size_hint(args, rec: Recording, detector: SizedDetector | None) -> str | None:
+    """A warning when the sampled images show a checkerboard of another size than ``--target``'s; an error
+    when the board was then found in too few frames to calibrate."""
+    hint = board_size_hint(detector.sample, rec.target) if detector is not None else None
+    if hint is None:
+        return None
+    message = hint.message(f"--target {args.target}")
+    seen = np.count_nonzero(rec.frames.num_detections)
+    if seen < MIN_VIEWS:
+        raise CalibrationError(f"the board was found in {seen} of {len(rec.frames)} images: {message}")
+    return message
 
 
 def _failure_message(problems: list[str], result: CalibrationResult, rec: Recording, args) -> str:
@@ -337,11 +380,13 @@ def _write_outputs(
                 write_camchain_imucam(tmp / name, result.camera, result.T_cam_imu, result.time_offset)
                 write_imu_yaml(tmp / "imu.yaml", noise)
             write_results_text(tmp / "results.txt", result, errors, failure)
+            write_frames_csv(tmp / "frames.csv", result.frame_log)
             if not args.no_report:
-                write_report(tmp, result)
+                write_report(tmp, result, errors, failure)
     except OSError as err:
         raise OutputError(cannot_write("--out", out, err)) from None
     print(summary_table(result, errors))
+    print(f"frames: {result.frame_log.summary()} (every frame with its reason: {out / 'frames.csv'})")
     for w in result.warnings:
         print(f"warning: {w}")
     for w in result.weak_parameters[:3]:
@@ -350,10 +395,8 @@ def _write_outputs(
 
 
 def _message(err: Exception) -> str:
-    """The error's message, with a fix it names spelled as this command line's flag."""
-    if isinstance(err, SettingError) and err.setting in FLAGS:
-        return err.spelled(f"{FLAGS[err.setting]} {err.cli_value}")
-    return str(err)
+    """The error's message, with the settings it names spelled as this command line's flags."""
+    return err.with_flags(FLAGS) if isinstance(err, SettingError) else str(err)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -42,9 +42,8 @@ def calibrate_extrinsics(
         options: solver settings (``ViOptions()`` if None).
     """
     start = time.perf_counter()
-    observations = collect_observations(frames, target)
     return run_visual_inertial(
-        "extrinsic", observations, imu, target, camera, imu_noise or ImuNoise(), initial_T_cam_imu,
+        "extrinsic", frames, imu, target, camera, imu_noise or ImuNoise(), initial_T_cam_imu,
         initial_time_offset, options or ViOptions(), start,
     )[0]  # fmt: skip
 
@@ -72,12 +71,12 @@ def calibrate_joint(
         frames, target, model, image_size_px, initial_camera, opts.pixel_sigma, opts.huber_k,
         frame_stride=opts.frame_stride,
     )  # fmt: skip
-    observations = collect_observations(frames, target)
     result = run_visual_inertial(
-        "joint", observations, imu, target, intrinsic.camera, imu_noise or ImuNoise(), initial_T_cam_imu,
+        "joint", frames, imu, target, intrinsic.camera, imu_noise or ImuNoise(), initial_T_cam_imu,
         initial_time_offset, opts, start,
     )[0]  # fmt: skip
-    coverage = image_coverage_warnings(observations, (intrinsic.camera.width, intrinsic.camera.height))
+    size = (intrinsic.camera.width, intrinsic.camera.height)
+    coverage = image_coverage_warnings(collect_observations(frames, target), size)
     return replace(result, warnings=coverage + result.warnings)
 
 
@@ -191,7 +190,7 @@ def calibrate_rig(
     first, *rest = frames
     others = [CameraInput(n, observations[n], models[n], guesses.get(n), offsets.get(n, 0.0)) for n in rest]
     results = run_visual_inertial(
-        task, observations[first], imu, target, models[first], imu_noise or ImuNoise(), guesses.get(first),
+        task, frames[first], imu, target, models[first], imu_noise or ImuNoise(), guesses.get(first),
         offsets.get(first, 0.0), opts, start, others,
     )  # fmt: skip
     if task == "joint":

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from vical.calib.errors import CalibrationError
+from vical.calib.errors import CalibrationError, CalibrationSettingError
 from vical.calib.observations import FrameObservation
 from vical.data import ImuNoise
 
@@ -75,11 +75,11 @@ def check_memory(frames: int, corners: int, limit_mb: float, stride: int) -> Non
     if need <= limit_mb:
         return
     thin = math.ceil(stride * need / limit_mb)
-    raise CalibrationError(
+    raise CalibrationSettingError(
         f"the recording's {frames} frames with {corners} corners need about {need:.0f} MB to calibrate, more than the "
-        f"limit of {limit_mb:.0f} MB; use every {thin}th frame (frame_stride={thin}, vical-calibrate --frame-stride "
-        f"{thin}) or raise the limit (memory_limit_mb, --memory-limit)"
-    )
+        f"limit of {limit_mb:.0f} MB; keep one frame in {thin} ({{fix}}) or raise the limit ({{memory_limit_mb}})",
+        "frame_stride", str(thin), str(thin), {"memory_limit_mb": (None, None)},
+    )  # fmt: skip
 
 
 def image_coverage_warnings(observations: Sequence[FrameObservation], size: tuple[int, int]) -> list[str]:

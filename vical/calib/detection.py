@@ -16,7 +16,7 @@ import numpy as np
 from vical.calib.errors import CalibrationError
 from vical.data.target import Target
 
-_FIND_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
+FIND_FLAGS = cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE | cv2.CALIB_CB_FAST_CHECK
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 40, 1e-3)
 
 
@@ -32,7 +32,7 @@ def detect_checkerboard(image: np.ndarray, target: Target) -> tuple[np.ndarray, 
         in Kalibr's numbering; both empty unless the whole board was found.
     """
     _check_inputs(image, target)
-    found, raw = cv2.findChessboardCorners(image, (target.cols, target.rows), flags=_FIND_FLAGS)
+    found, raw = cv2.findChessboardCorners(image, (target.cols, target.rows), flags=FIND_FLAGS)
     if not found or raw is None or len(raw) != target.num_points:
         return np.zeros((0, 2)), np.zeros(0, dtype=np.int64)
     grid = raw.reshape(target.rows, target.cols, 2).astype(np.float32)

@@ -18,6 +18,7 @@ import numpy as np
 from vical.calib.checks import image_coverage_warnings
 from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError
+from vical.calib.frame_log import build_frame_log, left_out
 from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera
 from vical.calib.observations import FrameObservation, collect_observations, image_size
 from vical.calib.outliers import reject_outliers
@@ -92,14 +93,15 @@ class _Solve:
 
 def reprojection_residuals(
     camera: CameraModel, observations: list[FrameObservation], T_cam_target: dict[int, np.ndarray]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Measured minus predicted pixels (N, 2) [px] and the frame index (N,) of each corner."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Measured minus predicted pixels (N, 2) [px], the frame index (N,) and measured pixel (N, 2) of each corner."""
     res, frame = [], []
     for k, T in T_cam_target.items():
         obs = observations[k]
         res.append(obs.residuals(camera, T))
         frame.append(np.full(len(obs.ids), obs.index))
-    return np.concatenate(res), np.concatenate(frame)
+    pixels = np.concatenate([observations[k].uv for k in T_cam_target])
+    return np.concatenate(res), np.concatenate(frame), pixels
 
 
 def estimated_pixel_sigma(residuals: np.ndarray, num_params: int) -> float:
@@ -138,7 +140,8 @@ def calibrate_intrinsics(
     check_model(model)
     if not (isinstance(frame_stride, int) and frame_stride >= 1):
         raise CalibrationError(f"frame_stride must be an integer >= 1, got {frame_stride!r}")
-    observations = collect_observations(frames, target)[::frame_stride]
+    every = collect_observations(frames, target)
+    observations = every[::frame_stride]
     if image_size_px is None and initial_camera_guess is not None:
         image_size_px = (initial_camera_guess.width, initial_camera_guess.height)
     size = image_size(frames, image_size_px)
@@ -161,7 +164,7 @@ def calibrate_intrinsics(
         solve.observations = observations = rejection.observations
         camera, T_cam_target, graph, solution = solve(camera, rejection.poses)
     poses = T_cam_target
-    residuals, frame_index = reprojection_residuals(camera, observations, T_cam_target)
+    residuals, frame_index, pixels = reprojection_residuals(camera, observations, T_cam_target)
     covariance = covariance_or_unobservable(graph.linearize(solution.values), solution.values, [K_KEY])
     if pixel_sigma is None:
         sigma_px = estimated_pixel_sigma(residuals, 6 * len(poses) + CAMERA_PARAMETERS)
@@ -170,6 +173,9 @@ def calibrate_intrinsics(
         sigma_px = float(pixel_sigma)
     names = intrinsic_names(model)
     found = correlations(names, covariance)
+    decided = left_out(every, observations, rejection.dropped)
+    min_corners = min(MIN_INIT_CORNERS, target.num_points)
+
     estimate = np.concatenate([camera.intrinsics, camera.dist])
     return CalibrationResult(
         task="intrinsic",
@@ -195,13 +201,8 @@ def calibrate_intrinsics(
         num_frames=len(poses),
         warnings=rejection.warnings
         + image_coverage_warnings(observations, size)
-        + _dropped_frames_warning(len(frames), len(poses))
         + correlation_warnings(found)
         + unobservable_warnings(names, covariance),
+        frame_log=build_frame_log(frames, frame_index, min_corners, decided),
+        reprojection_pixels=pixels,
     )
-
-
-def _dropped_frames_warning(num_frames: int, used: int) -> list[str]:
-    if used == num_frames:
-        return []
-    return [f"{num_frames - used} of {num_frames} frames had no usable target view and were not used"]

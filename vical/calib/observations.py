@@ -26,6 +26,7 @@ class FrameObservation:
         uv: (K, 2) [px] corner pixels.
         ids: (K,) int64 target point ids.
         points: (K, 3) [m] the corners' board-frame positions.
+        name: the frame's image file name, or None (``CameraFrames.names``).
     """
 
     index: int
@@ -33,6 +34,12 @@ class FrameObservation:
     uv: np.ndarray
     ids: np.ndarray
     points: np.ndarray
+    name: str | None = None
+
+    @property
+    def label(self) -> str:
+        """How messages name the frame: its image file name, else its index in the recording."""
+        return self.name if self.name is not None else str(self.index)
 
     def residuals(self, camera: CameraModel, T_cam_target: np.ndarray) -> np.ndarray:
         """Measured minus predicted corner pixels (K, 2) [px] with the target at ``T_cam_target`` (4, 4)."""
@@ -60,7 +67,8 @@ def collect_observations(
                 f"the target ({target.rows} x {target.cols} points) does not match the detections"
             )
         if len(ids) >= min_corners:
-            out.append(FrameObservation(k, int(frames.t[k]), frames.corners[k], ids, points[ids]))
+            name = None if frames.names is None else frames.names[k]
+            out.append(FrameObservation(k, int(frames.t[k]), frames.corners[k], ids, points[ids], name))
     if not out:
         counts = frames.num_detections
         raise CalibrationError(

@@ -15,7 +15,7 @@ before the final solve, and the result says how many, by which threshold and in 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -68,7 +68,11 @@ def robust_pose(
 def rejection_warnings(
     observations: list[FrameObservation], dropped: list[int], corners: dict[int, int], threshold: float, sigma: float
 ) -> list[str]:
-    """Plain-language notes on outlier corners (how many, by which rule, in which frames) and dropped frames."""
+    """Plain-language notes on outlier corners (how many, by which rule, in which frames) and dropped frames.
+
+    ``dropped`` and the keys of ``corners`` are frame indices; frames are named by ``FrameObservation.label``.
+    """
+    labels = {o.index: o.label for o in observations}
     notes = []
     if corners:
         rejected, total = sum(corners.values()), sum(len(o.ids) for o in observations)
@@ -80,20 +84,20 @@ def rejection_warnings(
         notes.append(
             f"{rejected} of {total} corners ({100 * rejected / total:.2g} %) in {len(corners)} frames are outliers and "
             f"were left out: their reprojection error after fitting the frame's pose exceeds {threshold:.2f} px, "
-            f"{rule}; frames {_listing(sorted(corners))}"
+            f"{rule}; frames {_listing([labels[k] for k in sorted(corners)])}"
         )
     if dropped:
         notes.append(
             f"{len(dropped)} of {len(observations)} frames with detections fit no target pose even without their "
             f"worst {MAX_OUTLIER_FRACTION:.0%} of corners (scrambled ids, or another target than the one given?) and "
-            f"were dropped: frames {_listing(dropped)}"
+            f"were dropped: frames {_listing([labels[k] for k in dropped])}"
         )
     return notes
 
 
-def _listing(indices: list[int], limit: int = 12) -> str:
-    shown = ", ".join(str(i) for i in indices[:limit])
-    return shown + (f", ... ({len(indices) - limit} more)" if len(indices) > limit else "")
+def _listing(labels: list[str], limit: int = 12) -> str:
+    shown = ", ".join(labels[:limit])
+    return shown + (f", ... ({len(labels) - limit} more)" if len(labels) > limit else "")
 
 
 @dataclass(frozen=True)
@@ -105,12 +109,14 @@ class Rejection:
         poses: ``{observation index: T_cam_target (4, 4)}`` of the frames kept.
         warnings: plain-language notes on what was removed (empty when nothing was).
         threshold: [px] the residual norm above which corners were rejected.
+        dropped: frame indices (``FrameObservation.index``) of the frames dropped whole.
     """
 
     observations: list[FrameObservation]
     poses: dict[int, np.ndarray]
     warnings: list[str]
     threshold: float
+    dropped: list[int] = field(default_factory=list)
 
     @property
     def changed(self) -> bool:
@@ -151,4 +157,4 @@ def reject_outliers(
             cleaned[k] = keep_inliers(obs, inliers)
             rejected[obs.index] = int((~inliers).sum())
     notes = rejection_warnings(observations, dropped, rejected, threshold, sigma)
-    return Rejection(cleaned, kept, notes, threshold)
+    return Rejection(cleaned, kept, notes, threshold, dropped)

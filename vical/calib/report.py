@@ -1,17 +1,20 @@
-"""Human-readable outputs of a calibration: summary table, results text and plots (PNG + PDF).
+"""Human-readable outputs of a calibration: summary table, results text, the frames' CSV, the report (PDF + PNGs).
 
 All files are written atomically (temporary sibling + ``os.replace``).
 """
 
 from __future__ import annotations
 
+import csv
+import io
 import os
 from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_pdf import PdfPages
-from matplotlib.figure import Figure  # no pyplot: no global backend state, no display needed
 
+from vical.calib import report_figures as figures
+from vical.calib.frame_log import REASONS, FrameLog, short_reason
 from vical.calib.metrics import CalibrationErrors
 from vical.calib.result import CalibrationResult, ResidualStats
 from vical.geometry import matrix_to_euler
@@ -83,6 +86,39 @@ def _quality_lines(result: CalibrationResult) -> list[str]:
     return lines
 
 
+def _frame_lines(log: FrameLog | None, limit: int = 20) -> list[str]:
+    """The frame counts, then the frames not used (or trimmed) by reason, each named by file or timestamp [ns]."""
+    if log is None:
+        return []
+    lines = ["frames: " + log.summary()]
+    for reason in log.counts():
+        labels = [r.label for r in log.records if r.reason == reason]
+        more = f", ... ({len(labels) - limit} more)" if len(labels) > limit else ""
+        lines.append(f"  {short_reason(reason)} ({len(labels)}): {', '.join(labels[:limit])}{more}")
+    return lines
+
+
+FRAMES_CSV_HEADER = [
+    "index", "timestamp_ns", "file", "corners_found", "corners_used", "status", "reason", "explanation",
+]  # fmt: skip
+
+
+def frames_csv(log: FrameLog) -> str:
+    """Every frame as a CSV row: index, timestamp [ns], file, corners found and used, status, reason code and text."""
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(FRAMES_CSV_HEADER)
+    for r in log.records:
+        status = "used" if r.used else "not used"
+        writer.writerow([r.index, r.t_ns, r.name or "", r.found, r.used, status, r.reason, REASONS.get(r.reason, "")])
+    return out.getvalue()
+
+
+def write_frames_csv(path: str | os.PathLike, log: FrameLog) -> None:
+    """Write ``frames_csv`` to ``path`` atomically."""
+    write_text_atomic(path, frames_csv(log))
+
+
 def _weak_lines(result: CalibrationResult) -> list[str]:
     if not result.weak_parameters:
         return ["weakly observed parameters: none"]
@@ -126,6 +162,7 @@ def results_text(result: CalibrationResult, errors: CalibrationErrors | None = N
         _camera_lines(result),
         _extrinsic_lines(result),
         _quality_lines(result),
+        _frame_lines(result.frame_log),
         _weak_lines(result),
         _correlation_lines(result),
         _error_lines(errors),
@@ -171,40 +208,47 @@ def write_results_text(
     write_text_atomic(path, results_text(result, errors, failure))
 
 
-def _reprojection_figure(result: CalibrationResult):
-    fig = Figure(figsize=(11, 4.5))
-    ax0, ax1 = fig.subplots(1, 2)
-    r = result.reprojection_residuals
-    ax0.scatter(r[:, 0], r[:, 1], s=2, alpha=0.4)
-    ax0.set_xlabel("u residual [px]")
-    ax0.set_ylabel("v residual [px]")
-    ax0.set_title(f"reprojection errors (rms {result.reprojection.rms:.3f} px)")
-    ax0.set_aspect("equal", adjustable="datalim")
-    ax1.plot(result.reprojection_frames, np.linalg.norm(r, axis=1), ".", ms=2)
-    ax1.set_xlabel("frame index")
-    ax1.set_ylabel("|residual| [px]")
-    ax1.set_title("reprojection error per corner over the recording")
-    fig.tight_layout()
-    return fig
+def _summary_lines(result: CalibrationResult, errors: CalibrationErrors | None, failure: str | None) -> list[str]:
+    """The report's first page: the estimates with their 1-sigma, the errors against the truth, quality and frames."""
+    sections = [
+        [f"FAILED: {failure}", "The estimates below are kept for diagnosis; do not use them."] if failure else [],
+        [f"task {result.task}"],
+        _camera_lines(result),
+        _extrinsic_lines(result),
+        _error_lines(errors),
+        _quality_lines(result),
+        ["frames: " + result.frame_log.summary()] if result.frame_log is not None else [],
+    ]
+    return [line for section in sections if section for line in [*section, ""]]
 
 
-def _imu_figure(result: CalibrationResult):
-    imu = result.imu_residuals
-    fig = Figure(figsize=(11, 7))
-    axes = fig.subplots(3, 2, sharex=True)
-    pairs = [(imu.gyro_measured, imu.gyro_predicted, "gyro [rad/s]"), (imu.accel_measured, imu.accel_predicted, "")]
-    for col, (meas, pred, unit) in enumerate(pairs):
-        unit = unit or "accel [m/s^2]"
-        for i, axis in enumerate("xyz"):
-            ax = axes[i, col]
-            ax.plot(imu.t, meas[:, i], lw=0.8, label="measured")
-            ax.plot(imu.t, pred[:, i], lw=0.8, ls="--", label="predicted from states")
-            ax.set_ylabel(f"{unit.split()[0]} {axis} {unit.split()[1]}")
-        axes[-1, col].set_xlabel("time [s]")
-    axes[0, 0].legend(loc="upper right", fontsize=7)
-    fig.suptitle("IMU: mean rates per state interval, measured vs predicted")
-    fig.tight_layout()
-    return fig
+def _notes_lines(result: CalibrationResult) -> list[str]:
+    """The report's last page: warnings, weak parameters, correlations, the frames not used, what 1-sigma means."""
+    sections = [
+        ["warnings:", *[f"  {w}" for w in result.warnings]] if result.warnings else ["warnings: none"],
+        _weak_lines(result),
+        _correlation_lines(result),
+        _frame_lines(result.frame_log),
+        ["note: " + UNCERTAINTY_NOTE],
+    ]
+    return [line for section in sections if section for line in [*section, ""]]
+
+
+def report_pages(result: CalibrationResult, errors: CalibrationErrors | None = None, failure: str | None = None):
+    """The report's pages in order (``matplotlib.figure.Figure``): parameters, reprojection residuals, coverage,
+    frames, then for camera-IMU tasks the IMU's measured and predicted rates, its residuals and the time offset,
+    and last the notes."""
+    pages = figures.text_pages(f"vical calibration report: {result.task}", _summary_lines(result, errors, failure))
+    pages.append(figures.reprojection_page(result))
+    if result.reprojection_pixels is not None and len(result.reprojection_pixels) >= 3:
+        pages.append(figures.coverage_page(result))
+    if result.frame_log is not None:
+        pages.append(figures.frames_page(result.frame_log))
+    if result.imu_residuals is not None and len(result.imu_residuals.t):
+        pages += [figures.imu_page(result), figures.imu_residual_page(result)]
+    if result.time_offset_trace is not None:
+        pages.append(figures.time_offset_page(result))
+    return pages + figures.text_pages("Notes", _notes_lines(result))
 
 
 def _save_png(fig, path: Path) -> None:
@@ -212,19 +256,24 @@ def _save_png(fig, path: Path) -> None:
         fig.savefig(tmp, format="png", dpi=110)
 
 
-def write_report(directory: str | os.PathLike, result: CalibrationResult) -> list[Path]:
-    """Plots of the residuals as PNGs and one ``report.pdf`` in ``directory``; returns the written paths."""
+def write_report(
+    directory: str | os.PathLike,
+    result: CalibrationResult,
+    errors: CalibrationErrors | None = None,
+    failure: str | None = None,
+) -> list[Path]:
+    """``report.pdf`` (``report_pages``) and the residual plots as PNGs in ``directory``; returns the written paths."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    figures = {"reprojection": _reprojection_figure(result)}
+    pngs = {"reprojection": figures.reprojection_page(result)}
     if result.imu_residuals is not None and len(result.imu_residuals.t):
-        figures["imu"] = _imu_figure(result)
+        pngs["imu"] = figures.imu_page(result)
     written = []
-    for name, fig in figures.items():
+    for name, fig in pngs.items():
         _save_png(fig, directory / f"{name}.png")
         written.append(directory / f"{name}.png")
     with atomic_file(directory / "report.pdf") as tmp, PdfPages(tmp) as pdf:
-        for fig in figures.values():
+        for fig in report_pages(result, errors, failure):
             pdf.savefig(fig)
     written.append(directory / "report.pdf")
     return written

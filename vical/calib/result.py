@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from vical.calib.frame_log import FrameLog
 from vical.geometry import CameraModel
 
 
@@ -106,6 +107,26 @@ class ImuResiduals:
 
 
 @dataclass(frozen=True)
+class TimeOffsetTrace:
+    """The camera's rotation rate against the gyro's, the evidence for the time offset (times [s] since one start).
+
+    Attributes:
+        t_camera: (M,) [s] middle of each pair of consecutive frames with a target pose (camera clock).
+        omega_camera: (M, 3) [rad/s] the camera's mean rotation rate over each pair (PnP poses), in the IMU frame.
+        t_imu: (N,) [s] IMU sample times; gyro: (N, 3) [rad/s] the gyro minus the estimated bias.
+        shifts: (G,) [s] time offsets around the estimate; mismatch: (G,) [rad] RMS difference between the
+            camera's rotation increments and the gyro's integrated over the same pairs shifted by each offset.
+    """
+
+    t_camera: np.ndarray
+    omega_camera: np.ndarray
+    t_imu: np.ndarray
+    gyro: np.ndarray
+    shifts: np.ndarray
+    mismatch: np.ndarray
+
+
+@dataclass(frozen=True)
 class CalibrationResult:
     """The outcome of ``calibrate_intrinsics`` / ``calibrate_extrinsics`` / ``calibrate_joint``.
 
@@ -137,6 +158,10 @@ class CalibrationResult:
         imu_noise_scale: the IMU's noise measured from its residuals over the declared densities
             (``vical.calib.variance``; the solve weighted the IMU by it), or None (intrinsic task).
         correlations: the strongest correlations between parameter groups, strongest first.
+        frame_log: every input frame's detected and used corners, and why a frame was not used (the
+            final solve's frames: the extrinsic stage's in the two-stage task).
+        reprojection_pixels: (N, 2) [px] the measured corner of each residual, or None.
+        time_offset_trace: the camera's rotation rate against the gyro's, or None (intrinsic task).
     """
 
     task: str
@@ -162,6 +187,9 @@ class CalibrationResult:
     warnings: list[str] = field(default_factory=list)
     imu_noise_scale: float | None = None
     correlations: list[Correlation] = field(default_factory=list)
+    frame_log: FrameLog | None = None
+    reprojection_pixels: np.ndarray | None = None
+    time_offset_trace: TimeOffsetTrace | None = None
 
     @property
     def sigmas(self) -> dict[str, float]:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vical.calib.errors import CalibrationError
+from vical.calib.errors import CalibrationError, CalibrationSettingError
 from vical.calib.imu_integration import cumulative_angle, interpolate
 from vical.geometry import so3_log
 
@@ -168,10 +168,12 @@ def _scan(t_imu, angle, inc: RotationIncrements, max_offset: float, offset_guess
     d, valid = _gyro_increments(t_imu, angle, inc, taus)
     magnitude_cost = _masked_mean((np.linalg.norm(d, axis=2) - np.linalg.norm(inc.theta_cam, axis=1)) ** 2, valid)
     if not np.any(np.isfinite(magnitude_cost)):
-        raise CalibrationError(
+        raise CalibrationSettingError(
             "the camera frames and the IMU samples do not overlap in time for any time offset within "
-            f"+-{max_offset * 1e3:.0f} ms; check that both streams are stamped with the same clock"
-        )
+            f"+-{max_offset * 1e3:.0f} ms; check that both streams are stamped with the same clock, or search "
+            "further ({fix})",
+            "max_time_offset", f"{2 * max_offset:g}", f"{2 * max_offset:g}",
+        )  # fmt: skip
     return _parabola_minimum(taus, magnitude_cost)
 
 
@@ -180,11 +182,24 @@ def _valid_pair(t_imu, angle, inc: RotationIncrements, tau: float) -> tuple[np.n
     return np.where(valid[0][:, None], d[0], 0.0), valid[0]
 
 
-def _refine(t_imu, angle, inc: RotationIncrements, tau: float, R: np.ndarray, b: np.ndarray) -> float:
-    """``tau`` minimising the full vector mismatch on a fine grid around ``tau``."""
-    taus = tau + np.arange(-FINE_HALF_WIDTH, FINE_HALF_WIDTH + 0.5 * FINE_STEP, FINE_STEP)
+def _vector_cost(t_imu, angle, inc: RotationIncrements, R: np.ndarray, b: np.ndarray, taus: np.ndarray) -> np.ndarray:
+    """Mean squared mismatch (G,) [rad^2] of camera and rotated, bias-corrected gyro increments per shift (G,) [s]."""
     d, valid = _gyro_increments(t_imu, angle, inc, taus)
     dt = inc.t_end - inc.t_start
     predicted = (d - b * dt[None, :, None]) @ R.T
-    cost = _masked_mean(np.sum((predicted - inc.theta_cam[None]) ** 2, axis=2), valid)
-    return _parabola_minimum(taus, cost)
+    return _masked_mean(np.sum((predicted - inc.theta_cam[None]) ** 2, axis=2), valid)
+
+
+def _refine(t_imu, angle, inc: RotationIncrements, tau: float, R: np.ndarray, b: np.ndarray) -> float:
+    """``tau`` minimising the full vector mismatch on a fine grid around ``tau``."""
+    taus = tau + np.arange(-FINE_HALF_WIDTH, FINE_HALF_WIDTH + 0.5 * FINE_STEP, FINE_STEP)
+    return _parabola_minimum(taus, _vector_cost(t_imu, angle, inc, R, b, taus))
+
+
+def increment_mismatch(
+    t_imu: np.ndarray, gyro: np.ndarray, inc: RotationIncrements, R_cam_imu: np.ndarray, gyro_bias: np.ndarray,
+    taus: np.ndarray,
+) -> np.ndarray:  # fmt: skip
+    """RMS [rad] (G,) of ``theta_cam - R_cam_imu (Theta_imu(t + tau) - b dt)`` over the increments, per shift
+    ``taus`` (G,) [s]; NaN where fewer than 3 increments overlap the IMU samples. Its minimum is the time offset."""
+    return np.sqrt(_vector_cost(t_imu, cumulative_angle(t_imu, gyro), inc, R_cam_imu, gyro_bias, taus))

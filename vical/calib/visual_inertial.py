@@ -29,21 +29,22 @@ import numpy as np
 
 from vical.calib.checks import check_imu_noise, check_memory
 from vical.calib.corner_factors import CornerFactors, CornerKeys
-from vical.calib.errors import CalibrationError
+from vical.calib.errors import CalibrationError, CalibrationSettingError
+from vical.calib.frame_log import FrameLog, build_frame_log, left_out
 from vical.calib.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
 from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses
 from vical.calib.intrinsics import check_model, estimated_pixel_sigma, intrinsic_names
 from vical.calib.nominal import nominal_T_cam_imu
-from vical.calib.observations import FrameObservation
+from vical.calib.observations import FrameObservation, collect_observations
 from vical.calib.outliers import reject_outliers
-from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats
+from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats, TimeOffsetTrace
 from vical.calib.rig import OtherCamera, initialise_other, pair, prepare_other
 from vical.calib.robust_covariance import robust_covariance, widen
 from vical.calib.solver import covariance_or_unobservable, optimize
-from vical.calib.time_alignment import align, rotation_increments
+from vical.calib.time_alignment import align, increment_mismatch, rotation_increments
 from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
 from vical.calib.variance import used_dof, variance_factor
-from vical.data import ImuNoise, ImuSamples, Target, seconds_since
+from vical.data import CameraFrames, ImuNoise, ImuSamples, Target, seconds_since
 from vical.geometry import CameraModel, invert_transform, make_transform, skew
 
 GRAVITY_MAGNITUDE = 9.81  # [m/s^2]
@@ -63,6 +64,8 @@ WIDENING_WARNING = 2.0  # tell the user when a 1-sigma was widened by more than 
 IMU_RESIDUAL_DIM = 15  # per CombinedImuFactor: rotation, velocity, position, accel and gyro bias changes
 MIN_GAP_WARNING = 0.5  # [s] a stretch without target views this long (and ...
 GAP_WARNING_FACTOR = 5.0  # ... this many typical frame intervals) is reported
+TRACE_HALF_WIDTH = 0.05  # [s] the report's time-offset plot shows the mismatch this far either side of the estimate
+TRACE_POINTS = 201
 
 E_KEY, G_KEY, D_KEY, K_KEY = (gtsam.symbol(c, 0) for c in "egdk")
 EXTRINSIC_NAMES = ["rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "time_offset"]
@@ -142,6 +145,7 @@ class _Problem:
     imu_noise_scale: float = 1.0  # a posteriori / declared IMU noise (the variance factors' product)
     warnings: list[str] = field(default_factory=list)
     others: list[OtherCamera] = field(default_factory=list)  # a rig's other cameras
+    outliers: list[int] = field(default_factory=list)  # frame indices of the frames dropped as outliers
 
 
 @dataclass
@@ -163,11 +167,12 @@ def _check_overlap(imu: ImuSamples, frame_t_ns: np.ndarray, t0_ns: int, offset_g
     lo, hi = frame_t_ns.min() + shift, frame_t_ns.max() + shift
     if hi < imu.t[0] or lo > imu.t[-1]:
         span = seconds_since(np.array([lo, hi, imu.t[0], imu.t[-1]]), t0_ns)
-        raise CalibrationError(
+        raise CalibrationSettingError(
             f"camera frames span {span[0]:.3f}..{span[1]:.3f} s and IMU samples {span[2]:.3f}..{span[3]:.3f} s "
             f"(relative to the recording start, frames moved by the time-offset guess {offset_guess:g} s): they do "
-            "not overlap; check that both streams use the same clock or give the offset as the initial guess"
-        )
+            "not overlap; check that both streams use the same clock or give the offset as the initial guess ({fix})",
+            "initial_time_offset", None, None,
+        )  # fmt: skip
 
 
 def _prepare(
@@ -210,6 +215,7 @@ def _prepare(
         t0_ns=t0_ns,
         sigma_px=float(sigma),
         warnings=list(rejection.warnings),
+        outliers=list(rejection.dropped),
     )
 
 
@@ -544,6 +550,33 @@ def _reprojection(problem: _Problem, g: _Graph, values: gtsam.Values) -> tuple[n
     return g.corners.residuals(values), frames[g.corners.frame_of]
 
 
+def _frame_log(
+    frames: CameraFrames, every: list[FrameObservation], problem: _Problem, g: _Graph, used: np.ndarray
+) -> FrameLog:
+    """Every input frame: its corners found and used, and why a frame was left out (``vical.calib.frame_log``)."""
+    inside = {problem.frame_ids[k] for k in g.states}
+    outside = [problem.observations[k].index for k in problem.frame_ids if k not in inside]
+    decided = left_out(every, problem.observations, problem.outliers) | {k: "outside_imu" for k in outside}
+    return build_frame_log(frames, used, min(MIN_INIT_CORNERS, problem.target.num_points), decided)
+
+
+def _time_offset_trace(problem: _Problem, est: _Estimate) -> TimeOffsetTrace:
+    """The PnP poses' rotation rates against the bias-corrected gyro, and the mismatch around the offset."""
+    inc = rotation_increments(problem.frame_times, problem.T_target_cam[:, :3, :3])
+    dt = inc.t_end - inc.t_start
+    R_imu_cam = est.T_cam_imu[:3, :3].T
+    shifts = est.tau0 + np.linspace(-TRACE_HALF_WIDTH, TRACE_HALF_WIDTH, TRACE_POINTS)
+    mismatch = increment_mismatch(problem.t_imu, problem.gyro, inc, est.T_cam_imu[:3, :3], est.gyro_bias, shifts)
+    return TimeOffsetTrace(
+        t_camera=0.5 * (inc.t_start + inc.t_end),
+        omega_camera=(inc.theta_cam / dt[:, None]) @ R_imu_cam.T,
+        t_imu=problem.t_imu,
+        gyro=problem.gyro - est.gyro_bias,
+        shifts=shifts,
+        mismatch=mismatch,
+    )
+
+
 def _imu_residuals(g: _Graph, values: gtsam.Values, gravity_magnitude: float) -> ImuResiduals:
     """Mean rates per IMU factor: measured (preintegrated, bias-corrected to first order) vs from the states."""
     gravity = np.asarray(values.atUnit3(G_KEY).point3()) * gravity_magnitude
@@ -606,6 +639,8 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
         num_frames=len(g.states),
         warnings=problem.warnings,
         imu_noise_scale=problem.imu_noise_scale,
+        reprojection_pixels=g.corners.measured,
+        time_offset_trace=_time_offset_trace(problem, est),
     )
 
 
@@ -667,7 +702,7 @@ class CameraInput:
 
 def run_visual_inertial(
     task: str,
-    observations: list[FrameObservation],
+    frames: CameraFrames,
     imu: ImuSamples,
     target: Target,
     camera: CameraModel,
@@ -691,10 +726,10 @@ def run_visual_inertial(
     if T_guess.shape != (4, 4):
         raise CalibrationError(f"initial_T_cam_imu must be a 4 x 4 transform, got shape {T_guess.shape}")
     noise_warnings = check_imu_noise(imu_noise)
-    observations = observations[:: options.frame_stride]
-    frames = len(observations) + sum(len(o.observations[:: options.frame_stride]) for o in others)
-    corners = sum(len(o.ids) for o in observations) + sum(len(f.ids) for o in others for f in o.observations)
-    check_memory(frames, corners, options.memory_limit_mb, options.frame_stride)
+    every = collect_observations(frames, target)
+    observations = every[:: options.frame_stride]
+    views = observations + [f for o in others for f in o.observations[:: options.frame_stride]]
+    check_memory(len(views), sum(len(v.ids) for v in views), options.memory_limit_mb, options.frame_stride)
     problem = _prepare(observations, imu, camera, target, imu_noise, options, float(initial_time_offset))
     problem.warnings += noise_warnings
     est = _initial_estimate(problem, T_guess, float(initial_time_offset))
@@ -705,6 +740,7 @@ def run_visual_inertial(
     problem.warnings += _span_warnings(problem, g) + _gap_warnings(g.state_times)
     problem.warnings += _imu_noise_warning(problem.imu_noise_scale)
     first = _result(task, problem, g, solution, est, iterations + more, start)
+    first = replace(first, frame_log=_frame_log(frames, every, problem, g, first.reprojection_frames))
     return [first] + [_other_result(task, problem, g, solution, est, entry, first) for entry in g.others]
 
 

@@ -139,12 +139,15 @@ class CameraFrames:
             target was not detected in that frame).
         ids: M arrays (K_i,) int64 target point ids of those corners (see ``Target``).
         images: optional (M, H, W) uint8 grey images.
+        names: optional M image file names (sources read from files), so that messages can name the
+            image a frame came from; None when the frames have no files (bags, simulations).
     """
 
     t: np.ndarray
     corners: list[np.ndarray]
     ids: list[np.ndarray]
     images: np.ndarray | None = None
+    names: list[str] | None = None
 
     def __post_init__(self) -> None:
         t = _as_timestamps(self.t, "CameraFrames.t")
@@ -166,9 +169,17 @@ class CameraFrames:
             if images.ndim != 3 or len(images) != len(t) or images.dtype != np.uint8:
                 raise DataError(f"images must be (M, H, W) uint8 with M={len(t)}, got {images.shape} {images.dtype}")
             object.__setattr__(self, "images", images)
+        if self.names is not None:
+            if len(self.names) != len(t):
+                raise DataError(f"CameraFrames needs one name per frame: {len(t)} timestamps, {len(self.names)} names")
+            object.__setattr__(self, "names", [str(n) for n in self.names])
 
     def __len__(self) -> int:
         return len(self.t)
+
+    def label(self, k: int) -> str:
+        """How messages name frame ``k``: its image file name, else its timestamp [ns]."""
+        return self.names[k] if self.names is not None else str(int(self.t[k]))
 
     @property
     def num_detections(self) -> np.ndarray:
@@ -179,7 +190,8 @@ class CameraFrames:
         """Frames where the boolean ``mask`` (M,) is true."""
         idx = np.flatnonzero(mask)
         images = None if self.images is None else self.images[idx]
-        return CameraFrames(self.t[idx], [self.corners[i] for i in idx], [self.ids[i] for i in idx], images)
+        names = None if self.names is None else [self.names[i] for i in idx]
+        return CameraFrames(self.t[idx], [self.corners[i] for i in idx], [self.ids[i] for i in idx], images, names)
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from tqdm import tqdm
 from vical.data import NS_PER_S, CameraFrames, DataError, ImuSamples, Recording, Target
 from vical.io.atomic import remove_stale_temporaries, temporary_prefix
 from vical.io.checks import check_camera_rates, check_sampling, scale_imu, sort_and_dedupe
-from vical.io.errors import BagFormatError, FormatError, UnitError
+from vical.io.errors import BagFormatError, BagTopicError, FormatError, UnitError
 from vical.io.images import ImageDetector, check_size, run_detector, to_gray
 
 IMAGE_TYPE, COMPRESSED_TYPE, IMU_TYPE = (
@@ -189,14 +189,17 @@ def read_bag(
 
 def _connections(reader: Reader, path: Path, image_topics: list[str], imu_topic: str | None) -> dict[str, Any]:
     topics = {c.topic: c for c in reader.connections}
-    wanted = dict.fromkeys(image_topics, (IMAGE_TYPE, COMPRESSED_TYPE))
+    wanted = [(topic, (IMAGE_TYPE, COMPRESSED_TYPE), "image_topic") for topic in image_topics]
     if imu_topic is not None:
-        wanted[imu_topic] = (IMU_TYPE,)
+        wanted.append((imu_topic, (IMU_TYPE,), "imu_topic"))
     found = {}
-    for topic, types in wanted.items():
+    for topic, types, setting in wanted:
         if topic not in topics:
             listing = ", ".join(f"{c.topic} ({c.msgtype})" for c in reader.connections) or "none"
-            raise BagFormatError(f"{path}: topic {topic} is missing; the bag has: {listing}. Choose the topic")
+            raise BagTopicError(
+                f"{path}: topic {topic} is missing; the bag has: {listing}. Choose the topic ({{fix}})",
+                setting, None, None,
+            )  # fmt: skip
         if topics[topic].msgtype not in types:
             raise BagFormatError(f"{path}: topic {topic} holds {topics[topic].msgtype}, expected {' or '.join(types)}")
         found[topic] = topics[topic]

@@ -31,8 +31,16 @@ class UnitError(SettingError, FormatError):
     """IMU readings that do not fit their declared unit; the message names the unit setting to change."""
 
 
+class SourceSettingError(SettingError, FormatError):
+    """A recording source that needs an argument it was not given; the message names the argument."""
+
+
 class BagFormatError(FormatError):
     """A ROS bag that is corrupt or lacks the requested topics."""
+
+
+class BagTopicError(SettingError, BagFormatError):
+    """A topic the bag lacks; the message names the topic argument to change."""
 
 
 def read_text_file(path: Path, error: type[FormatError]) -> str:

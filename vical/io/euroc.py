@@ -363,4 +363,4 @@ def _attach_corners(frames: CameraFrames, detections: CameraFrames, cam: Path) -
     pairs = [
         (detections.corners[index[t]], detections.ids[index[t]]) if t in index else empty for t in frames.t.tolist()
     ]
-    return CameraFrames(frames.t, [p[0] for p in pairs], [p[1] for p in pairs], frames.images)
+    return CameraFrames(frames.t, [p[0] for p in pairs], [p[1] for p in pairs], frames.images, frames.names)

@@ -107,15 +107,17 @@ def frames_from_images(
 
     Args:
         t: (M,) int64 [ns] frame timestamps.
-        images: M pairs (name for messages, (H, W) uint8 image), decoded lazily to bound memory.
+        images: M pairs (path for messages, (H, W) uint8 image), decoded lazily to bound memory; the
+            file names become the frames' ``names``.
         detector: corner detector, or None (frames without detections).
         keep_images: keep the decoded images in the returned frames.
         expected_size: (W, H) every image must have (e.g. from the camera's calibration), or None
             to require only that all images match the first.
     """
-    corners, ids, kept = [], [], []
+    corners, ids, kept, names = [], [], [], []
     size = expected_size
     for name, image in tqdm(images, total=len(t), desc=desc, unit="img", leave=False):
+        names.append(Path(name).name)
         size = check_size(image, size, name)
         c, i = run_detector(detector, image, target, name) if detector else (np.zeros((0, 2)), np.zeros(0, int))
         corners.append(c)
@@ -123,7 +125,7 @@ def frames_from_images(
         if keep_images:
             kept.append(image)
     stacked = np.stack(kept) if keep_images and kept else None
-    return CameraFrames(t, corners, ids, stacked)
+    return CameraFrames(t, corners, ids, stacked, names)
 
 
 def read_image_folder(

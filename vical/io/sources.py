@@ -20,7 +20,7 @@ import numpy as np
 from vical.data import ImuSamples, Recording, Target
 from vical.io.bag import read_bag
 from vical.io.csvfiles import read_corners_csv, read_imu_csv
-from vical.io.errors import FormatError
+from vical.io.errors import FormatError, SourceSettingError
 from vical.io.euroc import find_euroc_root, read_euroc
 from vical.io.images import ImageDetector, list_images, read_image_folder
 from vical.io.recording import is_recording_dir, load_recording
@@ -85,7 +85,10 @@ def open_recording(
             raise FormatError(f"{path} was recorded with target {recording.target}, not the given {target}")
         return recording
     if target is None:
-        raise FormatError(f"{path} is a {kind.replace('_', ' ')}: give the calibration target (Kalibr target YAML)")
+        raise SourceSettingError(
+            f"{path} is a {kind.replace('_', ' ')}: give the calibration target as {{fix}} (a Kalibr target YAML)",
+            "target", "read_target_yaml('target.yaml')", "target.yaml",
+        )  # fmt: skip
     units = {"gyro_unit": gyro_unit, "accel_unit": accel_unit}
     if kind == "euroc":
         return read_euroc(path, target, detector, keep_images, **units)
