@@ -5,8 +5,9 @@ Measured in one run on this machine, the same work each way:
 1. ``vical-train`` on the calibration MDP (joint task, practitioner's workspace, default SAC):
    ``--train-steps`` transitions with ``train.num_envs`` 1, 2 and 4 (local processes), wall time and
    steps/s, and their ratio (target >= 1.5x on 2 cores). Env steps vary in length (a motion takes
-   0.3-4 s of simulated time) and the envs step in lockstep, so with as many envs as cores a core
-   often waits for the slower env; more envs than cores keep both busy;
+   0.3-4 s of simulated time); the envs step independently, each up to ``train.policy_lag - 1``
+   rounds ahead of the slowest, so a core waits for another env only when that env falls behind by
+   more than that;
 2. ``vical-evaluate``'s episodes (the yardstick's joint task, the random moving policy and the
    random Fourier loop on ``--sensors`` sensors, path budgets as the yardstick's) serially and on
    ``parallel.workers=2``: episodes/s and their ratio (target >= 1.7x), and whether the rows agree;
