@@ -20,10 +20,10 @@ from vical.apps.calibrate import main
 from vical.apps.calibrate_rig import camera_list, image_topics, topic_list
 from vical.calib.calibrate import calibrate_rig
 from vical.calib.nominal import nominal_T_cam_imu
-from vical.calib.synthetic import RigCamera, default_camera, make_recording
-from vical.data import ImuNoise
+from vical.calib.synthetic import Excitation, RigCamera, default_camera, make_recording
+from vical.data import ImuNoise, ImuSamples
 from vical.geometry import euler_to_matrix, make_transform, transform_error
-from vical.io import write_bag, write_euroc, write_imu_yaml, write_target_yaml
+from vical.io import save_recording, write_bag, write_euroc, write_imu_yaml, write_target_yaml
 from vical.io.kalibr_chain import CameraChain, ChainCamera, read_chain, write_chain
 from vical.io.yamlfile import dump_yaml, load_mapping
 
@@ -269,3 +269,18 @@ def test_topics_and_camera_names_parse_as_documented():
     chain = CameraChain((ChainCamera("cam0", default_camera(), rostopic="/left"),))
     assert image_topics([], chain, ["cam0", "cam1"]) == ["/left"]  # the --cameras error then says cam1 is missing
     assert image_topics(["/x"], chain, None) == ["/x"]
+
+
+def test_a_rig_whose_gyro_logs_deg_per_s_fails_naming_the_cameras_and_the_flag(tmp_path, capsys):
+    rig = {"cam1": RigCamera(CAM1, T_C1_C0 @ nominal_T_cam_imu(), 0.006)}
+    slow = Excitation().scaled(rotation=0.3)  # peaks under the readers' 35 rad/s check even in deg/s
+    rec = make_recording(5.0, imu_noise=ImuNoise(), pixel_sigma=0.2, other_cameras=rig, excitation=slow, seed=3)
+    rec = replace(rec, imu=ImuSamples(rec.imu.t, np.degrees(rec.imu.gyro), rec.imu.accel))
+    save_recording(rec, tmp_path / "rec")
+    out = tmp_path / "out"
+    assert main([str(tmp_path / "rec"), "--out", str(out), "--no-report"]) == 2
+    (line,) = errors(capsys.readouterr().err)
+    assert line.startswith("vical-calibrate: error: the calibration failed: cam0, cam1: the IMU residuals")
+    assert line.count("the IMU residuals") == 1 and "it logs deg/s; pass --gyro-unit deg/s" in line
+    assert sorted(p.name for p in out.iterdir()) == ["camchain-imucam.failed.yaml", "imu.yaml", "results.txt"]
+    assert (out / "results.txt").read_text().startswith("FAILED: the calibration failed: cam0, cam1:")

@@ -438,7 +438,11 @@ def _rig_failure(results: dict[str, CalibrationResult], guesses: dict, rec: Reco
     failed = [n for n, p in problems.items() if p]
     if not failed:
         return None
-    found = "; ".join(f"{n}: {'; '.join(problems[n])}" for n in failed)
+    cameras: dict[str, list[str]] = {}  # the IMU's problems are every camera's: said once
+    for n in failed:
+        for problem in problems[n]:
+            cameras.setdefault(problem, []).append(n)
+    found = "; ".join(f"{', '.join(names)}: {problem}" for problem, names in cameras.items())
     return f"the calibration failed: {found}; {_cause(results[failed[0]], rec.frames_of(failed[0]), rec, args)}"
 
 
