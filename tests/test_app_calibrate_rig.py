@@ -214,6 +214,10 @@ def test_bad_rig_inputs_fail_in_one_line_naming_the_file_and_camera(rig, tmp_pat
     line = error("--task", "extrinsic", "--intrinsics", str(big))
     assert f"{big} [cam1]: resolution 1280 x 960 px, but cam1's images are 640 x 480 px" in line
 
+    flat = root / "euroc" / "mav0" / "cam0" / "sensor.yaml"  # EuRoC's: one camera, no cam0 section
+    line = error("--intrinsics", str(flat))
+    assert f"--intrinsics {flat} describes one camera without a camN section; calibrating cam0, cam1 needs" in line
+
     one = root / "one.yaml"
     write_chain(one, CameraChain((ChainCamera("cam0", rec.truth.camera),)))
     line = error("--task", "extrinsic", "--intrinsics", str(one))

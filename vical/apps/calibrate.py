@@ -48,11 +48,11 @@ from vical.apps.calibrate_rig import (
     camera_list,
     check_chain_topics,
     image_topics,
-    rig_chain,
-    rig_results_text,
-    rig_summary,
+    rig_image_size,
+    rig_problems,
     select_cameras,
     topic_list,
+    write_rig_outputs,
 )
 from vical.apps.cli import ArgumentParser, OutputError, cannot_write, one_line_warnings, report_error
 from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
@@ -76,10 +76,10 @@ from vical.config import SettingError
 from vical.data import DataError, ImuNoise, Recording, Target
 from vical.data.target import TargetError
 from vical.geometry import CameraModel, CameraModelError
-from vical.io.atomic import atomic_directory, remove_stale_temporaries, write_text_atomic
+from vical.io.atomic import atomic_directory, remove_stale_temporaries
 from vical.io.errors import FormatError, KalibrFormatError
 from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_camchain_imucam, write_imu_yaml
-from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, ChainCamera, check_chain_fits, read_chain, write_chain
+from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain
 from vical.io.sources import detect_source, open_recording
 from vical.io.yamlfile import load_mapping
 
@@ -369,10 +369,15 @@ def run_rig(
     The ``--intrinsics`` camchain ``chain`` must fit the recording (its cameras, their resolutions); it
     gives the extrinsic task's intrinsics and every task's initial ``T_cam_imu`` and time offset.
     """
+    if args.intrinsics and chain is None:
+        raise CalibrationError(
+            f"--intrinsics {args.intrinsics} describes one camera without a camN section; calibrating "
+            f"{', '.join(names)} needs a Kalibr camchain with a section per camera (cam0, cam1, ...)"
+        )
     if chain is not None:
         check_chain_fits(chain, args.intrinsics, rec)
     known = {n: chain[n] for n in names if chain is not None and n in chain.names}
-    sizes = {n: _rig_image_size(args, rec, n, known.get(n)) for n in names}
+    sizes = {n: rig_image_size(args, rec, n, known.get(n)) for n in names}
     frames = {n: rec.frames_of(n) for n in names}
     guesses = {n: c.T_cam_imu for n, c in known.items() if c.T_cam_imu is not None}
     noise = None
@@ -394,7 +399,7 @@ def run_rig(
             frames, rec.imu, rec.target, args.task, args.model, sizes, noise, cameras, guesses, offsets, options
         ).results
     failure = _rig_failure(results, guesses, rec, args)
-    _write_rig_outputs(out, results, rec, args, noise, chain, failure)
+    write_rig_outputs(out, results, rec, args, noise, chain, failure)
     if failure:
         raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
     return RigCalibration(results)
@@ -407,74 +412,13 @@ def _intrinsics(frames, rec: Recording, args, size, initial: CameraModel | None)
     )
 
 
-def _rig_image_size(args, rec: Recording, name: str, known: ChainCamera | None) -> tuple[int, int] | None:
-    """(W, H) [px] of camera ``name``'s images: as read, else ``--image-size``, else its truth's or the
-    ``--intrinsics`` camera's; a ``--image-size`` or ``--intrinsics`` resolution that differs is refused."""
-    images = rec.frames_of(name).images
-    decoded = rec.metadata.get("image_sizes", {}).get(name) or (None if images is None else images.shape[:0:-1])
-    decoded = None if decoded is None else (int(decoded[0]), int(decoded[1]))
-    given = tuple(args.image_size) if args.image_size else None
-    if decoded and given and decoded != given:
-        raise CalibrationError(
-            f"--image-size {given[0]} {given[1]} differs from {name}'s images' size {decoded[0]} x {decoded[1]} px; "
-            "leave --image-size out (the images give the size)"
-        )
-    truth = rec.truth_of(name)
-    size = decoded or given or (None if truth is None else (truth.camera.width, truth.camera.height))
-    if known is not None and size is not None and (known.camera.width, known.camera.height) != size:
-        raise CalibrationError(
-            f"{args.intrinsics} [{name}]: resolution {known.camera.width} x {known.camera.height} px, but {name}'s "
-            f"images are {size[0]} x {size[1]} px; give the camchain of this camera at this resolution"
-        )
-    return size or (None if known is None else (known.camera.width, known.camera.height))
-
-
 def _rig_failure(results: dict[str, CalibrationResult], guesses: dict, rec: Recording, args) -> str | None:
-    """Why the rig's calibration failed (each failing camera's problems and the likely cause), or None."""
-    first = next(iter(results))
-    problems = {
-        n: implausibilities(r, guesses.get(n, nominal_T_cam_imu() if n == first else None)) for n, r in results.items()
-    }
-    failed = [n for n, p in problems.items() if p]
-    if not failed:
+    """Why the rig's calibration failed (the cameras that show it, and the likely cause), or None."""
+    found = rig_problems(results, guesses)
+    if found is None:
         return None
-    cameras: dict[str, list[str]] = {}  # the IMU's problems are every camera's: said once
-    for n in failed:
-        for problem in problems[n]:
-            cameras.setdefault(problem, []).append(n)
-    found = "; ".join(f"{', '.join(names)}: {problem}" for problem, names in cameras.items())
-    return f"the calibration failed: {found}; {_cause(results[failed[0]], rec.frames_of(failed[0]), rec, args)}"
-
-
-def _write_rig_outputs(
-    out: Path,
-    results: dict[str, CalibrationResult],
-    rec: Recording,
-    args,
-    noise: ImuNoise | None,
-    given: CameraChain | None,
-    failure: str | None,
-) -> None:
-    """Write the rig's camchain, ``imu.yaml``, ``results.txt`` and a report folder per camera into ``out`` at
-    once, then print the summary."""
-    errors = {n: calibration_errors(r, rec.truth_of(n)) if rec.truth_of(n) else None for n, r in results.items()}
-    name = "camchain.yaml" if noise is None else "camchain-imucam.yaml"
-    if failure:
-        name = name.replace(".yaml", ".failed.yaml")
-    chain = rig_chain(results, rec, given)
-    try:
-        with atomic_directory(out, overwrite=out.exists()) as tmp:
-            write_chain(tmp / name, chain)
-            if noise is not None:
-                write_imu_yaml(tmp / "imu.yaml", noise)
-            write_text_atomic(tmp / "results.txt", rig_results_text(results, errors, chain, rec, args.task, failure))
-            if not args.no_report:
-                for camera, result in results.items():
-                    write_report(tmp / camera, result)
-    except OSError as err:
-        raise OutputError(cannot_write("--out", out, err)) from None
-    print("\n".join(rig_summary(results, errors, chain)))
-    print(f"outputs written to {out}")
+    problems, camera = found
+    return f"the calibration failed: {problems}; {_cause(results[camera], rec.frames_of(camera), rec, args)}"
 
 
 def _cause(result: CalibrationResult, frames, rec: Recording, args) -> str:

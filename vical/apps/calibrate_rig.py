@@ -1,4 +1,4 @@
-"""Camera rigs in ``vical-calibrate``: which cameras, their bag topics, the N-camera camchain and results text.
+"""Camera rigs in ``vical-calibrate``: which cameras, their bag topics and image sizes, the N-camera outputs.
 
 The recording's cameras (``cam0``, ``cam1``, ...: EuRoC ``camN`` folders, one bag image topic per
 camera, ``frames_camN.npz`` of a recording directory) are calibrated together, or those ``--cameras``
@@ -11,18 +11,24 @@ from __future__ import annotations
 
 import argparse
 import re
+from pathlib import Path
 
 import numpy as np
 
+from vical.apps.cli import OutputError, cannot_write
 from vical.calib.errors import CalibrationError
-from vical.calib.metrics import CalibrationErrors
-from vical.calib.report import results_text, summary_table
+from vical.calib.metrics import CalibrationErrors, calibration_errors
+from vical.calib.nominal import nominal_T_cam_imu
+from vical.calib.plausibility import implausibilities
+from vical.calib.report import results_text, summary_table, write_report
 from vical.calib.result import CalibrationResult
 from vical.calib.rig import pair
-from vical.data import CameraFrames, Recording, seconds_since
+from vical.data import CameraFrames, ImuNoise, Recording, seconds_since
 from vical.geometry import invert_transform, matrix_to_euler, transform_error
+from vical.io.atomic import atomic_directory, write_text_atomic
 from vical.io.bag import bag_image_topics
-from vical.io.kalibr_chain import CameraChain, ChainCamera
+from vical.io.kalibr import write_imu_yaml
+from vical.io.kalibr_chain import CameraChain, ChainCamera, write_chain
 
 CAMERA_NAME = re.compile(r"cam(\d+)")
 # Where each source's cameras come from, for the message that lists them.
@@ -227,3 +233,73 @@ def rig_summary(
 def _named(name: str, warning: str) -> str:
     """A camera's warning, prefixed with its name unless it starts with it."""
     return warning if warning.startswith(f"{name}:") else f"{name}: {warning}"
+
+
+def rig_image_size(args, rec: Recording, name: str, known: ChainCamera | None) -> tuple[int, int] | None:
+    """(W, H) [px] of camera ``name``'s images: as read, else ``--image-size``, else its truth's or the
+    ``--intrinsics`` camera's; a ``--image-size`` or ``--intrinsics`` resolution that differs is refused."""
+    images = rec.frames_of(name).images
+    decoded = rec.metadata.get("image_sizes", {}).get(name) or (None if images is None else images.shape[:0:-1])
+    decoded = None if decoded is None else (int(decoded[0]), int(decoded[1]))
+    given = tuple(args.image_size) if args.image_size else None
+    if decoded and given and decoded != given:
+        raise CalibrationError(
+            f"--image-size {given[0]} {given[1]} differs from {name}'s images' size {decoded[0]} x {decoded[1]} px; "
+            "leave --image-size out (the images give the size)"
+        )
+    truth = rec.truth_of(name)
+    size = decoded or given or (None if truth is None else (truth.camera.width, truth.camera.height))
+    if known is not None and size is not None and (known.camera.width, known.camera.height) != size:
+        raise CalibrationError(
+            f"{args.intrinsics} [{name}]: resolution {known.camera.width} x {known.camera.height} px, but {name}'s "
+            f"images are {size[0]} x {size[1]} px; give the camchain of this camera at this resolution"
+        )
+    return size or (None if known is None else (known.camera.width, known.camera.height))
+
+
+def rig_problems(results: dict[str, CalibrationResult], guesses: dict[str, np.ndarray]) -> tuple[str, str] | None:
+    """What makes the rig's results untrustworthy (``implausibilities``: each problem once, with the cameras that
+    show it; the IMU's are every camera's) and the first camera that shows one; None when nothing does."""
+    first = next(iter(results))
+    problems = {
+        n: implausibilities(r, guesses.get(n, nominal_T_cam_imu() if n == first else None)) for n, r in results.items()
+    }
+    failed = [n for n, p in problems.items() if p]
+    if not failed:
+        return None
+    cameras: dict[str, list[str]] = {}
+    for n in failed:
+        for problem in problems[n]:
+            cameras.setdefault(problem, []).append(n)
+    return "; ".join(f"{', '.join(names)}: {problem}" for problem, names in cameras.items()), failed[0]
+
+
+def write_rig_outputs(
+    out: Path,
+    results: dict[str, CalibrationResult],
+    rec: Recording,
+    args,
+    noise: ImuNoise | None,
+    given: CameraChain | None,
+    failure: str | None,
+) -> None:
+    """Write the rig's camchain, ``imu.yaml``, ``results.txt`` and a report folder per camera into ``out`` at
+    once, then print the summary."""
+    errors = {n: calibration_errors(r, rec.truth_of(n)) if rec.truth_of(n) else None for n, r in results.items()}
+    name = "camchain.yaml" if noise is None else "camchain-imucam.yaml"
+    if failure:
+        name = name.replace(".yaml", ".failed.yaml")
+    chain = rig_chain(results, rec, given)
+    try:
+        with atomic_directory(out, overwrite=out.exists()) as tmp:
+            write_chain(tmp / name, chain)
+            if noise is not None:
+                write_imu_yaml(tmp / "imu.yaml", noise)
+            write_text_atomic(tmp / "results.txt", rig_results_text(results, errors, chain, rec, args.task, failure))
+            if not args.no_report:
+                for camera, result in results.items():
+                    write_report(tmp / camera, result)
+    except OSError as err:
+        raise OutputError(cannot_write("--out", out, err)) from None
+    print("\n".join(rig_summary(results, errors, chain)))
+    print(f"outputs written to {out}")
