@@ -9,6 +9,7 @@ import pytest
 
 from vical.calib.calibrate import calibrate_rig
 from vical.calib.errors import CalibrationError
+from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.synthetic import RigCamera, default_camera, make_recording
 from vical.data import CameraFrames, ImuNoise
@@ -68,6 +69,21 @@ def test_noisy_stereo_rig_joint_calibration_is_within_its_sigmas():
     rotation, translation = errors(rig.T_cn_cnm1("cam1"), T_C1_C0)
     assert rotation < 0.05 and translation < 0.5  # measured 0.09 mm
     assert rig.results["cam1"].camera.fx == pytest.approx(470.0, abs=1.5)
+
+
+def test_two_stage_rig_calibrates_each_camera_alone_then_the_rig_with_those_intrinsics():
+    rec = stereo(0.2, ImuNoise())
+    sizes = {name: (640, 480) for name in rec.camera_names}
+    rig = calibrate_rig(frames_of(rec), rec.imu, rec.target, "two_stage", image_sizes=sizes, imu_noise=ImuNoise())
+    for name in rec.camera_names:
+        result, truth = rig.results[name], rec.truth_of(name)
+        assert result.camera == calibrate_intrinsics(rec.frames_of(name), rec.target, "radtan", (640, 480)).camera
+        assert result.task == "two_stage" and {"fx", "p2", "t_x", "time_offset"} <= set(result.parameter_names)
+        rotation, translation = errors(result.T_cam_imu, truth.T_cam_imu)
+        assert rotation < 0.1 and translation < 1.5, name  # measured 0.03-0.05 deg, 0.44-0.47 mm, 0.11 ms
+        t_error = result.T_cam_imu[:3, 3] - truth.T_cam_imu[:3, 3]
+        assert np.all(np.abs(t_error) < 4 * np.array([result.sigma(k) for k in ("t_x", "t_y", "t_z")])), name
+        assert abs(result.time_offset - truth.time_offset) < 4 * result.sigma("time_offset"), name
 
 
 def test_cameras_not_triggered_together_are_refused():

@@ -5,11 +5,21 @@ Examples::
     vical-calibrate runs/rec0 --task intrinsic --model radtan
     vical-calibrate runs/rec0 --task extrinsic --intrinsics camchain.yaml --imu-yaml imu.yaml
     vical-calibrate runs/rec0 --task joint --out calib/
+    vical-calibrate stereo.bag --image-topic /left/image_raw,/right/image_raw --target target.yaml --out rig/
+    vical-calibrate euroc/ --cameras cam1 --target target.yaml --out cam1/
 
 Sources: a vical recording directory, an EuRoC folder or a ROS1 bag (corners detected in the
 images with the detector of the target's kind, with a progress bar), a folder of images
 (intrinsic task only) or a corner CSV (+ ``--imu-csv``). Every source except a recording
 directory needs ``--target`` (Kalibr target YAML).
+
+Camera rigs: every camera the recording has (EuRoC ``camN`` folders, one bag image topic per
+camera, a recording directory's other cameras) is calibrated, all in one graph with the IMU, or
+those ``--cameras cam0,cam1`` names (``vical.apps.calibrate_rig``). A bag's image topics come from
+``--image-topic`` (several times or comma-separated, cam0's first), else from the ``rostopic`` of
+each camera of an ``--intrinsics`` camchain. The camchain written has a section per camera
+(``T_cn_cnm1``, ``cam_overlaps``; every key of an ``--intrinsics`` camchain kept), ``results.txt`` a
+section per camera and the relative poses, the plots a folder per camera (``cam0/report.pdf``, ...).
 
 Outputs in ``--out``: ``camchain.yaml`` (intrinsic) or ``camchain-imucam.yaml`` + ``imu.yaml``,
 ``results.txt``, ``reprojection.png`` / ``imu.png`` / ``report.pdf``, written as one directory
@@ -35,10 +45,26 @@ from pathlib import Path
 
 import numpy as np
 
+from vical.apps.calibrate_rig import (
+    camera_list,
+    check_chain_topics,
+    image_topics,
+    rig_image_size,
+    rig_problems,
+    select_cameras,
+    topic_list,
+    write_rig_outputs,
+)
 from vical.apps.cli import ArgumentParser, OutputError, cannot_write, one_line_warnings, report_error
 from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
 from vical.calib.board_size import MAX_SAMPLE, board_size_hint
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
+from vical.calib.calibrate import (
+    RigCalibration,
+    calibrate_extrinsics,
+    calibrate_joint,
+    calibrate_rig,
+    calibrate_two_stage,
+)
 from vical.calib.detection import detect_checkerboard
 from vical.calib.errors import CalibrationError
 from vical.calib.intrinsics import MIN_VIEWS, calibrate_intrinsics
@@ -53,9 +79,11 @@ from vical.data import DataError, ImuNoise, Recording, Target
 from vical.data.target import TargetError
 from vical.geometry import CameraModel, CameraModelError
 from vical.io.atomic import atomic_directory, remove_stale_temporaries
-from vical.io.errors import FormatError
+from vical.io.errors import FormatError, KalibrFormatError
 from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_camchain_imucam, write_imu_yaml
+from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain
 from vical.io.sources import detect_source, open_recording
+from vical.io.yamlfile import load_mapping
 
 APP = "vical-calibrate"
 TASKS = ("intrinsic", "extrinsic", "joint", "two_stage")
@@ -97,11 +125,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording", help="recording directory, EuRoC folder, ROS1 bag, image folder or corner CSV")
     p.add_argument("--task", choices=TASKS, default="joint", help="what to calibrate (default: joint)")
     p.add_argument("--model", choices=("radtan", "equidistant"), default="radtan", help="lens distortion model")
-    p.add_argument("--intrinsics", help="Kalibr camchain.yaml with the known intrinsics (extrinsic task)")
+    p.add_argument(
+        "--intrinsics", help="Kalibr camchain.yaml with the known intrinsics (extrinsic task), one section per camera"
+    )
     p.add_argument("--imu-yaml", help="Kalibr imu.yaml with the IMU noise densities")
     p.add_argument("--target", help="Kalibr target YAML (needed unless the recording stores its target)")
     p.add_argument("--imu-csv", help="EuRoC-format IMU CSV to pair with a corner CSV")
-    p.add_argument("--image-topic", default="/cam0/image_raw", help="bag image topic (default: /cam0/image_raw)")
+    p.add_argument(
+        "--image-topic",
+        action="append",
+        help="bag image topic; a rig's: several times or comma-separated, cam0's first (default: each --intrinsics "
+        "camera's rostopic, else /cam0/image_raw)",
+    )
+    p.add_argument(
+        "--cameras",
+        type=camera_list,
+        help="calibrate only these of the recording's cameras, e.g. cam0,cam1 or cam1 (default: every one)",
+    )
     p.add_argument("--imu-topic", default="/imu0", help="bag IMU topic (default: /imu0)")
     p.add_argument(
         "--rate", type=_number(0, closed=False), default=10.0, help="frame rate [Hz] that timestamps an image folder"
@@ -170,11 +210,16 @@ class SizedDetector:
         return detect_checkerboard(image, self.target)
 
 
-def load_source(args: argparse.Namespace) -> tuple[Recording, SizedDetector | None]:
+def load_source(args: argparse.Namespace, chain: CameraChain | None = None) -> tuple[Recording, SizedDetector | None]:
     """Open ``args.recording`` (detecting corners in its images); return it with the detector that saw the
-    images (None for sources whose corners were stored)."""
+    images (None for sources whose corners were stored).
+
+    A bag's image topics: ``--image-topic``'s, else those of the ``--intrinsics`` camchain ``chain``."""
     target = read_target_yaml(args.target) if args.target else None
     kind = detect_source(args.recording)
+    given = topic_list(args.image_topic)
+    if kind == "bag" and chain is not None and not given:
+        check_chain_topics(args.recording, chain, args.intrinsics)
     if args.task != "intrinsic" and (kind == "image_folder" or (kind == "corners_csv" and not args.imu_csv)):
         raise CalibrationError(_no_imu_message(kind, args))  # before decoding a single image
     detect = kind in ("euroc", "bag", "image_folder") and not (kind == "euroc" and args.stored_corners)
@@ -184,7 +229,7 @@ def load_source(args: argparse.Namespace) -> tuple[Recording, SizedDetector | No
         target,
         detector=detector,
         imu_csv=args.imu_csv,
-        image_topic=args.image_topic,
+        image_topic=image_topics(given, chain, args.cameras),
         imu_topic=None if kind == "bag" and args.task == "intrinsic" else args.imu_topic,
         rate_hz=args.rate,
         gyro_unit=args.gyro_unit,
@@ -244,6 +289,16 @@ def _check_resolution(path: str, camera: CameraModel, size: tuple[int, int] | No
         raise CalibrationError(f"{resolution}, but corners were detected up to u = {u:.0f} px, v = {v:.0f} px; {fix}")
 
 
+def _read_chain(path: str | None) -> CameraChain | None:
+    """The cameras of an ``--intrinsics`` camchain; None without one or for a flat one-camera file (EuRoC's
+    ``sensor.yaml``: ``read_camchain`` reads it)."""
+    if not path or not any(
+        isinstance(k, str) and CAMERA_SECTION.fullmatch(k) for k in load_mapping(path, KalibrFormatError)
+    ):
+        return None
+    return read_chain(path)
+
+
 def _known_intrinsics(args) -> tuple[CameraModel | None, np.ndarray | None, float | None]:
     """Camera, T_cam_imu and time shift from ``--intrinsics`` (each may be None)."""
     if args.intrinsics:
@@ -284,7 +339,7 @@ def check_out(out: Path, overwrite: bool, inputs: list[str | None]) -> None:
         raise OutputError(f"--out {out} cannot be created: {existing} is not writable; choose another directory")
 
 
-def run(args: argparse.Namespace) -> CalibrationResult:
+def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     """Calibrate as the parsed arguments say, write the outputs and print the summary.
 
     Raises ``CalibrationFailed`` after writing the outputs (marked as failed) when the data do not
@@ -300,8 +355,12 @@ def run(args: argparse.Namespace) -> CalibrationResult:
     out = Path(args.out)
     inputs = [args.recording, args.target, args.intrinsics, args.imu_yaml, args.imu_csv]
     check_out(out, args.overwrite, inputs)
-    rec, detector = load_source(args)
+    chain = _read_chain(args.intrinsics)
+    rec, detector = load_source(args, chain)
     hint = _board_size_hint(args, rec, detector)
+    names = select_cameras(rec, args.cameras, args.recording, detect_source(args.recording))
+    if names != ["cam0"] or (chain is not None and len(chain.cameras) > 1):
+        return run_rig(args, rec, names, chain, options, out, hint)
     camera, T_guess, shift = _known_intrinsics(args)
     size = _image_size(args, rec, camera, None if detector is None else detector.size)
     common = {"initial_T_cam_imu": T_guess, "initial_time_offset": shift or 0.0, "options": options}
@@ -323,7 +382,9 @@ def run(args: argparse.Namespace) -> CalibrationResult:
     if hint:
         result = replace(result, warnings=[hint, *result.warnings])
     problems = implausibilities(result, nominal_T_cam_imu() if T_guess is None else T_guess)
-    failure = _failure_message(problems, result, rec, args) if problems else None
+    failure = (
+        f"the calibration failed: {'; '.join(problems)}; {_cause(result, rec.frames, rec, args)}" if problems else None
+    )
     _write_outputs(out, result, rec, args, noise, failure)
     if failure:
         raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
@@ -343,9 +404,78 @@ def _board_size_hint(args, rec: Recording, detector: SizedDetector | None) -> st
     return message
 
 
-def _failure_message(problems: list[str], result: CalibrationResult, rec: Recording, args) -> str:
-    """The calibration failed: what shows it, and the likely cause with the option that fixes it."""
-    scale = gyro_scale(rec.frames, rec.imu, rec.target, result.camera) if result.imu_residuals is not None else None
+def run_rig(
+    args,
+    rec: Recording,
+    names: list[str],
+    chain: CameraChain | None,
+    options: ViOptions,
+    out: Path,
+    hint: str | None = None,
+) -> RigCalibration:
+    """Calibrate the cameras ``names`` of ``rec`` (the first one's frames set the IMU states), write the outputs.
+
+    The ``--intrinsics`` camchain ``chain`` must fit the recording (its cameras, their resolutions); it
+    gives the extrinsic task's intrinsics and every task's initial ``T_cam_imu`` and time offset.
+    """
+    if args.intrinsics and chain is None:
+        raise CalibrationError(
+            f"--intrinsics {args.intrinsics} describes one camera without a camN section; calibrating "
+            f"{', '.join(names)} needs a Kalibr camchain with a section per camera (cam0, cam1, ...)"
+        )
+    if chain is not None:
+        check_chain_fits(chain, args.intrinsics, rec)
+    known = {n: chain[n] for n in names if chain is not None and n in chain.names}
+    sizes = {n: rig_image_size(args, rec, n, known.get(n)) for n in names}
+    frames = {n: rec.frames_of(n) for n in names}
+    guesses = {n: c.T_cam_imu for n, c in known.items() if c.T_cam_imu is not None}
+    noise = None
+    if args.task == "intrinsic":
+        initial = {n: c.camera for n, c in known.items()}
+        results = {n: _intrinsics(frames[n], rec, args, sizes[n], initial.get(n)) for n in names}
+    else:
+        unknown = [n for n in names if n not in known]
+        if args.task == "extrinsic" and unknown:
+            where = f"--intrinsics {args.intrinsics} has no {unknown[0]}" if chain else "no --intrinsics given"
+            raise CalibrationError(
+                f"the extrinsic task needs the intrinsics of every camera it calibrates ({', '.join(names)}), but "
+                f"{where}; pass a camchain with a section per camera, or choose the cameras with --cameras"
+            )
+        noise = _imu_noise(args, rec)
+        offsets = {n: c.timeshift_cam_imu for n, c in known.items() if c.timeshift_cam_imu is not None}
+        cameras = {n: c.camera for n, c in known.items()} if args.task == "extrinsic" else None
+        results = calibrate_rig(
+            frames, rec.imu, rec.target, args.task, args.model, sizes, noise, cameras, guesses, offsets, options
+        ).results
+    if hint:  # the board size the images suggest: said once, with the first camera's warnings
+        first = names[0]
+        results[first] = replace(results[first], warnings=[hint, *results[first].warnings])
+    failure = _rig_failure(results, guesses, rec, args)
+    write_rig_outputs(out, results, rec, args, noise, chain, failure)
+    if failure:
+        raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
+    return RigCalibration(results)
+
+
+def _intrinsics(frames, rec: Recording, args, size, initial: CameraModel | None) -> CalibrationResult:
+    """One camera's intrinsic calibration, as the one-camera intrinsic task does it."""
+    return calibrate_intrinsics(
+        frames, rec.target, args.model, size, initial, huber_k=args.huber, frame_stride=args.frame_stride
+    )
+
+
+def _rig_failure(results: dict[str, CalibrationResult], guesses: dict, rec: Recording, args) -> str | None:
+    """Why the rig's calibration failed (the cameras that show it, and the likely cause), or None."""
+    found = rig_problems(results, guesses)
+    if found is None:
+        return None
+    problems, camera = found
+    return f"the calibration failed: {problems}; {_cause(results[camera], rec.frames_of(camera), rec, args)}"
+
+
+def _cause(result: CalibrationResult, frames, rec: Recording, args) -> str:
+    """The likely cause of a failed calibration of the camera of ``frames``, with the option that fixes it."""
+    scale = gyro_scale(frames, rec.imu, rec.target, result.camera) if result.imu_residuals is not None else None
     unit = likely_gyro_unit(scale, args.gyro_unit)
     if unit == "deg/s":
         cause = f"the gyro reads {scale:.1f}x the rotation the camera sees: it logs deg/s; pass --gyro-unit deg/s"
@@ -361,7 +491,7 @@ def _failure_message(problems: list[str], result: CalibrationResult, rec: Record
         )
     else:
         cause = "likely causes: the lens model (--model), or a --target file that does not describe the board"
-    return f"the calibration failed: {'; '.join(problems)}; {cause}"
+    return cause
 
 
 def _write_outputs(

@@ -168,7 +168,10 @@ def calibrate_rig(
     initial_time_offsets: dict[str, float] | None = None,
     options: ViOptions | None = None,
 ) -> RigCalibration:
-    """Every camera of a rig and the IMU in one factor graph (``task`` ``"joint"`` or ``"extrinsic"``).
+    """Every camera of a rig and the IMU in one factor graph (``task`` ``"joint"``, ``"extrinsic"`` or ``"two_stage"``).
+
+    ``"two_stage"`` calibrates each camera's intrinsics on its own frames first, then the rig's
+    extrinsics with those intrinsics fixed (per camera, the covariance as ``calibrate_two_stage``'s).
 
     Args:
         frames: each camera's frames by name, the first camera (its frames set the IMU states) first;
@@ -182,17 +185,23 @@ def calibrate_rig(
     """
     start = time.perf_counter()
     opts = options or ViOptions()
-    if task not in ("joint", "extrinsic"):
-        raise CalibrationError(f"a rig is calibrated by the joint or the extrinsic task, not {task!r}")
-    models = {name: _rig_camera(name, frames[name], target, task, model, image_sizes, cameras, opts) for name in frames}
+    if task not in ("joint", "extrinsic", "two_stage"):
+        raise CalibrationError(f"a rig is calibrated by the joint, the extrinsic or the two-stage task, not {task!r}")
+    intrinsic = {
+        name: _rig_intrinsics(name, frames[name], target, task, model, image_sizes, cameras, opts) for name in frames
+    }
+    models = {name: (cameras or {})[name] if r is None else r.camera for name, r in intrinsic.items()}
     observations = {name: collect_observations(f, target) for name, f in frames.items()}
     guesses, offsets = initial_T_cam_imu or {}, initial_time_offsets or {}
     first, *rest = frames
     others = [CameraInput(n, observations[n], models[n], guesses.get(n), offsets.get(n, 0.0)) for n in rest]
     results = run_visual_inertial(
-        task, frames[first], imu, target, models[first], imu_noise or ImuNoise(), guesses.get(first),
-        offsets.get(first, 0.0), opts, start, others,
+        "joint" if task == "joint" else "extrinsic", frames[first], imu, target, models[first],
+        imu_noise or ImuNoise(), guesses.get(first), offsets.get(first, 0.0), opts, start, others,
     )  # fmt: skip
+    if task == "two_stage":
+        elapsed = time.perf_counter() - start
+        results = [_combine(intrinsic[n], r, elapsed) for n, r in zip(frames, results, strict=True)]
     if task == "joint":
         results = [
             replace(
@@ -203,14 +212,16 @@ def calibrate_rig(
     return RigCalibration(dict(zip(frames, results, strict=True)))
 
 
-def _rig_camera(name, frames, target, task, model, image_sizes, cameras, opts) -> CameraModel:
-    """A camera's known intrinsics (extrinsic task) or its intrinsic calibration (joint task's start)."""
+def _rig_intrinsics(name, frames, target, task, model, image_sizes, cameras, opts) -> CalibrationResult | None:
+    """A camera's intrinsic calibration (the joint task's start, the two-stage task's first stage); None for the
+    extrinsic task, which needs its known intrinsics."""
     known = (cameras or {}).get(name)
     if task == "extrinsic":
         if known is None:
             raise CalibrationError(f"the extrinsic task needs the intrinsics of every camera; {name} has none")
-        return known
+        return None
     size = (image_sizes or {}).get(name)
+    initial = known if task == "joint" else None  # the two-stage method calibrates the camera alone
     return calibrate_intrinsics(
-        frames, target, model, size, known, opts.pixel_sigma, opts.huber_k, frame_stride=opts.frame_stride
-    ).camera
+        frames, target, model, size, initial, opts.pixel_sigma, opts.huber_k, frame_stride=opts.frame_stride
+    )

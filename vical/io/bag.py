@@ -56,6 +56,15 @@ def camera_topics(image_topic: str | Sequence[str], count: int) -> list[str]:
     return topics
 
 
+def bag_image_topics(path: str | os.PathLike) -> list[str]:
+    """The topics of the ROS1 bag ``path`` that hold images (raw or compressed), in the bag's order."""
+    try:
+        with Reader(Path(path)) as reader:
+            return [c.topic for c in reader.connections if c.msgtype in (IMAGE_TYPE, COMPRESSED_TYPE)]
+    except ReaderError as exc:
+        raise BagFormatError(f"{path} cannot be read as a ROS1 bag (corrupt or truncated?): {exc}") from exc
+
+
 # ------------------------------------------------------------------------------------ write
 def write_bag(
     recording: Recording,
