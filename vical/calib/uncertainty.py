@@ -28,18 +28,19 @@ def _rotate_others_hint(axis: str, what: str) -> str:
 _COEFFICIENT_THRESHOLDS = {  # [-]
     "radtan": {"k1": 0.005, "k2": 0.01, "p1": 0.0005, "p2": 0.0005},
     "equidistant": {"k1": 0.005, "k2": 0.01, "k3": 0.02, "k4": 0.02},
-    # Wide-angle lenses seen over their whole image (30 views, 0.3 px noise) gave 1-sigma about a
-    # tenth of these; xi and alpha trade off against each other and the focal length.
-    "ds": {"xi": 0.02, "alpha": 0.01},
-    "eucm": {"alpha": 0.005, "beta": 0.02},
+    # A 180 deg lens seen over its whole image (30 views, 0.3 px noise) gave 1-sigma of xi 0.004, alpha
+    # 0.001 (ds) and alpha 0.001, beta 0.0035 (eucm); ds's focal length trades off against xi (0.45 % of f).
+    "ds": {"xi": 0.01, "alpha": 0.003},
+    "eucm": {"alpha": 0.003, "beta": 0.01},
 }
+_FOCAL_THRESHOLD = {"ds": 0.006}  # of the focal length; 0.002 for the other models
 
 
 def thresholds(camera: CameraModel) -> dict[str, float]:
     """1-sigma above which each parameter counts as weakly observed (in the parameter's unit)."""
     t = {
-        "fx": 0.002 * camera.fx,  # [px] 0.2 % of the focal length
-        "fy": 0.002 * camera.fy,  # [px]
+        "fx": _FOCAL_THRESHOLD.get(camera.distortion, 0.002) * camera.fx,  # [px] 0.2 % of the focal length
+        "fy": _FOCAL_THRESHOLD.get(camera.distortion, 0.002) * camera.fy,  # [px]
         "cx": 0.003 * camera.width,  # [px] ~2 px at 640 wide
         "cy": 0.003 * camera.height,  # [px]
         "rot_x": np.deg2rad(0.1),  # [rad]
