@@ -20,7 +20,7 @@ from vical.calib.checks import image_coverage_warnings
 from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError
 from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera, starting_camera
-from vical.calib.model_fit import misfit_warnings
+from vical.calib.model_fit import COMPARISON, misfit_warnings
 from vical.calib.observations import FrameObservation, collect_observations, image_size
 from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ResidualStats
@@ -243,7 +243,7 @@ def _model_warnings(camera, observations, T_cam_target, residuals, compare) -> l
             rms[other] = np.nan
     best = min(rms, key=lambda m: np.inf if np.isnan(rms[m]) else rms[m])
     listed = ", ".join(f"{m} {v:.3f} px" + (" (used)" if m == camera.distortion else "") for m, v in rms.items())
-    return [*misfit, f"lens models on these corners, reprojection rms: {listed}; {best} fits best"]
+    return [*misfit, f"{COMPARISON}, reprojection rms: {listed}; {best} fits best"]
 
 
 def _dropped_frames_warning(num_frames: int, used: int) -> list[str]:
