@@ -58,6 +58,8 @@ def test_kalibr_commands_follow_the_topic_and_the_lens_model(tmp_path):
     commands = kalibr_commands(tmp_path, True, "/camera/image", "equidistant")
     assert "--topics /camera/image " in commands[0] and "--models pinhole-equi " in commands[0]
     assert "--models pinhole-radtan " in kalibr_commands(tmp_path, True)[0]
+    assert "--models ds-none " in kalibr_commands(tmp_path, True, distortion="ds")[0]
+    assert "--models eucm-none " in kalibr_commands(tmp_path, True, distortion="eucm")[0]
 
 
 def test_an_export_killed_mid_write_leaves_nothing_that_blocks_the_next_one(tmp_path):

@@ -62,6 +62,11 @@ def test_bad_task_settings_are_refused_by_name():
         CalibrationTask(calibrate="intrinsic", error_metric="extrinsic_relative")
     with pytest.raises(ConfigError, match="unknown setting"):
         CalibrationTask.from_config({"name": "x", "metric": "intrinsic_relative"})
+    with pytest.raises(
+        ConfigError, match=r"task\.camera_model must be one of \('radtan', 'equidistant', 'ds', 'eucm'\)"
+    ):
+        CalibrationTask(camera_model="omni")
+    assert CalibrationTask(camera_model="ds").camera_model == "ds"
 
 
 def test_scoring_needs_the_truth(recording):

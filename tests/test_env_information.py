@@ -8,9 +8,9 @@ from hydra.errors import InstantiationException
 from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.observations import collect_observations
-from vical.calib.synthetic import make_recording
+from vical.calib.synthetic import make_recording, scattered_views, wide_angle_camera
 from vical.config import ConfigError
-from vical.data import ImuNoise, Target
+from vical.data import ImuNoise, ImuSamples, Target
 from vical.env.calibration import INFO_OBS_SIZE, CalibrationEnv
 from vical.env.information import GROUPS, Guess, InformationTracker, excess, features, quantile_factor
 from vical.rl.trainer import make_env
@@ -146,3 +146,18 @@ def test_bad_information_settings_are_refused_by_key(override, key):
     with pytest.raises(InstantiationException, match=key.replace(".", r"\.")) as raised:
         information_env("joint", override)
     assert isinstance(raised.value.__cause__, ConfigError)
+
+
+def test_predicted_sigmas_of_a_double_sphere_camera_are_the_calibrators():
+    """The tracker sizes its camera block by the model: a ds camera's 6 parameters, as the calibrator's 1-sigma."""
+    camera = wide_angle_camera("ds", 180.0)
+    frames, _ = scattered_views(camera, Target.checkerboard(), 30, pixel_sigma=0.3, seed=2)
+    sig = calibrate_intrinsics(frames, Target.checkerboard(), "ds", (640, 480), pixel_sigma=0.3).sigmas
+    guess = Guess(camera, np.eye(4), 0.0, ImuNoise(), pixel_sigma=0.3)
+    tracker = InformationTracker("intrinsic", Target.checkerboard(), guess)
+    no_imu = ImuSamples(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+    tracker.add_frames(collect_observations(frames, Target.checkerboard()), no_imu)
+    predicted = tracker.sigmas()
+    assert len(tracker.covariance()[0]) == 6
+    assert predicted["focal"] == pytest.approx(np.sqrt(0.5 * (sig["fx"] ** 2 + sig["fy"] ** 2)), rel=0.15)
+    assert predicted["principal_point"] == pytest.approx(np.sqrt(0.5 * (sig["cx"] ** 2 + sig["cy"] ** 2)), rel=0.15)

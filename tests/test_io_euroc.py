@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
+import yaml
 from test_io_samples import T0_NS, assert_frames_equal, make_recording
 
+from vical.geometry import CameraModel
 from vical.io.checks import FormatWarning
 from vical.io.csvfiles import IMU_HEADER, read_corners_csv, read_imu_csv, write_corners_csv, write_imu_csv
 from vical.io.errors import CsvFormatError, FormatError, UnitError
@@ -26,6 +30,17 @@ def test_euroc_round_trip_is_lossless(tmp_path):
     assert back.truth.camera == rec.truth.camera
     assert np.allclose(back.truth.T_cam_imu, rec.truth.T_cam_imu, atol=1e-15)
     assert back.truth.time_offset == rec.truth.time_offset and back.truth.imu_noise == rec.truth.imu_noise
+
+
+def test_euroc_sensor_yaml_holds_a_double_sphere_camera_as_kalibr_names_it(tmp_path):
+    rec = make_recording()
+    camera = CameraModel("ds", 64, 48, 20.5, 20.4, 31.7, 24.1, [-0.21, 0.59])
+    rec = replace(rec, truth=replace(rec.truth, camera=camera))
+    write_euroc(rec, tmp_path / "seq")
+    sensor = yaml.safe_load((tmp_path / "seq" / "mav0" / "cam0" / "sensor.yaml").read_text())
+    assert sensor["camera_model"] == "ds" and sensor["intrinsics"] == [-0.21, 0.59, 20.5, 20.4, 31.7, 24.1]
+    assert sensor["distortion_model"] == "none" and sensor["distortion_coefficients"] == []
+    assert read_euroc(tmp_path / "seq", rec.target).truth.camera == camera
 
 
 def test_euroc_detector_replaces_stored_corners(tmp_path):

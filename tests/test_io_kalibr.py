@@ -261,3 +261,37 @@ def test_an_aprilgrid_code_offset_is_refused_unless_zero(tmp_path):
     path.write_text(grid + "codeOffset: 36\n")
     with pytest.raises(KalibrFormatError, match=r"codeOffset 36 is not supported .*codeOffset 0"):
         read_target_yaml(path)
+
+
+@pytest.mark.parametrize(("model", "coeffs"), [("ds", [-0.21, 0.59]), ("eucm", [0.61, 1.12])])
+def test_wide_angle_camchain_has_kalibrs_layout_and_round_trips(tmp_path, model, coeffs):
+    camera = CameraModel(model, 640, 480, 171.5, 170.9, 321.2, 238.7, coeffs)
+    path = tmp_path / "camchain.yaml"
+    write_camchain_imucam(path, camera, None, None)
+    cam0 = yaml.safe_load(path.read_text())["cam0"]
+    # Kalibr's ds / eucm: the two model coefficients lead the intrinsics, no distortion on top.
+    assert cam0["camera_model"] == model and cam0["intrinsics"] == [*coeffs, 171.5, 170.9, 321.2, 238.7]
+    assert cam0["distortion_model"] == "none" and cam0["distortion_coeffs"] == []
+    assert read_camchain(path)[0] == camera
+
+
+@pytest.mark.parametrize(
+    ("entry", "message"),
+    [
+        ("camera_model: omni\nintrinsics: [0.8, 300, 300, 320, 240]\ndistortion_model: none",
+         r"camera_model 'omni' is not supported; use one of \['pinhole', 'ds', 'eucm'\]"),
+        ("camera_model: ds\nintrinsics: [300, 300, 320, 240]\ndistortion_model: none",
+         "intrinsics must hold 6 finite numbers"),
+        ("camera_model: ds\nintrinsics: [-0.2, 1.4, 300, 300, 320, 240]\ndistortion_model: none",
+         r"ds parameter alpha must be in \[0, 1\], got 1.4"),
+        ("camera_model: eucm\nintrinsics: [0.6, 0.0, 300, 300, 320, 240]\ndistortion_model: none",
+         "eucm parameter beta must be > 0"),
+        ("camera_model: ds\nintrinsics: [-0.2, 0.6, 300, 300, 320, 240]\ndistortion_model: radtan\n"
+         "distortion_coeffs: [0.1, 0, 0, 0]", "camera_model ds with distortion_model 'radtan'"),
+    ],
+)  # fmt: skip
+def test_bad_wide_angle_camchains_name_the_key(tmp_path, entry, message):
+    path = tmp_path / "camchain.yaml"
+    path.write_text("cam0:\n  " + entry.replace("\n", "\n  ") + "\n  resolution: [640, 480]\n")
+    with pytest.raises(KalibrFormatError, match=message):
+        read_camchain(path)

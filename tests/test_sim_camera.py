@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from vical.calib.detection import detect_checkerboard
+from vical.calib.synthetic import wide_angle_camera
 from vical.config import ConfigError
 from vical.geometry import (
     CameraModel,
@@ -20,9 +21,11 @@ from vical.sim.camera import (
     ProjectBackend,
     RenderBackend,
     VisibilityRules,
+    cube_face_pinhole,
     distortion_maps,
     interpolate_pose,
     render_pinhole,
+    warp_views,
 )
 from vical.sim.sampling import SensorSampling, mean_sensor, sample_sensor
 
@@ -203,3 +206,57 @@ def test_render_size_beyond_the_offscreen_buffer_is_refused(sim, target):
             backend.image(sim.data, np.eye(4))
     finally:
         backend.close()
+
+
+@pytest.mark.parametrize("model", ["ds", "eucm"])
+def test_a_180_deg_lens_warps_from_the_cube_faces_its_rays_cross(model):
+    camera = wide_angle_camera(model, 180.0)
+    views = warp_views(camera, 704, 528)
+    assert len(views.rotations) == 5  # front and four sides; no ray looks backwards
+    assert views.seen.mean() > 0.98  # the ds lens's image circle leaves its image corners dark
+    rng = np.random.default_rng(2)
+    uv = rng.uniform([0, 0], [camera.width - 1, camera.height - 1], (3000, 2))
+    i, j = np.rint(uv[:, 1]).astype(int), np.rint(uv[:, 0]).astype(int)
+    i, j = i[views.seen[i, j]], j[views.seen[i, j]]
+    src = np.stack([views.map_x[i, j], views.map_y[i, j]], axis=1).astype(float)
+    face = (src[:, 1] // 528).astype(int)
+    local = views.pinhole.unproject(src - np.stack([np.zeros(len(src)), face * 528.0], axis=1))
+    rays = np.einsum("nij,nj->ni", views.rotations[face], local)
+    expected, _ = camera.bearings(np.stack([j, i], axis=1).astype(float))
+    angle = np.arccos(np.clip(np.sum(rays / np.linalg.norm(rays, axis=1, keepdims=True) * expected, axis=1), -1, 1))
+    assert np.rad2deg(angle).max() < 1e-3
+    # Every ray lands inside its face, away from the neighbouring face's rows.
+    row = src[:, 1] - face * 528.0
+    assert src[:, 0].min() >= 1.0 and src[:, 0].max() <= 702.0 and row.min() >= 1.0 and row.max() <= 526.0
+    assert cube_face_pinhole(704, 528).project(np.array([[1.0, 1.0, 1.0]]))[0].tolist() == [
+        [701.0, 525.0]
+    ]  # 2 px inside the last pixel centre
+
+
+def test_render_of_a_180_deg_fisheye_matches_the_projection(sim, target, renderer):
+    """The board 50-60 deg off the axis of a 180 deg double-sphere lens, beyond what one pinhole render covers."""
+    sim.reset()
+    camera = wide_angle_camera("ds", 180.0)
+    renderer.set_camera(camera)
+    project = ProjectBackend(target, sim.T_world_board, 0.0)
+    T_board = sim.T_world_board
+    centre = T_board[:3, :3] @ target.center + T_board[:3, 3]
+    R_board_cam = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])
+    errors = []
+    for yaw in (0.9, -0.85):
+        R = T_board[:3, :3] @ R_board_cam @ so3_exp([0.0, yaw, 0.0])
+        T = make_transform(R, centre - 0.35 * (T_board[:3, :3] @ R_board_cam)[:, 2])
+        ideal = project.ideal_corners(camera, T)
+        corners, ids, _ = renderer.observe(sim.data, T)
+        assert ideal is not None and len(ids) == target.num_points
+        errors.append(corners - ideal[ids])
+    errors = np.vstack(errors)
+    rms = float(np.sqrt(np.mean(np.sum(errors**2, axis=1))))
+    print(f"fisheye render vs project: {rms:.3f} px RMS")
+    assert rms < 0.3
+    # A 240 deg lens folds 123 deg off its axis: the image corners beyond have no ray and stay black.
+    renderer.set_camera(CameraModel.from_hfov(np.deg2rad(240.0), dist=[-0.2, 0.6], distortion="ds"))
+    image = renderer.image(sim.data, camera_pose_cv(sim.model, sim.data))
+    dark = ~renderer.views.seen
+    assert dark[0, 0] and dark[-1, -1] and not dark[240, 320]
+    assert image[dark].max() == 0 and image[~dark].max() > 200  # the white board squares

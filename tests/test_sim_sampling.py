@@ -145,3 +145,26 @@ def test_distortion_that_always_folds_over_is_refused():
 
 def test_paper_file_equals_the_dataclass_defaults(paper):
     assert paper == SensorSampling()
+
+
+def test_wide_angle_lenses_are_drawn_up_to_180_deg_and_beyond():
+    rng = np.random.default_rng(5)
+    for model in ("ds", "eucm"):
+        cfg = SensorSampling.from_config({"camera": {"distortion": model, "hfov": {"mean": 3.3, "std": 0.05}}})
+        cameras = [sample_sensor(cfg, rng, asymmetric=True).camera for _ in range(400)]
+        assert {c.distortion for c in cameras} == {model} and not any(c.distortion_center_offset.any() for c in cameras)
+        # The edge ray of every draw sits at the image edge: the field of view is the drawn one.
+        coeffs = np.array([c.dist for c in cameras])
+        means, stds = ([-0.2, 0.6], [0.05, 0.03]) if model == "ds" else ([0.6, 1.1], [0.03, 0.05])
+        for k in range(2):
+            _check_moments(coeffs[:, k], means[k], stds[k])
+        hfov = [2 * np.arccos(c.bearings(np.array([[c.cx + c.width / 2, c.cy]]))[0][0, 2]) for c in cameras]
+        _check_moments(hfov, 3.3, 0.05)
+    assert mean_sensor(cfg).camera.dist.tolist() == [0.6, 1.1]
+
+
+def test_a_wide_angle_field_of_view_for_a_pinhole_model_is_refused():
+    with pytest.raises(ConfigError, match=r"sensor\.camera\.hfov\.mean"):
+        SensorSampling.from_config({"camera": {"hfov": {"mean": 3.3, "std": 0.0}}})
+    with pytest.raises(ConfigError, match=r"sensor\.camera\.distortion must be one of"):
+        SensorSampling.from_config({"camera": {"distortion": "omni"}})

@@ -77,7 +77,7 @@ from vical.calib.visual_inertial import ViOptions
 from vical.config import SettingError
 from vical.data import DataError, ImuNoise, Recording, Target
 from vical.data.target import TargetError
-from vical.geometry import CameraModel, CameraModelError
+from vical.geometry import CAMERA_MODELS, CameraModel, CameraModelError
 from vical.io.atomic import atomic_directory, remove_stale_temporaries
 from vical.io.errors import FormatError, KalibrFormatError
 from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_camchain_imucam, write_imu_yaml
@@ -124,7 +124,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog=APP, description=__doc__.split("\n\n")[0])
     p.add_argument("recording", help="recording directory, EuRoC folder, ROS1 bag, image folder or corner CSV")
     p.add_argument("--task", choices=TASKS, default="joint", help="what to calibrate (default: joint)")
-    p.add_argument("--model", choices=("radtan", "equidistant"), default="radtan", help="lens distortion model")
+    p.add_argument(
+        "--model",
+        choices=CAMERA_MODELS,
+        default="radtan",
+        help="lens model: pinhole with radtan or equidistant distortion, or the wide-angle ds (double sphere) or "
+        "eucm (extended unified); default radtan",
+    )
     p.add_argument(
         "--intrinsics", help="Kalibr camchain.yaml with the known intrinsics (extrinsic task), one section per camera"
     )

@@ -45,7 +45,7 @@ def kalibr_result_name(prefix: str, bag: Path) -> str:
     return f"{prefix}-{tag}.yaml"
 
 
-KALIBR_MODELS = {"radtan": "pinhole-radtan", "equidistant": "pinhole-equi"}
+KALIBR_MODELS = {"radtan": "pinhole-radtan", "equidistant": "pinhole-equi", "ds": "ds-none", "eucm": "eucm-none"}
 
 
 def kalibr_commands(

@@ -10,6 +10,7 @@ import numpy as np
 from vical.calib.checks import image_coverage_warnings
 from vical.calib.errors import CalibrationError
 from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.model_fit import is_model_warning
 from vical.calib.observations import collect_observations
 from vical.calib.result import CalibrationResult
 from vical.calib.uncertainty import correlations, weak_parameters
@@ -62,14 +63,14 @@ def calibrate_joint(
 ) -> CalibrationResult:
     """Intrinsics, distortion, ``T_cam_imu``, time offset and biases in one factor graph.
 
-    Initialised by ``calibrate_intrinsics`` on the same frames; arguments as in
-    ``calibrate_intrinsics`` and ``calibrate_extrinsics``.
+    Initialised by ``calibrate_intrinsics`` on the same frames (whose warning that the model does not fit
+    the lens, if any, the result carries); arguments as in ``calibrate_intrinsics`` and ``calibrate_extrinsics``.
     """
     start = time.perf_counter()
     opts = options or ViOptions()
     intrinsic = calibrate_intrinsics(
         frames, target, model, image_size_px, initial_camera, opts.pixel_sigma, opts.huber_k,
-        frame_stride=opts.frame_stride,
+        frame_stride=opts.frame_stride, compare_models=False,
     )  # fmt: skip
     result = run_visual_inertial(
         "joint", frames, imu, target, intrinsic.camera, imu_noise or ImuNoise(), initial_T_cam_imu,
@@ -77,7 +78,8 @@ def calibrate_joint(
     )[0]  # fmt: skip
     size = (intrinsic.camera.width, intrinsic.camera.height)
     coverage = image_coverage_warnings(collect_observations(frames, target), size)
-    return replace(result, warnings=coverage + result.warnings)
+    lens = [w for w in intrinsic.warnings if is_model_warning(w)]
+    return replace(result, warnings=coverage + lens + result.warnings)
 
 
 def calibrate_two_stage(

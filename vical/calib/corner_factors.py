@@ -15,14 +15,16 @@ Frame ``n`` sees the target from the camera pose (target frame)::
   the pose at the exposure instant to first order in ``delta`` (the neglected ``0.5 a delta^2`` is
   5 um at 1 ms);
 - ``E``: ``Pose3`` key of ``T_imu_cam``;
-- the camera: a ``Vector8`` key ``[fx, fy, cx, cy, d1, d2, d3, d4]`` or a fixed ``CameraModel``.
+- the camera: a vector key of the camera's ``parameters`` (``[fx, fy, cx, cy, *coefficients]``, 8 or 6)
+  or a fixed ``CameraModel``.
 
 Each frame's factor is a ``gtsam.CustomFactor`` whose residual is ``(predicted - measured) / sigma``
 for its corners (2 per corner, whitened; an optional Huber kernel per corner). GTSAM calls the
 factors one by one; the first call for a set of values computes all frames at once (one numpy
 pass), and each call returns its frame's slice, after checking that its variables are exactly
 those the pass used. Jacobians are analytic (``CameraModel.project_jacobians``, right
-perturbations of the poses as GTSAM's ``Pose3`` retraction).
+perturbations of the poses as GTSAM's ``Pose3`` retraction). Camera parameters outside their model's
+range (a Levenberg-Marquardt trial step, say) give non-finite residuals, which the solver rejects.
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ import gtsam
 import numpy as np
 
 from vical.calib.observations import FrameObservation
-from vical.geometry import CameraModel, skew
+from vical.geometry import CameraModel, CameraModelError, skew
 
 
 @dataclass(frozen=True)
@@ -48,7 +50,7 @@ class CornerKeys:
         omegas: (F, 3) [rad/s] gyro rates at the state times; needed with ``delta``.
         extrinsic: ``Pose3`` key of ``T_imu_cam``.
         delta: ``Vector1`` key [s] of the time-offset correction.
-        camera: ``Vector8`` key of the camera parameters.
+        camera: vector key of the camera parameters (``CameraModel.parameters``).
         shifts: (F,) [s] constant time from each frame's state to its exposure (another camera of a
             rig, whose frames join the first camera's states), added to ``delta``; needs ``delta``.
     """
@@ -115,7 +117,7 @@ class _Inputs:
     velocities: np.ndarray | None  # (F, 3)
     extrinsic: np.ndarray  # (4, 4) T_imu_cam
     delta: float
-    camera: np.ndarray  # (8,)
+    camera: np.ndarray  # (4 + D,) CameraModel.parameters
 
 
 @dataclass
@@ -125,7 +127,7 @@ class _Pass:
     inputs: _Inputs
     residuals: np.ndarray  # (N, 2) whitened (after the Huber kernel)
     d_camera_pose: np.ndarray | None = None  # (N, 2, 6) w.r.t. a right perturbation of C_n
-    d_parameters: np.ndarray | None = None  # (N, 2, 8)
+    d_parameters: np.ndarray | None = None  # (N, 2, 4 + D)
     to_pose: np.ndarray | None = None  # (F, 6, 6) d zeta_C / d xi_X
     to_velocity: np.ndarray | None = None  # (F, 6, 3)
     to_delta: np.ndarray | None = None  # (F, 6, 1)
@@ -249,7 +251,12 @@ class CornerFactors:
 
     def _evaluate(self, inputs: _Inputs, need_jacobians: bool) -> _Pass:
         shift, q = self._camera_points(inputs)
-        camera = self.camera.with_parameters(inputs.camera)
+        try:
+            camera = self.camera.with_parameters(inputs.camera)
+        except CameraModelError:
+            if need_jacobians:
+                raise
+            return _Pass(inputs, np.full_like(self.measured, np.nan))
         if not need_jacobians:
             return _Pass(inputs, self._huber((camera.project(q)[0] - self.measured) / self.sigma_px)[0])
         uv, d_point, d_parameters = camera.project_jacobians(q)
@@ -325,7 +332,7 @@ class CornerFactors:
             if self.keys.delta is not None:
                 blocks.append(d_pose @ p.to_delta[n])
             if self.keys.camera is not None:
-                blocks.append(p.d_parameters[rows].reshape(-1, 8))
+                blocks.append(p.d_parameters[rows].reshape(-1, p.d_parameters.shape[2]))
             for slot, block in enumerate(blocks):
                 jacobians[slot] = block
         return p.residuals[rows].reshape(-1)

@@ -1,4 +1,11 @@
-"""Closed-form starting points: focal length from plane homographies, frame poses from PnP."""
+"""Closed-form starting points: focal length from plane homographies, frame poses from PnP.
+
+Wide-angle models (``ds``, ``eucm``) start as the stereographic projection both contain
+(``ds`` with ``xi = 0, alpha = 0.5``; ``eucm`` with ``alpha = 0.5, beta = 1``): near the axis it
+images like a pinhole of the same focal length, and towards 90 deg it stays much closer to a
+fisheye lens than a pinhole does. Its focal length is the one under which the views' rays fit
+plane homographies best (a pinhole's homographies cannot describe a fisheye image).
+"""
 
 from __future__ import annotations
 
@@ -8,12 +15,19 @@ import numpy as np
 from vical.calib.errors import CalibrationError
 from vical.calib.observations import FrameObservation
 from vical.geometry import CameraModel, make_transform
+from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
 
 MIN_INIT_CORNERS = 12  # frames with fewer corners gave metre-level PnP errors; skip them for initialisation
 MAX_INIT_VIEWS = 20  # homographies used for the closed-form focal length
 HOMOGRAPHY_OUTLIER_FACTOR = 5.0  # a view fitting its homography this many times worse than the median is not used
 MIN_HOMOGRAPHY_OUTLIER_PX = 3.0  # [px] ... unless its fit is still this good
 MAX_PNP_RMS_PX = 20.0  # [px] a PnP pose that reprojects worse than this is not used as a starting point
+# Wide-angle starting coefficients: the stereographic projection ``m = 2 tan(theta / 2)``.
+STEREOGRAPHIC = {"ds": np.array([0.0, 0.5]), "eucm": np.array([0.5, 1.0])}
+# Rays further than this from the axis are left out of PnP and of the wide-angle focal-length fit: on the
+# unit-depth plane PnP works in, their few pixels of model error at the start become huge.
+MAX_INIT_RAY_ANGLE = np.deg2rad(85.0)
+FOCAL_SCAN = np.geomspace(0.1, 2.0, 60)  # wide-angle focal lengths tried, in image widths
 
 
 def _homography_fit(obs: FrameObservation, centre: np.ndarray) -> tuple[np.ndarray | None, float]:
@@ -68,20 +82,70 @@ def _consistent_homographies(fits: list[tuple[np.ndarray | None, float]]) -> lis
     return [H for H, r in fits if H is not None and r <= limit]
 
 
+def starting_camera(model: str, camera: CameraModel) -> CameraModel:
+    """A camera of ``model`` with ``camera``'s focal lengths and principal point, and no distortion (pinhole
+    models) or the stereographic coefficients (wide-angle models)."""
+    coeffs = STEREOGRAPHIC.get(model)
+    return CameraModel(model, camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy, coeffs)
+
+
 def initial_camera(observations: list[FrameObservation], model: str, size: tuple[int, int]) -> CameraModel:
-    """A distortion-free camera of ``model`` with Zhang's focal lengths and the image centre as principal point."""
+    """A starting camera of ``model`` with the image centre as principal point: no distortion and Zhang's focal
+    lengths (pinhole models), or the stereographic projection whose focal length best straightens the views."""
     w, h = size
     centre = np.array([(w - 1) / 2.0, (h - 1) / 2.0])
     usable = [o for o in observations if len(o.ids) >= MIN_INIT_CORNERS] or observations
     usable = usable[:: max(1, len(usable) // MAX_INIT_VIEWS)]  # a spread-out subset is plenty for a start
+    if model in WIDE_ANGLE_MODELS:
+        return _stereographic_camera(usable, model, w, h)
     fx, fy = focal_from_homographies(_consistent_homographies([_homography_fit(o, centre) for o in usable]))
-    return CameraModel(model, w, h, fx, fy, centre[0], centre[1], np.zeros(4))
+    return CameraModel(model, w, h, fx, fy, centre[0], centre[1])
+
+
+def _stereographic_camera(observations: list[FrameObservation], model: str, w: int, h: int) -> CameraModel:
+    """The stereographic ``model`` camera whose focal length (scanned over ``FOCAL_SCAN``) makes the views' rays
+    fit plane homographies best: the least median over views of their RMS angular misfit times the focal
+    length (a pixel scale: angles alone shrink as the focal length grows)."""
+    cx, cy = (w - 1) / 2.0, (h - 1) / 2.0
+    best, best_misfit = None, np.inf
+    for f in FOCAL_SCAN * w:
+        camera = CameraModel(model, w, h, f, f, cx, cy, STEREOGRAPHIC[model])
+        misfits = [_ray_homography_misfit(camera, o) for o in observations]
+        misfit = float(np.median(misfits)) * f
+        if misfit < best_misfit:
+            best, best_misfit = camera, misfit
+    if best is None:
+        raise CalibrationError(
+            f"wide-angle initialisation found no focal length under which the target views look like planes; "
+            f"check the target definition and that views hold >= {MIN_INIT_CORNERS} corners"
+        )
+    return best
+
+
+def _ray_homography_misfit(camera: CameraModel, obs: FrameObservation) -> float:
+    """RMS angle [rad] between the corners' rays and the rays of the plane homography fitted to them (inf when
+    too few rays lie within ``MAX_INIT_RAY_ANGLE`` of the axis)."""
+    rays, ok = camera.bearings(obs.uv)
+    ok &= rays[:, 2] > np.cos(MAX_INIT_RAY_ANGLE)
+    if ok.sum() < MIN_INIT_CORNERS:
+        return np.inf
+    xy = rays[ok, :2] / rays[ok, 2:]
+    H, _ = cv2.findHomography(obs.points[ok, :2], xy, method=0)
+    if H is None or not np.all(np.isfinite(H)):
+        return np.inf
+    predicted = np.hstack([obs.points[ok, :2], np.ones((int(ok.sum()), 1))]) @ H.T
+    predicted /= np.linalg.norm(predicted, axis=1, keepdims=True) * np.sign(predicted[:, 2:])
+    return float(np.sqrt(np.mean(np.arccos(np.clip(np.sum(predicted * rays[ok], axis=1), -1.0, 1.0)) ** 2)))
 
 
 def undistorted(camera: CameraModel, uv: np.ndarray) -> np.ndarray:
-    """Undistorted normalised coordinates (N, 2) of pixels (N, 2) (one batched Newton solve)."""
+    """Undistorted normalised coordinates (N, 2) of pixels (N, 2) (one batched Newton solve); NaN for rays
+    further than ``MAX_INIT_RAY_ANGLE`` from the axis (wide-angle models)."""
     xy = camera.pixels_to_normalized(uv)
-    if np.any(camera.dist != 0) or np.any(camera.distortion_center_offset != 0):
+    if camera.is_wide_angle:
+        xy = camera.undistort(xy)
+        xy[np.sum(xy * xy, axis=1) > np.tan(MAX_INIT_RAY_ANGLE) ** 2] = np.nan
+    elif np.any(camera.dist != 0) or np.any(camera.distortion_center_offset != 0):
         xy = camera.undistort(xy)
     return xy
 
@@ -92,13 +156,17 @@ def pnp(
     """Pose ``T_cam_target`` (4, 4) of one frame and its approximate reprojection RMS [px], or None on failure.
 
     Pixels are undistorted with the camera model first (or taken as the given undistorted
-    normalised ``xy`` (K, 2)), so both distortion models share one path. ``refine`` polishes the
-    planar solution to the least reprojection error (needed where the pose itself is used, not
-    where a solve refines it anyway).
+    normalised ``xy`` (K, 2)), so every model shares one path; corners without a usable ray (NaN)
+    are left out. ``refine`` polishes the planar solution to the least reprojection error (needed
+    where the pose itself is used, not where a solve refines it anyway).
     """
     if xy is None:
         xy = undistorted(camera, obs.uv)
-    obj = np.ascontiguousarray(obs.points, dtype=np.float64)
+    usable = np.all(np.isfinite(xy), axis=1)
+    if usable.sum() < min(MIN_INIT_CORNERS, len(usable)) or usable.sum() < 4:
+        return None
+    obj = np.ascontiguousarray(obs.points[usable], dtype=np.float64)
+    xy = xy[usable]
     img = np.ascontiguousarray(xy, dtype=np.float64)
     ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)  # planar target
     if not ok:
@@ -109,7 +177,7 @@ def pnp(
         rvec, tvec = cv2.solvePnPRefineLM(obj, img, np.eye(3), None, rvec, tvec)
     R = cv2.Rodrigues(rvec)[0]
     T = make_transform(R, tvec.ravel())
-    p_cam = obs.points @ R.T + tvec.ravel()
+    p_cam = obs.points[usable] @ R.T + tvec.ravel()
     if np.any(p_cam[:, 2] <= 0):
         return None
     # RMS in undistorted normalised coordinates scaled by the focal length: pixels to first order.
@@ -119,11 +187,16 @@ def pnp(
 
 
 def frame_poses(
-    camera: CameraModel, observations: list[FrameObservation], min_corners: int = MIN_INIT_CORNERS, refine: bool = True
+    camera: CameraModel,
+    observations: list[FrameObservation],
+    min_corners: int = MIN_INIT_CORNERS,
+    refine: bool = True,
+    only: list[int] | None = None,
 ) -> dict[int, tuple[np.ndarray, float]]:
     """PnP poses ``{observation index: (T_cam_target, rms [px])}`` of frames good enough to start from
-    (``refine``: see ``pnp``)."""
-    used = [k for k, obs in enumerate(observations) if len(obs.ids) >= min_corners]
+    (``refine``: see ``pnp``; ``only``: these observation indices, else all)."""
+    candidates = range(len(observations)) if only is None else only
+    used = [k for k in candidates if len(observations[k].ids) >= min_corners]
     if not used:
         return {}
     xy_all = undistorted(camera, np.concatenate([observations[k].uv for k in used]))

@@ -1,10 +1,11 @@
-"""Intrinsic calibration (pinhole + radtan or equidistant) from target observations.
+"""Intrinsic calibration (pinhole + radtan or equidistant, double sphere, extended unified) from target observations.
 
 Graph: one ``Pose3`` per frame (the camera pose in the target frame, ``T_target_cam``), the camera
-parameters ``[fx, fy, cx, cy, d1..d4]`` (a ``Vector8``, no skew, as Kalibr's pinhole) and one corner
-factor per frame (``vical.calib.corner_factors``: the target points are constants). Initialisation:
-Zhang's focal lengths from plane homographies (principal point at the image centre, no
-distortion), then PnP per frame.
+parameters ``[fx, fy, cx, cy, *coefficients]`` (a vector of 8 or 6, no skew, as Kalibr's models) and
+one corner factor per frame (``vical.calib.corner_factors``: the target points are constants).
+Initialisation: Zhang's focal lengths from plane homographies (principal point at the image centre,
+no distortion; wide-angle models from the focal length that best straightens the views), then PnP
+per frame.
 """
 
 from __future__ import annotations
@@ -19,18 +20,18 @@ from vical.calib.checks import image_coverage_warnings
 from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError
 from vical.calib.frame_log import build_frame_log, left_out
-from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera
+from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera, starting_camera
+from vical.calib.model_fit import COMPARISON, misfit_warnings
 from vical.calib.observations import FrameObservation, collect_observations, image_size
 from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ResidualStats
 from vical.calib.solver import covariance_or_unobservable, optimize
 from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
 from vical.data import CameraFrames, Target
-from vical.geometry import CameraModel, invert_transform
+from vical.geometry import CAMERA_MODELS, COEFFICIENT_NAMES, CameraModel, CameraModelError, invert_transform
 
 MIN_VIEWS = 3  # intrinsics with a free principal point need three views of a plane (Zhang)
-MODELS = ("radtan", "equidistant")
-CAMERA_PARAMETERS = 8  # fx, fy, cx, cy, four distortion coefficients
+MODELS = CAMERA_MODELS
 
 K_KEY = gtsam.symbol("k", 0)
 
@@ -40,8 +41,8 @@ def pose_key(k: int) -> int:
 
 
 def distortion_names(model: str) -> list[str]:
-    """Names of the four distortion coefficients of ``model``."""
-    return ["k1", "k2", "p1", "p2"] if model == "radtan" else ["k1", "k2", "k3", "k4"]
+    """Names of the coefficients of ``model`` beside focal length and principal point."""
+    return list(COEFFICIENT_NAMES[model])
 
 
 def intrinsic_names(model: str) -> list[str]:
@@ -50,7 +51,7 @@ def intrinsic_names(model: str) -> list[str]:
 
 def check_model(model: str) -> None:
     if model not in MODELS:
-        raise CalibrationError(f"camera model {model!r} is not supported; use one of {sorted(MODELS)}")
+        raise CalibrationError(f"camera model {model!r} is not supported; use one of {list(MODELS)}")
 
 
 def _build_graph(
@@ -122,19 +123,26 @@ def calibrate_intrinsics(
     huber_k: float | None = None,
     max_iterations: int = 50,
     frame_stride: int = 1,
+    compare_models: bool = True,
 ) -> CalibrationResult:
     """Calibrate the camera's intrinsics and distortion from target observations.
+
+    When the residuals show that the model does not fit the lens (``vical.calib.model_fit``), the
+    result warns, and (``compare_models``) the other models are calibrated on the same corners and
+    their fit is listed in the warnings.
 
     Args:
         frames: camera frames with corner detections.
         target: the calibration target.
-        model: ``"radtan"`` (``Cal3DS2``) or ``"equidistant"`` (``Cal3Fisheye``).
+        model: ``"radtan"`` (as GTSAM's ``Cal3DS2``), ``"equidistant"`` (``Cal3Fisheye``), ``"ds"`` or
+            ``"eucm"`` (wide-angle, ``vical.geometry.wide_angle``).
         image_size_px: ``(width, height)`` [px]; taken from ``frames.images`` or the initial guess if None.
         initial_camera_guess: starting intrinsics (Zhang's closed form if None).
         pixel_sigma: [px] corner noise; None estimates it from the residuals and scales the covariance.
         huber_k: Huber kernel width in sigmas (None: plain least squares).
         max_iterations: Levenberg-Marquardt iterations.
         frame_stride: use every ``frame_stride``-th frame with a target view (1: all).
+        compare_models: calibrate the other models when this one does not fit.
     """
     start = time.perf_counter()
     check_model(model)
@@ -147,7 +155,7 @@ def calibrate_intrinsics(
     size = image_size(frames, image_size_px)
     camera0 = initial_camera_guess or initial_camera(observations, model, size)
     if camera0.distortion != model:  # keep the guessed focal length and principal point, start undistorted
-        camera0 = CameraModel(model, camera0.width, camera0.height, camera0.fx, camera0.fy, camera0.cx, camera0.cy)
+        camera0 = starting_camera(model, camera0)
     # Unrefined planar poses: the joint solve refines them, and outliers are judged after it.
     poses = frame_poses(camera0, observations, min(MIN_INIT_CORNERS, target.num_points), refine=False)
     if len(poses) < MIN_VIEWS:
@@ -157,7 +165,9 @@ def calibrate_intrinsics(
         )
     sigma_graph = 1.0 if pixel_sigma is None else float(pixel_sigma)
     solve = _Solve(observations, sigma_graph, huber_k, max_iterations)
-    camera, T_cam_target, graph, solution = solve(camera0, {k: T for k, (T, _) in poses.items()})
+    camera, T_cam_target, graph, solution = _add_unplaced_frames(
+        solve, *solve(camera0, {k: T for k, (T, _) in poses.items()}), min(MIN_INIT_CORNERS, target.num_points)
+    )
     # Wrong detections pull the least-squares fit: drop them and solve again from this solution.
     rejection = reject_outliers(camera, observations, T_cam_target, min(MIN_INIT_CORNERS, target.num_points))
     if rejection.changed:
@@ -167,7 +177,7 @@ def calibrate_intrinsics(
     residuals, frame_index, pixels = reprojection_residuals(camera, observations, T_cam_target)
     covariance = covariance_or_unobservable(graph.linearize(solution.values), solution.values, [K_KEY])
     if pixel_sigma is None:
-        sigma_px = estimated_pixel_sigma(residuals, 6 * len(poses) + CAMERA_PARAMETERS)
+        sigma_px = estimated_pixel_sigma(residuals, 6 * len(poses) + len(camera.parameters))
         covariance = covariance * (sigma_px / sigma_graph) ** 2
     else:
         sigma_px = float(pixel_sigma)
@@ -175,7 +185,10 @@ def calibrate_intrinsics(
     found = correlations(names, covariance)
     decided = left_out(every, observations, rejection.dropped)
     min_corners = min(MIN_INIT_CORNERS, target.num_points)
-
+    comparison = None
+    if compare_models:
+        comparison = {"frames": frames, "target": target, "image_size_px": size, "pixel_sigma": pixel_sigma,
+                      "huber_k": huber_k, "max_iterations": max_iterations, "frame_stride": frame_stride}  # fmt: skip
     estimate = np.concatenate([camera.intrinsics, camera.dist])
     return CalibrationResult(
         task="intrinsic",
@@ -202,7 +215,39 @@ def calibrate_intrinsics(
         warnings=rejection.warnings
         + image_coverage_warnings(observations, size)
         + correlation_warnings(found)
-        + unobservable_warnings(names, covariance),
+        + unobservable_warnings(names, covariance)
+        + _model_warnings(camera, observations, T_cam_target, residuals, comparison),
         frame_log=build_frame_log(frames, frame_index, min_corners, decided),
         reprojection_pixels=pixels,
     )
+
+
+
+def _add_unplaced_frames(solve: _Solve, camera, T_cam_target, graph, solution, min_corners: int):
+    """Frames the starting camera could not place (a fisheye's border, far from its starting model) join once the
+    solved camera places them: the solve's outputs, solved again with them if any."""
+    missing = [k for k in range(len(solve.observations)) if k not in T_cam_target]
+    placed = frame_poses(camera, solve.observations, min_corners, refine=False, only=missing)
+    if not placed:
+        return camera, T_cam_target, graph, solution
+    return solve(camera, T_cam_target | {k: T for k, (T, _) in placed.items()})
+
+
+def _model_warnings(camera, observations, T_cam_target, residuals, compare) -> list[str]:
+    """``model_fit.misfit_warnings`` and, where the model does not fit and ``compare`` holds the calibration's
+    settings, the other models' fit on the same corners."""
+    frames = [observations[k] for k in T_cam_target]
+    misfit = misfit_warnings(
+        camera, frames, [obs.residuals(camera, T_cam_target[k]) for k, obs in zip(T_cam_target, frames, strict=True)]
+    )
+    if not misfit or not compare:
+        return misfit
+    rms = {camera.distortion: ResidualStats.of(residuals).rms}
+    for other in (m for m in MODELS if m != camera.distortion):
+        try:
+            rms[other] = calibrate_intrinsics(**compare, model=other, compare_models=False).reprojection.rms
+        except (CalibrationError, CameraModelError):
+            rms[other] = np.nan
+    best = min(rms, key=lambda m: np.inf if np.isnan(rms[m]) else rms[m])
+    listed = ", ".join(f"{m} {v:.3f} px" + (" (used)" if m == camera.distortion else "") for m, v in rms.items())
+    return [*misfit, f"{COMPARISON}, reprojection rms: {listed}; {best} fits best"]

@@ -87,3 +87,17 @@ def parameter_errors(
         float(trans * 1e3),
         dt,
     )
+
+
+def image_differences_px(camera: CameraModel, truth: CameraModel, step: float = 8.0) -> np.ndarray:
+    """Distances (N,) [px] between where ``truth`` and ``camera`` image the same rays, over the image.
+
+    Every ``step``-th pixel of the image that ``truth`` unprojects is taken back to its ray and projected with
+    ``camera`` (inf where ``camera`` cannot): the error a calibrated camera makes in pixels, whatever its
+    parameters (models differ).
+    """
+    u, v = np.meshgrid(np.arange(0.0, truth.width, step), np.arange(0.0, truth.height, step))
+    pixels = np.stack([u.ravel(), v.ravel()], axis=1)
+    rays, ok = truth.bearings(pixels)
+    uv, projected = camera.project(rays[ok])
+    return np.where(projected, np.linalg.norm(uv - pixels[ok], axis=1), np.inf)

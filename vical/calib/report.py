@@ -35,11 +35,11 @@ def _value_line(name: str, value: float, sigma: float | None, unit: str, scale: 
 
 def _camera_lines(result: CalibrationResult) -> list[str]:
     cam, sig = result.camera, result.sigmas
-    lines = [f"camera: pinhole-{cam.distortion} {cam.width} x {cam.height}"]
+    model = cam.distortion if cam.is_wide_angle else f"pinhole-{cam.distortion}"
+    lines = [f"camera: {model} {cam.width} x {cam.height}"]
     for name, value in zip(["fx", "fy", "cx", "cy"], cam.intrinsics, strict=True):
         lines.append(_value_line(name, value, sig.get(name), "px"))
-    names = ["k1", "k2", "p1", "p2"] if cam.distortion == "radtan" else ["k1", "k2", "k3", "k4"]
-    lines += [_value_line(n, v, sig.get(n), "") for n, v in zip(names, cam.dist, strict=True)]
+    lines += [_value_line(n, v, sig.get(n), "") for n, v in zip(cam.coefficient_names, cam.dist, strict=True)]
     return lines
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.data import NS_PER_S, CameraFrames, ImuNoise, ImuSamples, Recording, SensorTruth, Target, Trajectory
-from vical.geometry import CameraModel, euler_to_matrix, make_transform
+from vical.geometry import CameraModel, euler_to_matrix, make_transform, so3_exp
 
 GRAVITY = np.array([0.0, 0.0, -9.81])  # [m/s^2] world frame, z up
 EPOCH_NS = 1_700_000_000 * NS_PER_S  # a realistic epoch so int64 ns handling is exercised
@@ -207,6 +207,67 @@ def default_camera(distortion: str = "radtan") -> CameraModel:
     dist = np.array([-0.05, 0.02, 0.001, -0.0005]) if distortion == "radtan" else np.array([0.01, -0.005, 0.002, 0.0])
     cam = CameraModel.from_hfov(1.0, 640, 480, dist=dist, distortion=distortion)
     return cam.with_intrinsics(cam.fx * 1.01, cam.fy, cam.cx + 4.0, cam.cy - 3.0, dist)
+
+
+def wide_angle_camera(model: str = "ds", hfov_deg: float = 180.0) -> CameraModel:
+    """A 640 x 480 fisheye lens of ``model`` (``ds``: ``xi = -0.2, alpha = 0.6``; ``eucm``: ``alpha = 0.6,
+    beta = 1.1``, close to published calibrations of real fisheye lenses) with ``hfov_deg`` across the width."""
+    coeffs = {"ds": [-0.2, 0.6], "eucm": [0.6, 1.1]}[model]
+    cam = CameraModel.from_hfov(np.deg2rad(hfov_deg), 640, 480, dist=coeffs, distortion=model)
+    return cam.with_intrinsics(cam.fx * 1.01, cam.fy, cam.cx + 4.0, cam.cy - 3.0, cam.dist)
+
+
+def scattered_views(
+    camera: CameraModel,
+    target: Target,
+    num_views: int = 40,
+    pixel_sigma: float = 0.0,
+    distance: tuple[float, float] = (0.25, 0.6),
+    max_tilt: float = 0.8,
+    seed: int = 0,
+) -> tuple[CameraFrames, list[np.ndarray]]:
+    """Views of a whole checkerboard spread over the image (a camera-only recording for intrinsics).
+
+    Each view looks along the ray of a uniformly drawn image pixel: the board centre sits on it at
+    a distance drawn from ``distance`` [m], its normal points back along the ray tilted by up to
+    ``max_tilt`` [rad] about a random axis, rotated at random about the normal. Views whose corners
+    do not all project 2 px inside the image are drawn again, so wide-angle lenses are seen up to
+    their image border.
+
+    Returns:
+        frames at 10 Hz (corners with Gaussian noise of ``pixel_sigma`` [px]) and each view's
+        ``T_cam_target`` (4, 4).
+    """
+    rng = np.random.default_rng(seed)
+    corners, poses = [], []
+    while len(poses) < num_views:
+        T = _scattered_pose(camera, target, rng, distance, max_tilt)
+        if T is None:
+            continue
+        uv, ok = camera.project(target.points @ T[:3, :3].T + T[:3, 3])
+        if ok.all() and camera.in_image(uv, border=2.0).all():
+            corners.append(uv + rng.normal(0.0, pixel_sigma, size=uv.shape) if pixel_sigma > 0 else uv)
+            poses.append(T)
+    t = EPOCH_NS + np.arange(num_views, dtype=np.int64) * (NS_PER_S // 10)
+    ids = [np.arange(target.num_points, dtype=np.int64) for _ in poses]
+    return CameraFrames(t, corners, ids), poses
+
+
+def _scattered_pose(camera, target, rng, distance, max_tilt) -> np.ndarray | None:
+    """``T_cam_target`` (4, 4) of one ``scattered_views`` draw, or None when the drawn pixel has no ray."""
+    pixel = rng.uniform([0.0, 0.0], [camera.width - 1.0, camera.height - 1.0])
+    ray, ok = camera.bearings(pixel[None])
+    if not ok[0]:
+        return None
+    ray = ray[0]
+    normal = -ray  # the printed side faces the camera
+    axis = np.cross(normal, rng.normal(size=3))
+    normal = so3_exp(axis / np.linalg.norm(axis) * rng.uniform(0.0, max_tilt)) @ normal
+    x = np.cross(rng.normal(size=3), normal)
+    x /= np.linalg.norm(x)
+    R = np.stack([x, np.cross(normal, x), normal], axis=1)
+    centre = ray * rng.uniform(*distance)
+    return make_transform(R, centre - R @ target.center)
 
 
 def _imu_noise_samples(noise: ImuNoise, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

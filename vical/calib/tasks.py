@@ -19,10 +19,10 @@ from vical.calib.result import CalibrationResult
 from vical.calib.visual_inertial import ViOptions
 from vical.config import ConfigError, from_mapping, require
 from vical.data import CameraFrames, Recording
+from vical.geometry import CAMERA_MODELS
 
 SOLVES = ("intrinsic", "extrinsic", "joint", "two_stage")
 ERROR_METRICS = ("intrinsic_relative", "extrinsic_relative")
-CAMERA_MODELS = ("radtan", "equidistant")
 
 
 @dataclass(frozen=True)
@@ -33,7 +33,7 @@ class CalibrationTask:
         name: the task's name (``intrinsic``, ``extrinsic``, ``joint``).
         calibrate: the solve: ``intrinsic``; ``extrinsic`` (intrinsics known: the truth's);
             ``joint`` (one graph); ``two_stage`` (intrinsics first, then the extrinsic).
-        camera_model: lens model estimated: ``radtan`` or ``equidistant``.
+        camera_model: lens model estimated: ``radtan``, ``equidistant``, ``ds`` or ``eucm``.
         estimate_time_offset: estimate the camera-IMU time offset (camera-IMU solves).
         error_metric: the paper's score, ``intrinsic_relative`` or ``extrinsic_relative`` [%].
         asymmetric_distortion: the sensor's distortion centre is drawn away from the principal

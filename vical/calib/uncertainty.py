@@ -25,11 +25,22 @@ def _rotate_others_hint(axis: str, what: str) -> str:
     return f"rotate more about the camera's {others} axes: {what} along/about {_AXES[axis]} shows only then"
 
 
+_COEFFICIENT_THRESHOLDS = {  # [-]
+    "radtan": {"k1": 0.005, "k2": 0.01, "p1": 0.0005, "p2": 0.0005},
+    "equidistant": {"k1": 0.005, "k2": 0.01, "k3": 0.02, "k4": 0.02},
+    # A 180 deg lens seen over its whole image (30 views, 0.3 px noise) gave 1-sigma of xi 0.004, alpha
+    # 0.001 (ds) and alpha 0.001, beta 0.0035 (eucm); ds's focal length trades off against xi (0.45 % of f).
+    "ds": {"xi": 0.01, "alpha": 0.003},
+    "eucm": {"alpha": 0.003, "beta": 0.01},
+}
+_FOCAL_THRESHOLD = {"ds": 0.006}  # of the focal length; 0.002 for the other models
+
+
 def thresholds(camera: CameraModel) -> dict[str, float]:
     """1-sigma above which each parameter counts as weakly observed (in the parameter's unit)."""
     t = {
-        "fx": 0.002 * camera.fx,  # [px] 0.2 % of the focal length
-        "fy": 0.002 * camera.fy,  # [px]
+        "fx": _FOCAL_THRESHOLD.get(camera.distortion, 0.002) * camera.fx,  # [px] 0.2 % of the focal length
+        "fy": _FOCAL_THRESHOLD.get(camera.distortion, 0.002) * camera.fy,  # [px]
         "cx": 0.003 * camera.width,  # [px] ~2 px at 640 wide
         "cy": 0.003 * camera.height,  # [px]
         "rot_x": np.deg2rad(0.1),  # [rad]
@@ -40,9 +51,7 @@ def thresholds(camera: CameraModel) -> dict[str, float]:
         "t_z": 0.002,  # [m]
         "time_offset": 0.0005,  # [s]
     }
-    radtan = {"k1": 0.005, "k2": 0.01, "p1": 0.0005, "p2": 0.0005}  # [-]
-    equidistant = {"k1": 0.005, "k2": 0.01, "k3": 0.02, "k4": 0.02}  # [-]
-    t.update(radtan if camera.distortion == "radtan" else equidistant)
+    t.update(_COEFFICIENT_THRESHOLDS[camera.distortion])
     return t
 
 
@@ -54,7 +63,7 @@ def hint(name: str) -> str:
         return "tilt the target left/right (about the image's vertical axis) and show it near the left and right edges"
     if name == "cy":
         return "tilt the target up/down (about the image's horizontal axis) and show it near the top and bottom edges"
-    if name in ("k1", "k2", "k3", "k4", "p1", "p2"):
+    if name in ("k1", "k2", "k3", "k4", "p1", "p2", "xi", "alpha", "beta"):
         return _BORDER_HINT
     if name.startswith("rot_"):
         return _rotate_others_hint(name[-1], "a rotation error")

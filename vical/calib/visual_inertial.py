@@ -6,7 +6,7 @@ Layout (navigation frame = target frame, so no gauge prior is needed):
   ``t_cam_i + tau0``), velocity ``V_i`` [m/s] (target frame), bias ``B_i``;
 - shared: ``E`` = ``T_imu_cam`` (``Pose3``), gravity direction ``G`` (``Unit3``, target frame),
   time-offset correction ``D`` [s] (``tau = tau0 + D``), and in the joint task the camera
-  parameters ``K`` (``Vector8``);
+  parameters ``K`` (``CameraModel.parameters``, 8 or 6);
 - a rig's other cameras ``c`` (``vical.calib.rig``): their own ``E_c``, ``D_c`` (and ``K_c``); their frames
   join the states of the first camera's simultaneous frames;
 - factors: one corner factor per frame on ``(X_i, V_i, E, D[, K])``, which projects the known
@@ -521,7 +521,8 @@ def _parameter_covariance(
     robust = robust_covariance(linear, values, keys, _clusters(g, linear.size()))
     cov = model if robust is None else widen(model, robust)
     offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
-    blocks = ([np.eye(8)] if joint else []) + [_extrinsic_jacobian(T_cam_imu), offset_block, np.eye(6)]
+    camera_block = [np.eye(values.atVector(_key("k", index)).size)] if joint else []
+    blocks = camera_block + [_extrinsic_jacobian(T_cam_imu), offset_block, np.eye(6)]
     J = np.zeros((sum(b.shape[0] for b in blocks), cov.shape[0]))
     r = c = 0
     for b in blocks:

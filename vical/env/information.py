@@ -51,6 +51,7 @@ GRAVITY = 9.81  # [m/s^2]
 # Prior 1-sigma of the shared parameters: the spread of a guess before any data (tangent units).
 PRIOR_SIGMA = {
     "K": np.array([50.0, 50.0, 30.0, 30.0, 0.2, 0.2, 0.01, 0.01]),  # [px] x 4, distortion [-] x 4
+    "K_wide_angle": np.array([50.0, 50.0, 30.0, 30.0, 0.2, 0.1]),  # [px] x 4, ds [xi, alpha] / eucm [alpha, beta] [-]
     "E": np.r_[np.full(3, 0.2), np.full(3, 0.05)],  # [rad], [m]
     "D": np.array([0.05]),  # [s]
     "G": np.full(2, 0.5),  # [rad] gravity direction
@@ -97,7 +98,7 @@ class InformationTracker:
         self.task, self.target, self.guess = task, target, guess
         self.uses_imu = task != "intrinsic"
         self.shared = {"intrinsic": ["K"], "extrinsic": ["G", "E", "D"], "joint": ["G", "E", "D", "K"]}[task]
-        self.shared_dims = {"K": 8, "E": 6, "D": 1, "G": 2}
+        self.shared_dims = {"K": len(guess.camera.parameters), "E": 6, "D": 1, "G": 2}
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -108,7 +109,8 @@ class InformationTracker:
         offset = 0
         for name in self.shared:
             dim = self.shared_dims[name]
-            self.information[offset : offset + dim, offset : offset + dim] = np.diag(1.0 / PRIOR_SIGMA[name] ** 2)
+            sigma = PRIOR_SIGMA["K_wide_angle" if name == "K" and self.guess.camera.is_wide_angle else name]
+            self.information[offset : offset + dim, offset : offset + dim] = np.diag(1.0 / sigma**2)
             offset += dim
         self._state: tuple[float, np.ndarray] | None = None  # (IMU time [s], T_target_imu) of the last state
         self._residual_norms: list[np.ndarray] = []
@@ -161,10 +163,11 @@ class InformationTracker:
         values.insert(X_KEY, gtsam.Pose3(T_target_cam))
         values.insert(K_KEY, self.guess.camera.parameters)
         factor = self._corner_factor(obs, CornerKeys(poses=[X_KEY], camera=K_KEY))
-        layout = {K_KEY: slice(0, 8), X_KEY: slice(8, 14)}
-        block = np.zeros((14, 14))
+        k = self.shared_dims["K"]
+        layout = {K_KEY: slice(0, k), X_KEY: slice(k, k + 6)}
+        block = np.zeros((k + 6, k + 6))
         _accumulate(block, factor.linearize(values), layout)
-        self.information += _schur(block, 8)
+        self.information += _schur(block, k)
 
     def _add_inertial_frame(self, obs: FrameObservation, T_target_cam: np.ndarray, imu: ImuSamples) -> None:
         if self._t0 is None:
@@ -279,9 +282,13 @@ class InformationTracker:
         return out
 
     def _distortion_px(self, cov: np.ndarray) -> float:
-        """1-sigma [px] of the distortion's displacement at the image corner (RMS over the two axes)."""
+        """1-sigma [px] of the distortion's displacement at the image corner (RMS over the two axes; a wide-angle
+        lens whose image circle leaves the corner dark: at the right edge)."""
         cam = self.guess.camera
         corner = np.array([[(cam.width - 1 - cam.cx) / cam.fx, (cam.height - 1 - cam.cy) / cam.fy, 1.0]])
+        if cam.is_wide_angle:
+            rays, seen = cam.bearings(np.array([[cam.width - 1.0, cam.height - 1.0], [cam.width - 1.0, cam.cy]]))
+            corner = rays[:1] if seen[0] else rays[1:]
         _, _, d_params = cam.project_jacobians(corner)
         J = d_params[0][:, 4:]
         return float(np.sqrt(0.5 * np.trace(J @ cov @ J.T)))

@@ -1,6 +1,6 @@
 """Pure geometry: rigid transforms, rotation parameterisations and camera models."""
 
-from vical.geometry.camera import DISTORTION_MODELS, CameraModel, CameraModelError
+from vical.geometry.camera import CAMERA_MODELS, COEFFICIENT_NAMES, DISTORTION_MODELS, CameraModel, CameraModelError
 from vical.geometry.frames import R_CAM_BODY, T_CAM_BODY, body_imu_from_cam_imu, cam_imu_from_body_imu
 from vical.geometry.transforms import (
     euler_to_matrix,
@@ -21,6 +21,8 @@ from vical.geometry.transforms import (
 )
 
 __all__ = [
+    "CAMERA_MODELS",
+    "COEFFICIENT_NAMES",
     "DISTORTION_MODELS",
     "R_CAM_BODY",
     "T_CAM_BODY",

@@ -1,4 +1,4 @@
-"""Camera models: pinhole projection with radial-tangential or equidistant (fisheye) distortion.
+"""Camera models: pinhole with radial-tangential or equidistant distortion, double sphere, extended unified.
 
 Frames and units: points ``p_cam`` (N, 3) [m] are in the OpenCV/Kalibr camera frame (+z along
 the optical axis, +x right, +y down in the image); pixels ``uv`` (N, 2) [px] with the centre of the
@@ -14,6 +14,18 @@ OpenCV and GTSAM exactly:
   ``theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)``,
   ``x_d = theta_d / r * x`` (OpenCV ``fisheye``, GTSAM ``Cal3Fisheye``).
 
+Two wide-angle models project rays up to and beyond 90 deg from the axis (fields of view of 180
+deg and more), as Kalibr's and basalt's ``ds`` and ``eucm`` (``vical.geometry.wide_angle``):
+
+- ``ds`` (coefficients ``[xi, alpha]``): the double sphere model;
+- ``eucm`` (coefficients ``[alpha, beta]``): the extended unified camera model.
+
+They have no normalised-plane distortion: the model name sits in ``distortion`` beside the
+pinhole models' names so that every part of vical handles one kind of camera description, and
+their two coefficients are the ``dist`` array. ``distort`` / ``undistort`` still map between
+unit-depth coordinates ``p[:2] / p[2]`` and ``((u - cx) / fx, (v - cy) / fy)`` for rays in front of
+the camera; ``bearings`` unprojects every pixel to a unit ray, behind the image plane too.
+
 The simulator can also place the centre of distortion away from the principal point
 (``distortion_center_offset`` [px], the paper's "asymmetric distortion"): distortion is then
 applied to the normalised coordinates relative to that centre. The calibrator's models always
@@ -26,7 +38,17 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-DISTORTION_MODELS = {"radtan": 4, "equidistant": 4}
+from vical.geometry import wide_angle
+from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
+
+COEFFICIENT_NAMES = {
+    "radtan": ("k1", "k2", "p1", "p2"),
+    "equidistant": ("k1", "k2", "k3", "k4"),
+    "ds": ("xi", "alpha"),
+    "eucm": ("alpha", "beta"),
+}
+DISTORTION_MODELS = {model: len(names) for model, names in COEFFICIENT_NAMES.items()}
+CAMERA_MODELS = tuple(COEFFICIENT_NAMES)
 
 
 class CameraModelError(ValueError):
@@ -35,15 +57,17 @@ class CameraModelError(ValueError):
 
 @dataclass(frozen=True)
 class CameraModel:
-    """A pinhole camera with lens distortion.
+    """A camera model: pinhole with lens distortion, or a wide-angle model.
 
     Attributes:
-        distortion: ``"radtan"`` or ``"equidistant"``.
+        distortion: the model, one of ``CAMERA_MODELS``: ``"radtan"``, ``"equidistant"`` (pinhole with
+            that distortion), ``"ds"`` or ``"eucm"`` (wide-angle models).
         width, height: image size [px].
         fx, fy: focal lengths [px]; cx, cy: principal point [px].
-        dist: (4,) distortion coefficients (``[k1, k2, p1, p2]`` or ``[k1, k2, k3, k4]``).
+        dist: the model's coefficients, ``COEFFICIENT_NAMES[distortion]``: (4,) ``[k1, k2, p1, p2]`` or
+            ``[k1, k2, k3, k4]``; (2,) ``[xi, alpha]`` (ds) or ``[alpha, beta]`` (eucm).
         distortion_center_offset: (2,) [px] centre of distortion minus principal point
-            (simulation of asymmetric lenses; zero for every calibrated model).
+            (simulation of asymmetric pinhole lenses; zero for every calibrated model).
     """
 
     distortion: str
@@ -53,11 +77,13 @@ class CameraModel:
     fy: float
     cx: float
     cy: float
-    dist: np.ndarray = field(default_factory=lambda: np.zeros(4))
+    dist: np.ndarray | None = None
     distortion_center_offset: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "dist", np.asarray(self.dist, dtype=float).reshape(-1).copy())
+        # No coefficients: the model's distortion-free ones (zeros; a pinhole-like ds / eucm start).
+        dist = _neutral_coefficients(self.distortion) if self.dist is None else self.dist
+        object.__setattr__(self, "dist", np.asarray(dist, dtype=float).reshape(-1).copy())
         offset = np.asarray(self.distortion_center_offset, dtype=float).reshape(-1).copy()
         object.__setattr__(self, "distortion_center_offset", offset)
         self.validate()
@@ -73,13 +99,18 @@ class CameraModel:
         distortion: str = "radtan",
         distortion_center_offset: np.ndarray | None = None,
     ) -> CameraModel:
-        """Square-pixel camera with horizontal field of view ``hfov`` [rad]: ``fx = (W/2) / tan(hfov/2)``.
+        """Square-pixel camera with horizontal field of view ``hfov`` [rad] across the image width.
 
-        The principal point is the image centre ``((W-1)/2, (H-1)/2)`` in pixel-centre coordinates.
+        Pinhole models: ``fx = (W/2) / tan(hfov/2)`` (the undistorted pinhole's field of view). Wide-angle
+        models: the ray ``hfov/2`` from the axis projects onto the image's left and right edges, so
+        ``hfov`` may reach 180 deg and beyond (as far as the model projects). The principal point is
+        the image centre ``((W-1)/2, (H-1)/2)`` in pixel-centre coordinates.
         """
-        if not np.isfinite(hfov) or not 0.0 < hfov < np.pi:
-            raise CameraModelError(f"horizontal FOV must be in (0, pi) rad, got {hfov}")
-        f = (width / 2.0) / np.tan(hfov / 2.0)
+        wide = distortion in WIDE_ANGLE_MODELS
+        if not np.isfinite(hfov) or not 0.0 < hfov < (2.0 * np.pi if wide else np.pi):
+            raise CameraModelError(f"horizontal FOV must be in (0, {'2 pi' if wide else 'pi'}) rad, got {hfov}")
+        coeffs = _neutral_coefficients(distortion) if dist is None else dist
+        f = (width / 2.0) / np.tan(hfov / 2.0) if not wide else _wide_edge_focal(distortion, coeffs, hfov, width)
         return cls(
             distortion=distortion,
             width=int(width),
@@ -88,7 +119,7 @@ class CameraModel:
             fy=f,
             cx=(width - 1) / 2.0,
             cy=(height - 1) / 2.0,
-            dist=np.zeros(4) if dist is None else dist,
+            dist=coeffs,
             distortion_center_offset=np.zeros(2) if distortion_center_offset is None else distortion_center_offset,
         )
 
@@ -117,13 +148,18 @@ class CameraModel:
     def validate(self) -> None:
         """Raise ``CameraModelError`` naming the field when the parameters are impossible."""
         if self.distortion not in DISTORTION_MODELS:
+            raise CameraModelError(f"camera model {self.distortion!r} unknown; use one of {list(CAMERA_MODELS)}")
+        names = COEFFICIENT_NAMES[self.distortion]
+        if self.dist.shape != (len(names),):
             raise CameraModelError(
-                f"distortion model {self.distortion!r} unknown; use one of {sorted(DISTORTION_MODELS)}"
+                f"{self.distortion} needs {len(names)} coefficients {list(names)}, got {self.dist.tolist()}"
             )
-        if self.dist.shape != (DISTORTION_MODELS[self.distortion],):
-            raise CameraModelError(f"{self.distortion} needs 4 distortion coefficients, got {self.dist.shape}")
         if self.distortion_center_offset.shape != (2,):
             raise CameraModelError("distortion_center_offset must have 2 entries [px]")
+        if self.is_wide_angle and self.distortion_center_offset.any():
+            raise CameraModelError(
+                f"distortion_center_offset applies to the pinhole models only, not to {self.distortion}; leave it zero"
+            )
         if self.width <= 0 or self.height <= 0:
             raise CameraModelError(f"image size must be positive, got {self.width} x {self.height}")
         values = {"fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy}
@@ -134,6 +170,19 @@ class CameraModel:
             raise CameraModelError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
         if not np.all(np.isfinite(self.dist)) or not np.all(np.isfinite(self.distortion_center_offset)):
             raise CameraModelError(f"distortion coefficients must be finite, got {self.dist}")
+        problem = wide_angle.check_coefficients(self.distortion, self.dist) if self.is_wide_angle else None
+        if problem:
+            raise CameraModelError(problem)
+
+    @property
+    def is_wide_angle(self) -> bool:
+        """Whether the model is one of the wide-angle models (``ds``, ``eucm``) rather than a distorted pinhole."""
+        return self.distortion in WIDE_ANGLE_MODELS
+
+    @property
+    def coefficient_names(self) -> tuple[str, ...]:
+        """Names of the entries of ``dist``."""
+        return COEFFICIENT_NAMES[self.distortion]
 
     # ------------------------------------------------------------------ distortion
     def _centre_shift(self) -> np.ndarray:
@@ -142,6 +191,9 @@ class CameraModel:
     def distort(self, xy: np.ndarray) -> np.ndarray:
         """Distorted normalised coordinates (N, 2) of undistorted normalised ``xy`` (N, 2)."""
         x = np.atleast_2d(np.asarray(xy, dtype=float))
+        if self.is_wide_angle:
+            p = np.hstack([x, np.ones((len(x), 1))])
+            return x / wide_angle.denominator(self.distortion, self.dist, p)[:, None]
         distort = _radtan if self.distortion == "radtan" else _equidistant
         if not self.distortion_center_offset.any():
             return distort(x, self.dist)
@@ -151,9 +203,14 @@ class CameraModel:
     def undistort(self, xy_d: np.ndarray, iterations: int = 30) -> np.ndarray:
         """Undistorted normalised coordinates (N, 2) of distorted ``xy_d`` (N, 2) (Newton's method).
 
-        Accurate to ~1e-12 wherever the distortion is invertible (see ``check_invertible``).
+        Accurate to ~1e-12 wherever the distortion is invertible (see ``check_invertible``). Wide-angle
+        models: closed form, NaN for coordinates whose ray is not in front of the camera (``bearings``).
         """
         target = np.atleast_2d(np.asarray(xy_d, dtype=float))
+        if self.is_wide_angle:
+            rays, _ = wide_angle.unproject(self.distortion, self.dist, target)
+            z = np.where(rays[:, 2] > 0, rays[:, 2], np.nan)
+            return rays[:, :2] / z[:, None]
         x = target.copy()
         eps = 1e-7
         for _ in range(iterations):
@@ -173,8 +230,11 @@ class CameraModel:
         """Raise ``CameraModelError`` when the distortion folds over within the image.
 
         The radial map must be monotonic over every radius the image (enlarged by ``margin``)
-        can reach, else undistortion and image warping are ill-defined.
+        can reach, else undistortion and image warping are ill-defined. The wide-angle models are
+        one-to-one on their valid domain by construction.
         """
+        if self.is_wide_angle:
+            return
         corners_px = np.array([[0, 0], [self.width - 1, 0], [0, self.height - 1], [self.width - 1, self.height - 1]])
         xn = (corners_px - [self.cx, self.cy]) / [self.fx, self.fy] - self._centre_shift()
         r_max = float(np.max(np.linalg.norm(xn, axis=1))) * margin
@@ -199,21 +259,35 @@ class CameraModel:
         return np.stack([(uv[:, 0] - self.cx) / self.fx, (uv[:, 1] - self.cy) / self.fy], axis=1)
 
     def project(self, p_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Pixels (N, 2) of camera-frame points (N, 3) [m], and a mask (N,) of points in front (z > 0)."""
+        """Pixels (N, 2) of camera-frame points (N, 3) [m], and a mask (N,) of the projectable points.
+
+        Pinhole models project points in front (z > 0); the wide-angle models the points of their
+        valid domain (``wide_angle.valid``), and the pixels of the others are NaN.
+        """
         p = np.atleast_2d(np.asarray(p_cam, dtype=float))
+        if self.is_wide_angle:
+            ok = wide_angle.valid(self.distortion, self.dist, p) & (np.linalg.norm(p, axis=1) > 1e-12)
+            den = wide_angle.denominator(self.distortion, self.dist, p)
+            m = p[:, :2] / np.where(ok, den, np.nan)[:, None]
+            return self.normalized_to_pixels(m), ok
         in_front = p[:, 2] > 1e-9
         z = np.where(in_front, p[:, 2], 1.0)
         return self.normalized_to_pixels(self.distort(p[:, :2] / z[:, None])), in_front
 
     @property
     def parameters(self) -> np.ndarray:
-        """(8,) ``[fx, fy, cx, cy, d1, d2, d3, d4]``: the calibrated parameters, in ``project_jacobians`` order."""
+        """(4 + D,) ``[fx, fy, cx, cy, *dist]``: the calibrated parameters, in ``project_jacobians`` order."""
         return np.concatenate([self.intrinsics, self.dist])
 
+    @property
+    def parameter_names(self) -> list[str]:
+        """Names of ``parameters``."""
+        return ["fx", "fy", "cx", "cy", *self.coefficient_names]
+
     def with_parameters(self, parameters: np.ndarray) -> CameraModel:
-        """Same model and image size with the parameters ``[fx, fy, cx, cy, d1, d2, d3, d4]`` (8,)."""
+        """Same model and image size with the parameters ``[fx, fy, cx, cy, *dist]`` (4 + D,)."""
         p = np.asarray(parameters, dtype=float)
-        return self.with_intrinsics(p[0], p[1], p[2], p[3], p[4:8])
+        return self.with_intrinsics(p[0], p[1], p[2], p[3], p[4:])
 
     def project_jacobians(self, p_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Pixels of camera-frame points and their analytic derivatives.
@@ -222,12 +296,14 @@ class CameraModel:
             p_cam: (N, 3) [m] points in front of the camera (z > 0).
 
         Returns:
-            uv (N, 2) [px]; ``d uv / d p_cam`` (N, 2, 3) [px/m]; ``d uv / d parameters`` (N, 2, 8) in the
+            uv (N, 2) [px]; ``d uv / d p_cam`` (N, 2, 3) [px/m]; ``d uv / d parameters`` (N, 2, 4 + D) in the
             order of ``parameters``.
         """
         if self.distortion_center_offset.any():
             raise CameraModelError("projection Jacobians need the distortion centre at the principal point")
         p = np.atleast_2d(np.asarray(p_cam, dtype=float))
+        if self.is_wide_angle:
+            return self._wide_angle_jacobians(p)
         inv_z = 1.0 / p[:, 2]
         x, y = p[:, 0] * inv_z, p[:, 1] * inv_z
         jacobian = _radtan_jacobian if self.distortion == "radtan" else _equidistant_jacobian
@@ -247,10 +323,39 @@ class CameraModel:
         d_point[:, :, 2] = -(d_norm[:, :, 0] * x[:, None] + d_norm[:, :, 1] * y[:, None]) * inv_z[:, None]
         return uv, d_point, d_params
 
+    def _wide_angle_jacobians(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``project_jacobians`` of ``u = fx x / den + cx``, ``v = fy y / den + cy`` (points in the valid domain)."""
+        den, d_den, d_coeffs = wide_angle.denominator_jacobians(self.distortion, self.dist, p)
+        m = p[:, :2] / den[:, None]
+        f = np.array([self.fx, self.fy])
+        uv = m * f + [self.cx, self.cy]
+        # d m_i / d p = (e_i - m_i d den / d p) / den
+        d_m = -m[:, :, None] * d_den[:, None, :]
+        d_m[:, 0, 0] += 1.0
+        d_m[:, 1, 1] += 1.0
+        d_m /= den[:, None, None]
+        d_params = np.zeros((len(p), 2, 4 + len(self.dist)))
+        d_params[:, 0, 0], d_params[:, 1, 1] = m[:, 0], m[:, 1]
+        d_params[:, 0, 2], d_params[:, 1, 3] = 1.0, 1.0
+        d_params[:, :, 4:] = -(f * m / den[:, None])[:, :, None] * d_coeffs[:, None, :]
+        return uv, f[None, :, None] * d_m, d_params
+
     def unproject(self, uv: np.ndarray) -> np.ndarray:
-        """Unit-depth rays (N, 3) (``[x, y, 1]``) of pixels (N, 2)."""
+        """Unit-depth rays (N, 3) (``[x, y, 1]``) of pixels (N, 2); NaN where the ray is not in front (z <= 0)."""
         xy = self.undistort(self.pixels_to_normalized(uv))
         return np.hstack([xy, np.ones((len(xy), 1))])
+
+    def bearings(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit rays (N, 3) of pixels (N, 2) and a mask (N,) of the pixels the model unprojects (NaN rays elsewhere).
+
+        Unlike ``unproject`` this covers rays at and beyond 90 deg from the axis (wide-angle models).
+        """
+        m = self.pixels_to_normalized(uv)
+        if self.is_wide_angle:
+            return wide_angle.unproject(self.distortion, self.dist, m)
+        xy = self.undistort(m)
+        rays = np.hstack([xy, np.ones((len(xy), 1))])
+        return rays / np.linalg.norm(rays, axis=1, keepdims=True), np.all(np.isfinite(rays), axis=1)
 
     def in_image(self, uv: np.ndarray, border: float = 0.0) -> np.ndarray:
         """Mask (N,) of pixels inside the image, at least ``border`` [px] from its edge."""
@@ -295,6 +400,27 @@ class CameraModel:
 
     def __hash__(self) -> int:
         return hash(str(self.to_dict()))
+
+
+def _neutral_coefficients(model: str) -> np.ndarray:
+    """Coefficients without distortion: zeros (a pinhole; ds with ``xi = alpha = 0`` and eucm with ``alpha = 0``
+    project as one); ``beta = 1`` for eucm (its spherical case)."""
+    return np.array([0.0, 1.0]) if model == "eucm" else np.zeros(DISTORTION_MODELS.get(model, 4))
+
+
+def _wide_edge_focal(model: str, coeffs: np.ndarray, hfov: float, width: int) -> float:
+    """[px] focal length that images the ray ``hfov / 2`` from the axis at the image edge ``W / 2`` from the centre."""
+    coeffs = np.asarray(coeffs, dtype=float)
+    problem = wide_angle.check_coefficients(model, coeffs) if coeffs.shape == (2,) else f"{model} needs 2 coefficients"
+    if problem:
+        raise CameraModelError(problem)
+    edge = np.array([[np.sin(hfov / 2.0), 0.0, np.cos(hfov / 2.0)]])
+    den = wide_angle.denominator(model, coeffs, edge)[0]
+    if not (wide_angle.valid(model, coeffs, edge)[0] and den > 0):
+        raise CameraModelError(
+            f"{model} with coefficients {coeffs.tolist()} does not project rays {hfov / 2:.3f} rad off axis"
+        )
+    return float((width / 2.0) * den / edge[0, 0])
 
 
 def _radtan(x: np.ndarray, coeffs: np.ndarray) -> np.ndarray:

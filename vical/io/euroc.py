@@ -45,7 +45,7 @@ from vical.io.csvfiles import (
 )
 from vical.io.errors import CsvFormatError, EmptyCsvError, FormatError, KalibrFormatError
 from vical.io.images import ImageDetector, frames_from_images, read_gray, write_png
-from vical.io.kalibr import read_camchain, read_imu_yaml
+from vical.io.kalibr import kalibr_intrinsics, read_camchain, read_imu_yaml
 from vical.io.yamlfile import as_floats, dump_yaml, load_mapping
 
 EUROC_DISTORTION_NAMES = {"radtan": "radial-tangential", "equidistant": "equidistant"}
@@ -116,10 +116,11 @@ def _camera_sensor_yaml(frames: CameraFrames, truth: SensorTruth | None) -> dict
                 stacklevel=3,
             )
         data["T_BS"] = _matrix(invert_transform(truth.T_cam_imu))
-        data["camera_model"] = "pinhole"
-        data["intrinsics"] = [float(v) for v in cam.intrinsics]
-        data["distortion_model"] = EUROC_DISTORTION_NAMES[cam.distortion]
-        data["distortion_coefficients"] = [float(v) for v in cam.dist]
+        kalibr = kalibr_intrinsics(cam)  # ds / eucm as Kalibr names them; the pinhole models in EuRoC's words
+        data["camera_model"] = kalibr["camera_model"]
+        data["intrinsics"] = kalibr["intrinsics"]
+        data["distortion_model"] = EUROC_DISTORTION_NAMES.get(cam.distortion, kalibr["distortion_model"])
+        data["distortion_coefficients"] = kalibr["distortion_coeffs"]
         data["timeshift_cam_imu"] = float(truth.time_offset)
     return data
 

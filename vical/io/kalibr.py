@@ -17,6 +17,12 @@ key                    written by              meaning
 =====================  ======================  ===========================================
 
 Matrices may be nested 4 x 4 lists, flat lists of 16, or ``{rows, cols, data}`` mappings.
+
+Camera models, as Kalibr writes them: ``camera_model: pinhole`` with ``intrinsics: [fu, fv, pu, pv]``
+and a ``distortion_model`` (radtan, equidistant and their aliases); ``camera_model: ds`` (double
+sphere, ``intrinsics: [xi, alpha, fu, fv, pu, pv]``) and ``camera_model: eucm`` (extended unified,
+``intrinsics: [alpha, beta, fu, fv, pu, pv]``), both with ``distortion_model: none`` and
+``distortion_coeffs: []``.
 """
 
 from __future__ import annotations
@@ -46,6 +52,8 @@ DISTORTION_ALIASES = {
     "equi": "equidistant",
     "fisheye": "equidistant",
 }
+WIDE_ANGLE_CAMERA_MODELS = ("ds", "eucm")  # Kalibr's names, vical's too
+CAMERA_MODEL_NAMES = ("pinhole", *WIDE_ANGLE_CAMERA_MODELS)
 # (key, whether the stored matrix is T_imu_cam and must be inverted)
 EXTRINSIC_KEYS = (("T_cam_imu", False), ("T_imu_cam", True), ("T_BS", True), ("T_SC", True), ("body_T_cam0", True))
 TIMESHIFT_KEYS = ("timeshift_cam_imu", "td")
@@ -70,10 +78,7 @@ def camera_entry(
             stacklevel=3,
         )
     entry: dict[str, Any] = {
-        "camera_model": "pinhole",
-        "intrinsics": [float(v) for v in camera.intrinsics],
-        "distortion_model": camera.distortion,
-        "distortion_coeffs": [float(v) for v in camera.dist],
+        **kalibr_intrinsics(camera),
         "resolution": [int(camera.width), int(camera.height)],
         "rostopic": str(rostopic),
         "cam_overlaps": [],
@@ -83,6 +88,23 @@ def camera_entry(
     if timeshift_cam_imu is not None:
         entry["timeshift_cam_imu"] = float(timeshift_cam_imu)
     return entry
+
+
+def kalibr_intrinsics(camera: CameraModel) -> dict[str, Any]:
+    """Kalibr's ``camera_model``, ``intrinsics``, ``distortion_model`` and ``distortion_coeffs`` of a camera."""
+    if camera.is_wide_angle:
+        return {
+            "camera_model": camera.distortion,
+            "intrinsics": [float(v) for v in (*camera.dist, *camera.intrinsics)],
+            "distortion_model": "none",
+            "distortion_coeffs": [],
+        }
+    return {
+        "camera_model": "pinhole",
+        "intrinsics": [float(v) for v in camera.intrinsics],
+        "distortion_model": camera.distortion,
+        "distortion_coeffs": [float(v) for v in camera.dist],
+    }
 
 
 def write_camchain_imucam(
@@ -95,7 +117,7 @@ def write_camchain_imucam(
     """Write a one-camera Kalibr ``camchain-imucam.yaml`` (or ``camchain.yaml`` when both are None).
 
     Args:
-        camera: pinhole camera with radtan or equidistant distortion.
+        camera: pinhole camera with radtan or equidistant distortion, or a ds or eucm camera.
         T_cam_imu: (4, 4) maps IMU points into the camera frame, or None.
         timeshift_cam_imu: [s] ``t_imu = t_cam + timeshift_cam_imu``, or None.
         rostopic: the image topic Kalibr associates with ``cam0``.
@@ -123,21 +145,39 @@ def read_camchain(path: str | os.PathLike, camera: str = "cam0") -> tuple[Camera
 
 def _camera_model(entry: dict[str, Any], where: str) -> CameraModel:
     model = entry.get("camera_model", "pinhole")
-    if model != "pinhole":
-        raise KalibrFormatError(f"{where}: camera_model {model!r} is not supported; vical models 'pinhole' cameras")
-    fx, fy, cx, cy = _floats(entry, "intrinsics", 4, where)
-    dist_name = str(require(entry, "distortion_model", where, KalibrFormatError))
-    if dist_name not in DISTORTION_ALIASES:
+    if model not in CAMERA_MODEL_NAMES:
         raise KalibrFormatError(
-            f"{where}: distortion_model {dist_name!r} is not supported; use one of {sorted(DISTORTION_ALIASES)}"
+            f"{where}: camera_model {model!r} is not supported; use one of {list(CAMERA_MODEL_NAMES)}"
         )
-    key = "distortion_coeffs" if "distortion_coeffs" in entry else "distortion_coefficients"
-    dist = _floats(entry, key, 4, where)
     width, height = _floats(entry, "resolution", 2, where)
+    key = "distortion_coeffs" if "distortion_coeffs" in entry else "distortion_coefficients"
+    if model in WIDE_ANGLE_CAMERA_MODELS:
+        _check_no_distortion(entry, model, key, where)
+        *dist, fx, fy, cx, cy = _floats(entry, "intrinsics", 6, where)
+        name = model
+    else:
+        fx, fy, cx, cy = _floats(entry, "intrinsics", 4, where)
+        dist_name = str(require(entry, "distortion_model", where, KalibrFormatError))
+        if dist_name not in DISTORTION_ALIASES:
+            raise KalibrFormatError(
+                f"{where}: distortion_model {dist_name!r} is not supported; use one of {sorted(DISTORTION_ALIASES)}"
+            )
+        dist, name = _floats(entry, key, 4, where), DISTORTION_ALIASES[dist_name]
     try:
-        return CameraModel(DISTORTION_ALIASES[dist_name], int(width), int(height), fx, fy, cx, cy, dist)
+        return CameraModel(name, int(width), int(height), fx, fy, cx, cy, dist)
     except CameraModelError as exc:
         raise KalibrFormatError(f"{where}: {exc}") from exc
+
+
+def _check_no_distortion(entry: dict[str, Any], model: str, key: str, where: str) -> None:
+    """A ``ds`` / ``eucm`` camera has no distortion model on top: ``distortion_model: none``, no coefficients."""
+    name = entry.get("distortion_model", "none")
+    coeffs = entry.get(key)
+    if name != "none" or (coeffs is not None and np.size(coeffs)):
+        raise KalibrFormatError(
+            f"{where}: camera_model {model} with distortion_model {name!r} and {key} {coeffs!r} is not supported; "
+            "vical's ds and eucm carry no extra distortion: write distortion_model: none and an empty list"
+        )
 
 
 def _floats(entry: dict[str, Any], key: str, n: int, where: str) -> np.ndarray:

@@ -10,7 +10,11 @@ Both backends take the camera's optical-frame pose ``T_world_cam`` (OpenCV axes,
 - ``RenderBackend``: MuJoCo renders a wider undistorted pinhole image at that pose (offscreen,
   EGL), the image is warped through the lens distortion (``cv2.remap`` with maps from
   undistorting every output pixel) and an injected detector finds the corners, as a real one
-  would (the whole checkerboard or nothing; the aprilgrid tags it decodes).
+  would (the whole checkerboard or nothing; the aprilgrid tags it decodes). A lens that sees
+  further than ``MAX_PINHOLE_RAY_ANGLE`` from its axis (a fisheye, up to 180 deg and beyond) is
+  rendered as the faces of a cube map instead (pinhole views 90 deg wide along the camera's
+  axes), and the warp samples each ray from the face it crosses; pixels without a ray (outside
+  a fisheye's image circle) are black.
 
 The exposure pose is interpolated between the physics steps around the exposure instant
 (``interpolate_pose``), so time offsets below one physics step are represented.
@@ -33,6 +37,17 @@ Detector = Callable[[np.ndarray, Target], tuple[np.ndarray, np.ndarray]]
 """``detector(image (H, W) uint8, target) -> (corners (K, 2) float64 [px], ids (K,) int64)``."""
 
 _NO_CORNERS = (np.zeros((0, 2)), np.zeros(0, dtype=np.int64))
+# Beyond this angle from the axis one pinhole render would spend most of its pixels on the image border.
+MAX_PINHOLE_RAY_ANGLE = np.deg2rad(60.0)
+# Cube faces as rotations R_cam_face (each face's +z along one camera axis); the front face first.
+_CUBE_FACES = (
+    np.eye(3),
+    np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]),  # looks along +x
+    np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),  # -x
+    np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]]),  # +y
+    np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),  # -y
+    np.diag([-1.0, 1.0, -1.0]),  # -z
+)
 
 
 def interpolate_pose(t_ns: int, t0_ns: int, T0: np.ndarray, t1_ns: int, T1: np.ndarray) -> np.ndarray:
@@ -242,16 +257,67 @@ def render_pinhole(camera: CameraModel, width: int, height: int, margin_px: floa
     )
     xy = camera.undistort(camera.pixels_to_normalized(border))
     cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
-    f = min((cx + 0.5 - margin_px) / np.abs(xy[:, 0]).max(), (cy + 0.5 - margin_px) / np.abs(xy[:, 1]).max())
+    f = min((cx + 0.5 - margin_px) / np.nanmax(np.abs(xy[:, 0])), (cy + 0.5 - margin_px) / np.nanmax(np.abs(xy[:, 1])))
     return CameraModel("radtan", int(width), int(height), float(f), float(f), cx, cy)
 
 
+def cube_face_pinhole(width: int, height: int, margin_px: float = 2.0) -> CameraModel:
+    """The W x H pinhole of one cube face: rays up to 45 deg off its axis land ``margin_px`` inside its image."""
+    cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+    return CameraModel("radtan", int(width), int(height), cx - margin_px, cy - margin_px, cx, cy)
+
+
+@dataclass(frozen=True)
+class WarpViews:
+    """The pinhole renders a camera's image is warped from, stacked vertically into one atlas image.
+
+    Attributes:
+        rotations: (V, 3, 3) ``R_cam_view`` of each render.
+        pinhole: the renders' pinhole (all the same size).
+        map_x, map_y: (H, W) float32 ``cv2.remap`` maps of the camera's pixels into the atlas.
+        seen: (H, W) bool, the pixels the camera's model has a ray for (the others are black).
+    """
+
+    rotations: np.ndarray
+    pinhole: CameraModel
+    map_x: np.ndarray
+    map_y: np.ndarray
+    seen: np.ndarray
+
+
+def _pixel_rays(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
+    u, v = np.meshgrid(np.arange(camera.width, dtype=float), np.arange(camera.height, dtype=float))
+    return camera.bearings(np.stack([u.ravel(), v.ravel()], axis=1))
+
+
+def warp_views(camera: CameraModel, width: int, height: int) -> WarpViews:
+    """One wide pinhole render (``render_pinhole``) when every ray of ``camera`` lies within
+    ``MAX_PINHOLE_RAY_ANGLE`` of its axis, else the cube faces its rays cross (``cube_face_pinhole``)."""
+    rays, seen = _pixel_rays(camera)
+    shape = (camera.height, camera.width)
+    if np.all(rays[seen, 2] > np.cos(MAX_PINHOLE_RAY_ANGLE)):
+        pinhole = render_pinhole(camera, width, height)
+        map_x, map_y = distortion_maps(camera, pinhole)
+        return WarpViews(np.eye(3)[None], pinhole, map_x, map_y, seen.reshape(shape))
+    pinhole = cube_face_pinhole(width, height)
+    faces = np.array(_CUBE_FACES)
+    face = np.argmax(np.einsum("fi,ni->nf", faces[:, :, 2], np.where(seen[:, None], rays, 0.0)), axis=1)
+    used = np.unique(face[seen])
+    src = np.full((len(rays), 2), -1.0)
+    for slot, f in enumerate(used):
+        mine = seen & (face == f)
+        src[mine] = pinhole.project(rays[mine] @ faces[f])[0] + [0.0, slot * height]
+    map_x, map_y = (src[:, i].reshape(shape).astype(np.float32) for i in range(2))
+    return WarpViews(faces[used], pinhole, map_x, map_y, seen.reshape(shape))
+
+
 def distortion_maps(camera: CameraModel, pinhole: CameraModel) -> tuple[np.ndarray, np.ndarray]:
-    """``cv2.remap`` maps (H, W) float32: for each pixel of ``camera``, where its ray lands in ``pinhole``'s image."""
+    """``cv2.remap`` maps (H, W) float32: for each pixel of ``camera``, where its ray lands in ``pinhole``'s image
+    (-1 for pixels without a ray in front of the camera)."""
     u, v = np.meshgrid(np.arange(camera.width, dtype=float), np.arange(camera.height, dtype=float))
     uv = np.stack([u.ravel(), v.ravel()], axis=1)
     xy = camera.undistort(camera.pixels_to_normalized(uv))
-    src = pinhole.normalized_to_pixels(xy)
+    src = np.nan_to_num(pinhole.normalized_to_pixels(xy), nan=-1.0)
     shape = (camera.height, camera.width)
     return src[:, 0].reshape(shape).astype(np.float32), src[:, 1].reshape(shape).astype(np.float32)
 
@@ -283,7 +349,8 @@ class RenderBackend:
     """Rendered observations: MuJoCo image -> lens-distortion warp -> detector.
 
     Build it once per scene (the offscreen renderer costs 0.2-0.4 s); call ``set_camera`` once per
-    sensor (computes the warp maps, ~0.4 s at 640 x 480) and ``observe`` per exposure.
+    sensor (computes the warp maps, ~0.4 s at 640 x 480) and ``observe`` per exposure (one render, or
+    one per cube face a fisheye needs, see ``warp_views``).
 
     Args:
         model: the compiled scene (``mujoco.MjModel``) whose offscreen buffer holds ``render_size``.
@@ -315,30 +382,40 @@ class RenderBackend:
         self._renderer = mujoco.Renderer(model, height=height, width=width)
         self._size = (width, height)
         self.camera: CameraModel | None = None
-        self.pinhole: CameraModel | None = None
-        self._maps: tuple[np.ndarray, np.ndarray] | None = None
+        self.views: WarpViews | None = None
+
+    @property
+    def pinhole(self) -> CameraModel | None:
+        """The pinhole of the renders (one, or each cube face's)."""
+        return None if self.views is None else self.views.pinhole
 
     def set_camera(self, camera: CameraModel) -> None:
-        """Prepare the render pinhole and the warp maps of a (new) sensor's camera."""
+        """Prepare the render pinholes and the warp maps of a (new) sensor's camera."""
         self.camera = camera
-        self.pinhole = render_pinhole(camera, *self._size)
-        self._maps = distortion_maps(camera, self.pinhole)
+        self.views = warp_views(camera, *self._size)
 
     def image(self, data: mujoco.MjData, T_world_cam: np.ndarray) -> np.ndarray:
         """Grey image (H, W) uint8 of the camera at pose ``T_world_cam``, through the lens distortion.
 
         ``data`` supplies the scene state (the board, lights); the camera pose is ``T_world_cam``.
         """
-        if self._maps is None:
+        views = self.views
+        if views is None:
             raise RuntimeError("RenderBackend.set_camera(camera) must be called before rendering")
-        # The scene camera's update places the headlight along the rig's camera; pose and frustum
-        # are then replaced by the exposure's.
-        self._renderer.update_scene(data, camera=self._camera_name)
-        for gl_camera in self._renderer.scene.camera:
-            set_gl_camera(gl_camera, T_world_cam, self.pinhole)
-        rgb = self._renderer.render()
-        grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
-        return cv2.remap(grey, self._maps[0], self._maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        renders = []
+        for R_cam_view in views.rotations:
+            # The scene camera's update places the headlight along the rig's camera; pose and frustum
+            # are then replaced by the exposure's.
+            self._renderer.update_scene(data, camera=self._camera_name)
+            T_world_view = T_world_cam.copy()
+            T_world_view[:3, :3] = T_world_cam[:3, :3] @ R_cam_view
+            for gl_camera in self._renderer.scene.camera:
+                set_gl_camera(gl_camera, T_world_view, views.pinhole)
+            renders.append(cv2.cvtColor(self._renderer.render(), cv2.COLOR_RGB2GRAY))
+        atlas = renders[0] if len(renders) == 1 else np.vstack(renders)
+        image = cv2.remap(atlas, views.map_x, views.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        image[~views.seen] = 0
+        return image
 
     def observe(self, data: mujoco.MjData, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Detected corners (K, 2) [px], ids (K,) and the image (H, W) uint8 at ``T_world_cam``."""

@@ -21,6 +21,7 @@ import numpy as np
 from vical.config import ConfigError, from_mapping, require, require_range
 from vical.data import ImuNoise, SensorTruth
 from vical.geometry import (
+    CAMERA_MODELS,
     CameraModel,
     CameraModelError,
     body_imu_from_cam_imu,
@@ -28,6 +29,7 @@ from vical.geometry import (
     euler_to_matrix,
     make_transform,
 )
+from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
 
 NOISE_UNITS = ("continuous", "discrete")
 IMU_SAMPLING = ("average", "instant")
@@ -59,10 +61,15 @@ class CameraSampling:
     Attributes:
         width, height: image size [px].
         rate_hz: frame rate [Hz].
-        distortion: ``radtan`` (k1, k2 sampled; p1, p2 only with asymmetric distortion) or
-            ``equidistant`` (k1, k2 sampled; k3 = k4 = 0).
-        hfov: horizontal field of view [rad]; ``fx = fy = (W/2) / tan(hfov/2)``.
+        distortion: the camera model: ``radtan`` (k1, k2 sampled; p1, p2 only with asymmetric
+            distortion), ``equidistant`` (k1, k2 sampled; k3 = k4 = 0), or the wide-angle ``ds``
+            (xi, alpha sampled) and ``eucm`` (alpha, beta sampled), which have no asymmetric distortion.
+        hfov: horizontal field of view [rad]; pinhole models: ``fx = fy = (W/2) / tan(hfov/2)``, below pi;
+            wide-angle models: the angle between the rays of the image's left and right edges (180 deg
+            and beyond, as far as the drawn lens projects).
         k1, k2: radial distortion coefficients [-].
+        xi, alpha, beta: wide-angle coefficients [-] (ds: xi in [-1, 1], alpha in [0, 1]; eucm: alpha in
+            [0, 1], beta > 0); the defaults are near published calibrations of fisheye lenses.
         tangential_std: sigma of p1, p2 [-] (radtan, asymmetric distortion only).
         center_offset_std: sigma of the distortion-centre offset from the principal point, in
             units of the image width (x) and height (y) (asymmetric distortion only).
@@ -75,6 +82,9 @@ class CameraSampling:
     hfov: Normal = field(default_factory=lambda: Normal(1.0, 0.05))
     k1: Normal = field(default_factory=lambda: Normal(0.0, 0.02))
     k2: Normal = field(default_factory=lambda: Normal(0.0, 0.02))
+    xi: Normal = field(default_factory=lambda: Normal(-0.2, 0.05))
+    alpha: Normal = field(default_factory=lambda: Normal(0.6, 0.03))
+    beta: Normal = field(default_factory=lambda: Normal(1.1, 0.05))
     tangential_std: float = 0.001
     center_offset_std: float = 0.05
 
@@ -85,13 +95,12 @@ class CameraSampling:
             isinstance(self.height, int) and self.height > 0, f"{key}.height", "a positive integer [px]", self.height
         )
         require_range(f"{key}.rate_hz", self.rate_hz, 0.0, None, low_open=True)
-        require(
-            self.distortion in ("radtan", "equidistant"), f"{key}.distortion", "radtan or equidistant", self.distortion
-        )
+        require(self.distortion in CAMERA_MODELS, f"{key}.distortion", f"one of {CAMERA_MODELS}", self.distortion)
         self.hfov.check(f"{key}.hfov")
-        require_range(f"{key}.hfov.mean", self.hfov.mean, 0.0, np.pi, low_open=True, high_open=True)
-        self.k1.check(f"{key}.k1")
-        self.k2.check(f"{key}.k2")
+        max_hfov = 2.0 * np.pi if self.distortion in WIDE_ANGLE_MODELS else np.pi
+        require_range(f"{key}.hfov.mean", self.hfov.mean, 0.0, max_hfov, low_open=True, high_open=True)
+        for name in ("k1", "k2", "xi", "alpha", "beta"):
+            getattr(self, name).check(f"{key}.{name}")
         require_range(f"{key}.tangential_std", self.tangential_std, 0.0)
         require_range(f"{key}.center_offset_std", self.center_offset_std, 0.0)
 
@@ -206,20 +215,23 @@ def sample_camera(cfg: CameraSampling, rng: np.random.Generator, asymmetric: boo
         cfg: the camera distribution.
         rng: seeded generator.
         asymmetric: also draw the distortion-centre offset and (radtan) tangential terms
-            (the paper's joint task); otherwise they are zero.
+            (the paper's joint task; pinhole models only); otherwise they are zero.
     """
     for _ in range(_MAX_CAMERA_DRAWS):
         camera = _draw_camera(cfg, rng, asymmetric)
         if camera is not None:
             return camera
     raise ConfigError(
-        f"sensor.camera: {_MAX_CAMERA_DRAWS} draws gave no valid camera (FOV outside (0, pi) or distortion "
-        f"not invertible over the image); reduce sensor.camera.k1.std / k2.std (now {cfg.k1.std}, {cfg.k2.std}) "
-        f"or sensor.camera.hfov.std (now {cfg.hfov.std})"
+        f"sensor.camera: {_MAX_CAMERA_DRAWS} draws gave no valid camera (FOV outside the model's range, "
+        f"coefficients outside theirs, or distortion not invertible over the image); reduce the spread of "
+        f"sensor.camera's coefficients (k1.std / k2.std now {cfg.k1.std}, {cfg.k2.std}; xi, alpha, beta .std now "
+        f"{cfg.xi.std}, {cfg.alpha.std}, {cfg.beta.std}) or sensor.camera.hfov.std (now {cfg.hfov.std})"
     )
 
 
 def _draw_camera(cfg: CameraSampling, rng: np.random.Generator, asymmetric: bool) -> CameraModel | None:
+    if cfg.distortion in WIDE_ANGLE_MODELS:
+        return _draw_wide_angle_camera(cfg, rng)
     hfov = cfg.hfov.draw(rng)
     k1, k2 = cfg.k1.draw(rng), cfg.k2.draw(rng)
     if asymmetric:
@@ -234,6 +246,26 @@ def _draw_camera(cfg: CameraSampling, rng: np.random.Generator, asymmetric: bool
     except CameraModelError:
         return None
     return camera
+
+
+def _draw_wide_angle_camera(cfg: CameraSampling, rng: np.random.Generator) -> CameraModel | None:
+    hfov = cfg.hfov.draw(rng)
+    coeffs = (
+        [cfg.xi.draw(rng), cfg.alpha.draw(rng)] if cfg.distortion == "ds" else [cfg.alpha.draw(rng), cfg.beta.draw(rng)]
+    )
+    try:
+        return CameraModel.from_hfov(hfov, cfg.width, cfg.height, coeffs, cfg.distortion)
+    except CameraModelError:
+        return None
+
+
+def mean_coefficients(cfg: CameraSampling) -> list[float]:
+    """The camera model's coefficients at the distributions' means."""
+    if cfg.distortion == "ds":
+        return [cfg.xi.mean, cfg.alpha.mean]
+    if cfg.distortion == "eucm":
+        return [cfg.alpha.mean, cfg.beta.mean]
+    return [cfg.k1.mean, cfg.k2.mean, 0.0, 0.0]
 
 
 def sample_imu_pose(cfg: ExtrinsicSampling, rng: np.random.Generator) -> np.ndarray:
@@ -269,7 +301,7 @@ def mean_sensor(cfg: SensorSampling) -> SensorTruth:
         cfg.camera.hfov.mean,
         cfg.camera.width,
         cfg.camera.height,
-        [cfg.camera.k1.mean, cfg.camera.k2.mean, 0.0, 0.0],
+        mean_coefficients(cfg.camera),
         cfg.camera.distortion,
     )
     T_body_imu = make_transform(euler_to_matrix(cfg.extrinsic.rpy_mean), np.asarray(cfg.extrinsic.position_mean))
