@@ -157,9 +157,35 @@ def read_bag(
     return Recording(imu_samples, camera_frames, target, metadata={"source": "rosbag1", "path": str(path.resolve())})
 
 
-def _connections(reader: Reader, path: Path, image_topic: str, imu_topic: str | None) -> dict[str, Any]:
+def read_bag_imu(
+    path: str | os.PathLike, imu_topic: str = "/imu0", gyro_unit: str = "rad/s", accel_unit: str = "m/s^2"
+) -> ImuSamples:
+    """The IMU samples on ``imu_topic`` of a ROS1 bag (no images needed: a static IMU recording).
+
+    Raises ``BagFormatError`` naming the bag and topic as ``read_bag`` does.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise BagFormatError(f"{path} does not exist or is not a file")
+    try:
+        with Reader(path) as reader:
+            connections = _connections(reader, path, None, imu_topic)
+            _, imu = _read_streams(reader, connections, path, None, None, False)
+    except ReaderError as exc:
+        raise BagFormatError(f"{path} cannot be read as a ROS1 bag (corrupt or truncated?): {exc}") from exc
+    if not imu:
+        raise BagFormatError(f"{path} topic {imu_topic}: no IMU messages")
+    try:
+        return _imu_samples(imu, f"{path} topic {imu_topic}", gyro_unit, accel_unit)
+    except UnitError:
+        raise  # it names the unit setting to change
+    except (FormatError, DataError) as exc:
+        raise BagFormatError(str(exc)) from exc
+
+
+def _connections(reader: Reader, path: Path, image_topic: str | None, imu_topic: str | None) -> dict[str, Any]:
     topics = {c.topic: c for c in reader.connections}
-    wanted = {image_topic: (IMAGE_TYPE, COMPRESSED_TYPE)}
+    wanted = {} if image_topic is None else {image_topic: (IMAGE_TYPE, COMPRESSED_TYPE)}
     if imu_topic is not None:
         wanted[imu_topic] = (IMU_TYPE,)
     found = {}
@@ -177,7 +203,7 @@ def _read_streams(
     reader: Reader,
     connections: dict[str, Any],
     path: Path,
-    target: Target,
+    target: Target | None,
     detector: ImageDetector | None,
     keep_images: bool,
 ) -> tuple[list, list]:

@@ -189,8 +189,14 @@ def _timeshift(entry: dict[str, Any], where: str) -> float | None:
 
 
 # ------------------------------------------------------------------------------- IMU
-def write_imu_yaml(path: str | os.PathLike, noise: ImuNoise, rostopic: str = "/imu0") -> None:
-    """Write Kalibr's IMU configuration (``imu.yaml``) for ``noise``, atomically."""
+def write_imu_yaml(
+    path: str | os.PathLike, noise: ImuNoise, rostopic: str = "/imu0", comment: str | None = None
+) -> None:
+    """Write Kalibr's IMU configuration (``imu.yaml``) for ``noise``, atomically, headed by ``comment`` (``#`` lines).
+
+    Units: noise densities in rad/s/sqrt(Hz) (gyro) and m/s^2/sqrt(Hz) (accel), random walks in
+    rad/s^2/sqrt(Hz) and m/s^3/sqrt(Hz), ``update_rate`` in Hz.
+    """
     dump_yaml(
         path,
         {
@@ -201,6 +207,7 @@ def write_imu_yaml(path: str | os.PathLike, noise: ImuNoise, rostopic: str = "/i
             "update_rate": float(noise.rate_hz),
             "rostopic": str(rostopic),
         },
+        comment,
     )
 
 

@@ -41,9 +41,11 @@ _TolerantLoader.add_constructor(
 )
 
 
-def dump_yaml(path: str | os.PathLike, data: dict[str, Any]) -> None:
-    """Write ``data`` as block YAML with inline lists (Kalibr's look), atomically."""
-    write_text_atomic(path, yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+def dump_yaml(path: str | os.PathLike, data: dict[str, Any], comment: str | None = None) -> None:
+    """Write ``data`` as block YAML with inline lists (Kalibr's look), atomically; ``comment``'s lines first, as
+    ``# `` comments."""
+    header = "".join(f"# {line}".rstrip() + "\n" for line in comment.splitlines()) if comment else ""
+    write_text_atomic(path, header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
 
 
 def require(d: dict[str, Any], key: str, where: str, error: type[FormatError]) -> Any:
