@@ -18,10 +18,12 @@ and read as the Allan-plot lines are read:
 Fitting the terms together keeps each line free of the others' share near the curve's minimum,
 which reading single points of the curve does not; the floor enters the fit only where the curve
 shows one (``fit_terms``). The unit is rad/s for the gyro and m/s^2 for the accelerometer: ``N`` in
-rad/s/sqrt(Hz) or m/s^2/sqrt(Hz), ``K`` in rad/s^2/sqrt(Hz) or m/s^3/sqrt(Hz), Kalibr's units. The quantization (slope -1) and rate-ramp (slope +1) terms of the
-standard's five are left out: on simulated white noise + random walk they took a share of the
-random walk (-10 % on average over 90 one-hour streams, against -2.6 % without them), and a MEMS
-IMU's curve rarely shows them at the averaging times read here.
+rad/s/sqrt(Hz) or m/s^2/sqrt(Hz), ``K`` in rad/s^2/sqrt(Hz) or m/s^3/sqrt(Hz), Kalibr's units.
+
+The quantization (slope -1) and rate-ramp (slope +1) terms of the standard's five are left out: on
+simulated white noise + random walk they took a share of the random walk (-10 % on average over 90
+one-hour streams, against -2.6 % without them), and a MEMS IMU's curve rarely shows them at the
+averaging times read here.
 
 Deviations come from ``MIN_CLUSTERS`` non-overlapping clusters or more (``tau <= T / 10``) and the
 fit starts at ``FIT_MIN_SAMPLES`` samples per cluster, where an IMU's anti-aliasing filter no longer

@@ -3,7 +3,7 @@
 See ``docs/formats.md``. This package depends only on ``vical.geometry`` and ``vical.data``.
 """
 
-from vical.io.bag import read_bag, write_bag
+from vical.io.bag import read_bag, read_bag_imu, write_bag
 from vical.io.checks import FormatWarning
 from vical.io.csvfiles import read_corners_csv, read_imu_csv, write_corners_csv, write_imu_csv
 from vical.io.errors import (
@@ -24,7 +24,7 @@ from vical.io.kalibr import (
     write_target_yaml,
 )
 from vical.io.recording import is_recording_dir, load_recording, save_recording
-from vical.io.sources import detect_source, open_recording
+from vical.io.sources import detect_source, open_imu, open_recording
 
 __all__ = [
     "BagFormatError",
@@ -37,8 +37,10 @@ __all__ = [
     "detect_source",
     "is_recording_dir",
     "load_recording",
+    "open_imu",
     "open_recording",
     "read_bag",
+    "read_bag_imu",
     "read_camchain",
     "read_corners_csv",
     "read_euroc",
