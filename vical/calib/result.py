@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel
 
 
@@ -137,6 +138,8 @@ class CalibrationResult:
         imu_noise_scale: the IMU's noise measured from its residuals over the declared densities
             (``vical.calib.variance``; the solve weighted the IMU by it), or None (intrinsic task).
         correlations: the strongest correlations between parameter groups, strongest first.
+        imu_intrinsics: the IMU's scale, misalignment and g-sensitivity (estimated with
+            ``imu_model="scale-misalignment"``, else the known ones given), or None.
     """
 
     task: str
@@ -162,6 +165,7 @@ class CalibrationResult:
     warnings: list[str] = field(default_factory=list)
     imu_noise_scale: float | None = None
     correlations: list[Correlation] = field(default_factory=list)
+    imu_intrinsics: ImuIntrinsics | None = None
 
     @property
     def sigmas(self) -> dict[str, float]:

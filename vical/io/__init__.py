@@ -17,6 +17,7 @@ from vical.io.euroc import read_euroc, write_euroc
 from vical.io.images import ImageDetector, read_image_folder
 from vical.io.kalibr import (
     read_camchain,
+    read_imu_intrinsics,
     read_imu_yaml,
     read_target_yaml,
     write_camchain_imucam,
@@ -46,6 +47,7 @@ __all__ = [
     "read_euroc",
     "read_image_folder",
     "read_imu_csv",
+    "read_imu_intrinsics",
     "read_imu_yaml",
     "read_target_yaml",
     "save_recording",

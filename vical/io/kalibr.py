@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from vical.data import ImuNoise, Target, TargetError
+from vical.data import ImuIntrinsics, ImuNoise, Target, TargetError
 from vical.geometry.camera import CameraModel, CameraModelError
 from vical.geometry.transforms import invert_transform
 from vical.io.checks import warn
@@ -190,25 +190,65 @@ def _timeshift(entry: dict[str, Any], where: str) -> float | None:
 
 # ------------------------------------------------------------------------------- IMU
 def write_imu_yaml(
-    path: str | os.PathLike, noise: ImuNoise, rostopic: str = "/imu0", comment: str | None = None
+    path: str | os.PathLike,
+    noise: ImuNoise,
+    rostopic: str = "/imu0",
+    comment: str | None = None,
+    intrinsics: ImuIntrinsics | None = None,
 ) -> None:
     """Write Kalibr's IMU configuration (``imu.yaml``) for ``noise``, atomically, headed by ``comment`` (``#`` lines).
 
     Units: noise densities in rad/s/sqrt(Hz) (gyro) and m/s^2/sqrt(Hz) (accel), random walks in
-    rad/s^2/sqrt(Hz) and m/s^3/sqrt(Hz), ``update_rate`` in Hz.
+    rad/s^2/sqrt(Hz) and m/s^3/sqrt(Hz), ``update_rate`` in Hz. With ``intrinsics``, also Kalibr's
+    ``scale-misalignment`` keys: ``model``, ``accelerometers: {M}``, ``gyroscopes: {M, A, C_gyro_i}``
+    (``vical.data.ImuIntrinsics``; ``A`` in (rad/s)/(m/s^2)).
     """
-    dump_yaml(
-        path,
-        {
-            "accelerometer_noise_density": float(noise.accel_noise_density),
-            "accelerometer_random_walk": float(noise.accel_random_walk),
-            "gyroscope_noise_density": float(noise.gyro_noise_density),
-            "gyroscope_random_walk": float(noise.gyro_random_walk),
-            "update_rate": float(noise.rate_hz),
-            "rostopic": str(rostopic),
-        },
-        comment,
-    )
+    data = {
+        "accelerometer_noise_density": float(noise.accel_noise_density),
+        "accelerometer_random_walk": float(noise.accel_random_walk),
+        "gyroscope_noise_density": float(noise.gyro_noise_density),
+        "gyroscope_random_walk": float(noise.gyro_random_walk),
+        "update_rate": float(noise.rate_hz),
+        "rostopic": str(rostopic),
+    }
+    if intrinsics is not None:
+        data["model"] = "scale-misalignment"
+        data["accelerometers"] = {"M": intrinsics.M_accel.tolist()}
+        data["gyroscopes"] = {
+            "M": intrinsics.M_gyro.tolist(), "A": intrinsics.A_gyro.tolist(), "C_gyro_i": intrinsics.C_gyro_i.tolist()
+        }  # fmt: skip
+    dump_yaml(path, data, comment)
+
+
+IMU_MODELS = ("calibrated", "scale-misalignment")
+INTRINSIC_KEYS = (("accelerometers", "M"), ("gyroscopes", "M"), ("gyroscopes", "A"), ("gyroscopes", "C_gyro_i"))
+
+
+def read_imu_intrinsics(path: str | os.PathLike) -> ImuIntrinsics | None:
+    """The IMU intrinsics of a Kalibr IMU file (``model: scale-misalignment``), or None (``calibrated``, no model).
+
+    Reads the flat file or Kalibr's result (``imu0`` section); refuses other models and matrices that
+    are not Kalibr's (``M`` lower triangular with a positive diagonal, ``C_gyro_i`` a rotation).
+    """
+    data = load_mapping(path, KalibrFormatError)
+    entry, where = (data["imu0"], f"{path} [imu0]") if isinstance(data.get("imu0"), dict) else (data, str(path))
+    model = entry.get("model", "calibrated")
+    if model not in IMU_MODELS:
+        raise KalibrFormatError(f"{where}: IMU model {model!r} is not supported; vical reads {list(IMU_MODELS)}")
+    if model == "calibrated":
+        return None
+    matrices = []
+    for group, key in INTRINSIC_KEYS:
+        section = require(entry, group, where, KalibrFormatError)
+        if not isinstance(section, dict):
+            raise KalibrFormatError(f"{where}: {group} must be a mapping with {key}")
+        matrices.append(as_floats(require(section, key, f"{where} [{group}]", KalibrFormatError), 9, key, where,
+                                  KalibrFormatError).reshape(3, 3))  # fmt: skip
+    M_accel, M_gyro, A_gyro, C_gyro_i = matrices
+    try:
+        return ImuIntrinsics(M_accel, M_gyro, C_gyro_i, A_gyro)
+    except ValueError as exc:
+        raise KalibrFormatError(f"{where}: {exc}") from exc
 
 
 def read_imu_yaml(path: str | os.PathLike) -> ImuNoise:
