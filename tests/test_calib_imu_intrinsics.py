@@ -88,6 +88,21 @@ def test_scale_and_misalignment_are_recovered_in_the_joint_graph(recording):
     assert result.parameter_names[:4] == ["fx", "fy", "cx", "cy"]
 
 
+def test_the_gyros_g_sensitivity_is_recovered_when_asked_for():
+    base = sensor_intrinsics()
+    A = np.random.default_rng(0).normal(0.0, 1e-3, (3, 3))  # [(rad/s)/(m/s^2)], ~0.6 deg/s per g
+    truth = ImuIntrinsics(base.M_accel, base.M_gyro, base.C_gyro_i, A)
+    rec = make_recording(duration=20, imu_noise=ImuNoise(), pixel_sigma=0.2, seed=1, imu_intrinsics=truth)
+    options = ViOptions(imu_model="scale-misalignment", g_sensitivity=True)
+    result = calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, ImuNoise(), options=options)
+    names = ImuIntrinsics.parameter_names(g_sensitivity=True)
+    estimate, covariance = result.block(names)
+    sigma = np.sqrt(np.diag(covariance))
+    assert np.all(np.abs(estimate - truth.vector(g_sensitivity=True)) < 3 * sigma)
+    assert np.all(sigma[15:] < 3e-4)  # a third of the simulated entries' spread
+    np.testing.assert_allclose(result.imu_intrinsics.A_gyro, A, atol=5e-4)
+
+
 def test_known_intrinsics_correct_the_readings_when_not_estimated(recording):
     truth = recording.truth
     known = ViOptions(imu_intrinsics=truth.imu_intrinsics)
