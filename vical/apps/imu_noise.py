@@ -37,6 +37,7 @@ from vical.apps.calibrate import _number, check_out
 from vical.apps.cli import ArgumentParser, OutputError, cannot_write, one_line_warnings, report_error
 from vical.calib.allan import (
     AXES,
+    AxisNoise,
     NoiseIdentification,
     NoiseIdentificationError,
     averaging_factors,
@@ -115,6 +116,7 @@ def identify(imu: ImuSamples, where: str) -> NoiseIdentification:
 
 
 def inflated_comment(density: float, walk: float) -> str:
+    """The header of ``imu-inflated.yaml``: the factors, why, and the units."""
     return (
         f"vical-imu-noise: the measured values of imu.yaml inflated, noise densities x{density:g}, random walks "
         f"x{walk:g}.\nA static recording misses what motion adds (vibration, temperature change, scale and "
@@ -123,7 +125,8 @@ def inflated_comment(density: float, walk: float) -> str:
     )
 
 
-def axis_entry(axis) -> dict:
+def axis_entry(axis: AxisNoise) -> dict:
+    """One axis of ``allan.yaml``: its values and its Allan deviation curve."""
     return {
         "noise_density": axis.noise_density,
         "random_walk": axis.random_walk,
