@@ -8,11 +8,18 @@ from vical.apps.calibrate import main
 from vical.calib.checks import check_memory
 from vical.calib.errors import CalibrationSettingError
 from vical.calib.synthetic import Excitation, make_recording
-from vical.data import ImuNoise, ImuSamples
+from vical.data import ImuIntrinsics, ImuNoise, ImuSamples
 from vical.geometry import CameraModel, transform_error
 from vical.io.checks import MAX_GYRO_RAD_S
 from vical.io.csvfiles import write_corners_csv, write_imu_csv
-from vical.io.kalibr import read_camchain, read_imu_yaml, write_camchain_imucam, write_imu_yaml, write_target_yaml
+from vical.io.kalibr import (
+    read_camchain,
+    read_imu_intrinsics,
+    read_imu_yaml,
+    write_camchain_imucam,
+    write_imu_yaml,
+    write_target_yaml,
+)
 from vical.io.recording import save_recording
 
 
@@ -159,3 +166,34 @@ def test_messages_spell_the_library_parameters_as_flags(recording_dir, tmp_path,
     err = capsys.readouterr().err
     assert "the image size is unknown (no images came with the frames): give it as --image-size W H" in err
     assert "image_size" not in err
+
+
+def test_imu_intrinsics_are_estimated_and_written_in_kalibrs_keys(tmp_path, capsys):
+    scales_and_angles = np.r_[0.008, -0.006, 0.004, np.radians([0.3, -0.2, 0.4]), -0.005, 0.007, 0.003,
+                              np.radians([-0.3, 0.2, 0.1, 0.2, -0.4, 0.3])]  # fmt: skip
+    truth = ImuIntrinsics.from_vector(scales_and_angles)
+    rec = make_recording(duration=20, imu_noise=ImuNoise(), pixel_sigma=0.2, seed=3, imu_intrinsics=truth)
+    save_recording(rec, tmp_path / "rec")
+    known = tmp_path / "known.yaml"
+    write_camchain_imucam(known, rec.truth.camera, None, None)
+    argv = [str(tmp_path / "rec"), "--task", "extrinsic", "--intrinsics", str(known), "--no-report"]
+    assert main([*argv, "--imu-model", "scale-misalignment", "--out", str(tmp_path / "out")]) == 0
+    found = read_imu_intrinsics(tmp_path / "out" / "imu.yaml")
+    # 0.5 % and 0.3 deg: the 3-sigma checks are in tests/test_calib_imu_intrinsics.py; this one checks the file
+    np.testing.assert_allclose(found.M_accel, truth.M_accel, atol=0.005)
+    np.testing.assert_allclose(found.M_gyro @ found.C_gyro_i, truth.M_gyro @ truth.C_gyro_i, atol=0.005)
+    text = (tmp_path / "out" / "results.txt").read_text()
+    assert "IMU intrinsics (Kalibr's scale-misalignment model" in text and "gyro_scale_z" in text
+    assert main([*argv, "--g-sensitivity", "--out", str(tmp_path / "g")]) == 2
+    assert "--g-sensitivity needs --imu-model scale-misalignment" in capsys.readouterr().err
+
+
+def test_too_little_motion_for_the_imu_intrinsics_names_the_flag(tmp_path, capsys):
+    no_yaw = Excitation(angle_amplitudes=np.array([[0.35, 0.10], [0.40, 0.10], [0.0, 0.0]]))
+    save_recording(make_recording(duration=8, excitation=no_yaw), tmp_path / "rec")
+    argv = [str(tmp_path / "rec"), "--imu-model", "scale-misalignment", "--out", str(tmp_path / "o"), "--no-report"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "too little motion to estimate the IMU intrinsics" in err and err.rstrip().endswith(
+        "or leave --imu-model calibrated"
+    )

@@ -9,13 +9,14 @@ import pytest
 import yaml
 from test_io_samples import make_camera, make_truth
 
-from vical.data import ImuNoise, Target
+from vical.data import ImuIntrinsics, ImuNoise, Target
 from vical.geometry.camera import CameraModel
 from vical.geometry.transforms import invert_transform
 from vical.io.checks import FormatWarning
 from vical.io.errors import KalibrFormatError
 from vical.io.kalibr import (
     read_camchain,
+    read_imu_intrinsics,
     read_imu_yaml,
     read_target_yaml,
     write_camchain_imucam,
@@ -295,3 +296,37 @@ def test_bad_wide_angle_camchains_name_the_key(tmp_path, entry, message):
     path.write_text("cam0:\n  " + entry.replace("\n", "\n  ") + "\n  resolution: [640, 480]\n")
     with pytest.raises(KalibrFormatError, match=message):
         read_camchain(path)
+
+
+def test_imu_intrinsics_round_trip_in_kalibrs_scale_misalignment_keys(tmp_path):
+    intrinsics = ImuIntrinsics.from_vector(np.random.default_rng(1).normal(0.0, 0.01, 24))
+    write_imu_yaml(tmp_path / "imu.yaml", ImuNoise(), intrinsics=intrinsics)
+    raw = yaml.safe_load((tmp_path / "imu.yaml").read_text())
+    assert raw["model"] == "scale-misalignment"
+    assert set(raw["accelerometers"]) == {"M"} and set(raw["gyroscopes"]) == {"M", "A", "C_gyro_i"}
+    read = read_imu_intrinsics(tmp_path / "imu.yaml")
+    for name in ("M_accel", "M_gyro", "C_gyro_i", "A_gyro"):
+        np.testing.assert_array_equal(getattr(read, name), getattr(intrinsics, name))
+    assert read_imu_yaml(tmp_path / "imu.yaml").gyro_noise_density == ImuNoise().gyro_noise_density
+    # Kalibr's result file: the same keys in an imu0 section
+    (tmp_path / "result.yaml").write_text(yaml.safe_dump({"imu0": raw}))
+    np.testing.assert_array_equal(read_imu_intrinsics(tmp_path / "result.yaml").M_gyro, intrinsics.M_gyro)
+    write_imu_yaml(tmp_path / "plain.yaml", ImuNoise())
+    assert read_imu_intrinsics(tmp_path / "plain.yaml") is None
+
+
+@pytest.mark.parametrize(
+    ("change", "match"),
+    [
+        ({"model": "scale-misalignment-size-effect"}, "IMU model 'scale-misalignment-size-effect' is not supported"),
+        ({"accelerometers": {"M": [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]]}}, "M_accel must be lower triangular"),
+        ({"gyroscopes": {"M": np.eye(3).tolist(), "A": np.zeros((3, 3)).tolist()}}, "required key 'C_gyro_i'"),
+    ],
+)
+def test_bad_imu_intrinsics_are_refused_naming_the_file(tmp_path, change, match):
+    write_imu_yaml(tmp_path / "imu.yaml", ImuNoise(), intrinsics=ImuIntrinsics())
+    raw = yaml.safe_load((tmp_path / "imu.yaml").read_text()) | change
+    (tmp_path / "imu.yaml").write_text(yaml.safe_dump(raw))
+    with pytest.raises(KalibrFormatError, match=match) as refused:
+        read_imu_intrinsics(tmp_path / "imu.yaml")
+    assert str(tmp_path / "imu.yaml") in str(refused.value)

@@ -15,7 +15,7 @@ from vical.data import ImuNoise
 from vical.geometry.transforms import euler_to_matrix, invert_transform, make_transform
 from vical.io.checks import FormatWarning
 from vical.io.errors import KalibrFormatError
-from vical.io.kalibr import read_imu_yaml
+from vical.io.kalibr import read_imu_intrinsics, read_imu_yaml
 from vical.io.kalibr_chain import read_chain, read_imu_file, write_chain, write_imu_file
 
 # A rig of four cameras on a bar, 11 cm apart, each slightly turned; the IMU behind cam0.
@@ -294,10 +294,22 @@ def test_ideal_imu_intrinsics_are_accepted_for_calibration(tmp_path):
     assert read_imu_yaml(path) == ImuNoise(2e-3, 3e-3, 1.6968e-04, 1.9393e-05, 200.0)
 
 
+def test_kalibrs_scale_misalignment_intrinsics_are_read_for_calibration(tmp_path):
+    path = tmp_path / "imu.yaml"
+    path.write_text(KALIBR_IMU_RESULT)
+    assert read_imu_yaml(path).gyro_noise_density == 0.0004
+    intrinsics = read_imu_intrinsics(path)  # applied by the calibration (--imu-yaml)
+    assert intrinsics.M_accel[2, 1] == 0.00231 and intrinsics.A_gyro[1, 2] == -0.00694
+
+
 @pytest.mark.parametrize(
     ("text", "edit", "key"),
     [
-        (KALIBR_IMU_RESULT, lambda t: t, "accelerometers.M"),
+        (
+            KALIBR_IMU_RESULT,
+            lambda t: t.replace("model: scale-misalignment", "model: scale-misalignment-size-effect"),
+            "accelerometers.M",
+        ),
         (OPENVINS_IMU_CHAIN, lambda t: t.replace("Ta:\n    - [ 1.0", "Ta:\n    - [ 1.01"), "Ta"),
         (OPENVINS_IMU_CHAIN, lambda t: t.replace("Tg:\n    - [ 0.0", "Tg:\n    - [ 0.002"), "Tg"),
         (OPENVINS_IMU_CHAIN, lambda t: t.replace("time_offset: 0.0", "time_offset: 0.004"), "time_offset"),

@@ -1,25 +1,30 @@
-"""open_recording recognises every source; image folders: natural order, timestamps from the rate, bad images."""
+"""open_recording recognises every source; image folders: natural order, timestamps from the rate, bad images;
+open_imu reads IMU-only recordings."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 import pytest
+from imu_streams import static_stream
 from test_io_samples import assert_frames_equal, make_recording
 
-from vical.data import Target
+from vical.data import ImuSamples, Target
 from vical.io import (
     FormatError,
     FormatWarning,
     detect_source,
+    open_imu,
     open_recording,
     read_image_folder,
+    read_imu_csv,
     save_recording,
     write_bag,
     write_corners_csv,
     write_euroc,
     write_imu_csv,
 )
+from vical.io.errors import UnitError
 
 
 def _first_pixel_detector(image):
@@ -90,3 +95,16 @@ def test_image_folder_natural_order_colour_and_bad_files(tmp_path):
     (tmp_path / "img3.png").write_bytes(b"broken")
     with pytest.raises(FormatError, match=r"img3\.png: cannot decode"):
         read_image_folder(tmp_path, target)
+
+
+def test_open_imu_reads_a_resting_gyro_logged_in_deg_per_s(tmp_path):
+    imu = static_stream(60, 0)
+    write_imu_csv(ImuSamples(imu.t, np.degrees(imu.gyro), imu.accel), tmp_path / "static" / "imu0" / "data.csv")
+    read = open_imu(tmp_path / "static", gyro_unit="deg/s")
+    np.testing.assert_allclose(read.gyro, imu.gyro, rtol=1e-12)
+    np.testing.assert_array_equal(read.t, imu.t)
+    # The calibration readers' unit check expects a calibration motion: it takes this gyro for rad/s.
+    with pytest.raises(UnitError, match="the data look like rad/s"):
+        read_imu_csv(tmp_path / "static" / "imu0" / "data.csv", gyro_unit="deg/s")
+    with pytest.raises(FormatError, match="holds no IMU CSV"):
+        open_imu(tmp_path)

@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from vical.data import ImuNoise
+from vical.data import ImuIntrinsics, ImuNoise
 from vical.geometry import euler_to_matrix, make_transform, so3_log
 from vical.sim import PandaSim, camera_pose_cv, set_imu_pose, site_pose
 from vical.sim.imu import (
@@ -340,3 +340,19 @@ def test_reader_matches_a_site_spinning_on_a_circle():
         np.testing.assert_allclose(site.reading[3:], R.T @ (accel_world - model.opt.gravity), atol=1e-5)
         # The position differences see chords of the circle: (omega h)^2 / 6 ~ 1e-6 relative below the arc.
         np.testing.assert_allclose(site.v_world, omega * r * tangential, atol=1e-5)
+
+
+def test_intrinsics_scale_and_misalign_the_ideal_readings_before_the_noise():
+    intrinsics = ImuIntrinsics.from_vector(np.random.default_rng(0).normal(0.0, 0.01, 24))
+
+    def run(with_intrinsics):
+        sim = ImuSimulator(STEP_NS, 5, "average", intrinsics=intrinsics if with_intrinsics else None)
+        _feed(sim, range(100), lambda t: np.array([np.sin(t * 1e-7), 0.5, -0.2]))  # accel: twice the gyro
+        return sim.samples()
+
+    exact, distorted = run(False), run(True)
+    gyro, accel = intrinsics.distort(exact.gyro, exact.accel)
+    np.testing.assert_allclose(distorted.gyro, gyro, atol=1e-15)
+    np.testing.assert_allclose(distorted.accel, accel, atol=1e-15)
+    # Kalibr's accelerometer model: a = M_a a_i, M_a lower triangular.
+    np.testing.assert_allclose(distorted.accel[:, 0], intrinsics.M_accel[0, 0] * exact.accel[:, 0], atol=1e-15)

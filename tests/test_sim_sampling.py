@@ -168,3 +168,22 @@ def test_a_wide_angle_field_of_view_for_a_pinhole_model_is_refused():
         SensorSampling.from_config({"camera": {"hfov": {"mean": 3.3, "std": 0.0}}})
     with pytest.raises(ConfigError, match=r"sensor\.camera\.distortion must be one of"):
         SensorSampling.from_config({"camera": {"distortion": "omni"}})
+
+
+def test_imu_intrinsics_are_drawn_only_when_configured(paper):
+    rng_a, rng_b = np.random.default_rng(5), np.random.default_rng(5)
+    exact = sample_sensor(paper, rng_a)
+    assert exact.imu_intrinsics.is_identity()
+    raw = yaml.safe_load(PAPER.read_text())
+    raw["imu"].update(accel_scale_std=0.01, gyro_misalignment_std=0.002, g_sensitivity_std=0.0005)
+    cfg = SensorSampling.from_config(raw)
+    first = sample_sensor(cfg, rng_b)
+    # Drawn after everything else: the same sensor otherwise, so configurations without them are unchanged.
+    assert first.camera == exact.camera and np.array_equal(first.T_cam_imu, exact.T_cam_imu)
+    sensors = [sample_sensor(cfg, rng_b) for _ in range(2000)]
+    _check_moments([s.imu_intrinsics.M_accel[1, 1] for s in sensors], 1.0, 0.01)
+    _check_moments([s.imu_intrinsics.M_gyro[2, 0] for s in sensors], 0.0, 0.002)
+    _check_moments([s.imu_intrinsics.A_gyro[0, 2] for s in sensors], 0.0, 0.0005)
+    assert all(np.array_equal(np.diag(s.imu_intrinsics.M_gyro), np.ones(3)) for s in sensors)  # scale std 0
+    restored = type(first).from_dict(first.to_dict())
+    np.testing.assert_allclose(restored.imu_intrinsics.vector(True), first.imu_intrinsics.vector(True), atol=1e-15)

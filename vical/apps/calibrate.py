@@ -80,7 +80,14 @@ from vical.data.target import TargetError
 from vical.geometry import CAMERA_MODELS, CameraModel, CameraModelError
 from vical.io.atomic import atomic_directory, remove_stale_temporaries
 from vical.io.errors import FormatError, KalibrFormatError
-from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_camchain_imucam, write_imu_yaml
+from vical.io.kalibr import (
+    read_camchain,
+    read_imu_intrinsics,
+    read_imu_yaml,
+    read_target_yaml,
+    write_camchain_imucam,
+    write_imu_yaml,
+)
 from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain
 from vical.io.sources import detect_source, open_recording
 from vical.io.yamlfile import load_mapping
@@ -100,6 +107,7 @@ FLAGS = {
     "target": "--target",
     "image_topic": "--image-topic",
     "imu_topic": "--imu-topic",
+    "imu_model": "--imu-model",
 }
 
 
@@ -165,6 +173,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--max-time-offset", type=_number(0), default=0.1, help="time-offset search half-width [s]")
     p.add_argument("--fixed-time-offset", action="store_true", help="do not estimate the time offset")
+    p.add_argument(
+        "--imu-model",
+        choices=("calibrated", "scale-misalignment"),
+        default="calibrated",
+        help="scale-misalignment: also estimate the IMU's scale factors and axis misalignment (Kalibr's model)",
+    )
+    p.add_argument("--g-sensitivity", action="store_true", help="with scale-misalignment: the gyro's g-sensitivity too")
     p.add_argument(
         "--frame-stride",
         type=_number(1, int),
@@ -351,12 +366,17 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     Raises ``CalibrationFailed`` after writing the outputs (marked as failed) when the data do not
     support the result.
     """
+    if args.g_sensitivity and args.imu_model == "calibrated":
+        raise CalibrationError("--g-sensitivity needs --imu-model scale-misalignment")
     options = ViOptions(  # first: a bad option fails before the recording is read
         estimate_time_offset=not args.fixed_time_offset,
         max_time_offset=args.max_time_offset,
         huber_k=args.huber,
         frame_stride=args.frame_stride,
         memory_limit_mb=args.memory_limit,
+        imu_model=args.imu_model,
+        g_sensitivity=args.g_sensitivity,
+        imu_intrinsics=read_imu_intrinsics(args.imu_yaml) if args.imu_yaml else None,
     )
     out = Path(args.out)
     inputs = [args.recording, args.target, args.intrinsics, args.imu_yaml, args.imu_csv]
@@ -514,7 +534,7 @@ def _write_outputs(
                 write_camchain_imucam(tmp / name, result.camera, None, None)
             else:
                 write_camchain_imucam(tmp / name, result.camera, result.T_cam_imu, result.time_offset)
-                write_imu_yaml(tmp / "imu.yaml", noise)
+                write_imu_yaml(tmp / "imu.yaml", noise, intrinsics=result.imu_intrinsics)
             write_results_text(tmp / "results.txt", result, errors, failure)
             write_frames_csv(tmp / "frames.csv", result.frame_log)
             if not args.no_report:

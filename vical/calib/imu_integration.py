@@ -48,7 +48,11 @@ def midpoint_segments(
     """
     inside = t[(t > ta) & (t < tb)]
     knots = np.concatenate([[ta], inside, [tb]])
-    w, a = interpolate(t, gyro, knots), interpolate(t, accel, knots)
+    return knot_segments(knots, interpolate(t, gyro, knots), interpolate(t, accel, knots))
+
+
+def knot_segments(knots: np.ndarray, w: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``midpoint_segments`` of readings ``w`` (K, 3) [rad/s], ``a`` (K, 3) [m/s^2] at the times ``knots`` (K,) [s]."""
     dt = np.diff(knots)
     omega = 0.5 * (w[:-1] + w[1:])
     R = batch_so3_exp(omega * dt[:, None])

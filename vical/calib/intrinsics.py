@@ -222,7 +222,6 @@ def calibrate_intrinsics(
     )
 
 
-
 def _add_unplaced_frames(solve: _Solve, camera, T_cam_target, graph, solution, min_corners: int):
     """Frames the starting camera could not place (a fisheye's border, far from its starting model) join once the
     solved camera places them: the solve's outputs, solved again with them if any."""

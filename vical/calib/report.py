@@ -17,6 +17,7 @@ from vical.calib import report_figures as figures
 from vical.calib.frame_log import REASONS, FrameLog, short_reason
 from vical.calib.metrics import CalibrationErrors
 from vical.calib.result import CalibrationResult, ResidualStats
+from vical.calib.uncertainty import IMU_INTRINSIC_THRESHOLDS
 from vical.geometry import matrix_to_euler
 from vical.io.atomic import atomic_file, write_text_atomic
 
@@ -62,6 +63,29 @@ def _extrinsic_lines(result: CalibrationResult) -> list[str]:
     lines.append("  gyro bias [rad/s]: " + " ".join(f"{v:.6f}" for v in result.gyro_bias))
     lines.append("  accel bias [m/s^2]: " + " ".join(f"{v:.5f}" for v in result.accel_bias))
     return lines
+
+
+def _imu_intrinsic_lines(result: CalibrationResult) -> list[str]:
+    """The IMU intrinsics with their 1-sigma (scales in %, misalignments in deg) when they were estimated."""
+    sig = result.sigmas
+    names = [n for n in result.parameter_names if n in IMU_INTRINSIC_THRESHOLDS]
+    if not names:
+        return []
+    values = dict(zip(result.parameter_names, result.estimate, strict=True))
+    lines = ["IMU intrinsics (Kalibr's scale-misalignment model; scale - 1 in %, angles in deg):"]
+    for n in names:
+        scale, unit = _intrinsic_unit(n)
+        lines.append(_value_line(n, values[n], sig[n], unit, scale))
+    return lines
+
+
+def _intrinsic_unit(name: str) -> tuple[float, str]:
+    """(factor, unit) in which an IMU intrinsic parameter is printed."""
+    if "_scale_" in name:
+        return 100.0, "%"
+    if name.startswith("g_sens_"):
+        return 1.0, "(rad/s)/(m/s^2)"
+    return float(np.rad2deg(1.0)), "deg"
 
 
 def _stats_line(name: str, stats: ResidualStats, unit: str) -> str:
@@ -161,6 +185,7 @@ def results_text(result: CalibrationResult, errors: CalibrationErrors | None = N
         [f"vical calibration results: task {result.task}"],
         _camera_lines(result),
         _extrinsic_lines(result),
+        _imu_intrinsic_lines(result),
         _quality_lines(result),
         _frame_lines(result.frame_log),
         _weak_lines(result),

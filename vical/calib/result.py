@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vical.calib.frame_log import FrameLog
+from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel
 
 
@@ -162,6 +163,8 @@ class CalibrationResult:
             final solve's frames: the extrinsic stage's in the two-stage task).
         reprojection_pixels: (N, 2) [px] the measured corner of each residual, or None.
         time_offset_trace: the camera's rotation rate against the gyro's, or None (intrinsic task).
+        imu_intrinsics: the IMU's scale, misalignment and g-sensitivity (estimated with
+            ``imu_model="scale-misalignment"``, else the known ones given), or None.
     """
 
     task: str
@@ -190,6 +193,7 @@ class CalibrationResult:
     frame_log: FrameLog | None = None
     reprojection_pixels: np.ndarray | None = None
     time_offset_trace: TimeOffsetTrace | None = None
+    imu_intrinsics: ImuIntrinsics | None = None
 
     @property
     def sigmas(self) -> dict[str, float]:

@@ -26,7 +26,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vical.calib.nominal import nominal_T_cam_imu
-from vical.data import NS_PER_S, CameraFrames, ImuNoise, ImuSamples, Recording, SensorTruth, Target, Trajectory
+from vical.data import (
+    NS_PER_S,
+    CameraFrames,
+    ImuIntrinsics,
+    ImuNoise,
+    ImuSamples,
+    Recording,
+    SensorTruth,
+    Target,
+    Trajectory,
+)
 from vical.geometry import CameraModel, euler_to_matrix, make_transform, so3_exp
 
 GRAVITY = np.array([0.0, 0.0, -9.81])  # [m/s^2] world frame, z up
@@ -299,6 +309,7 @@ def make_recording(
     seed: int = 0,
     rolling_shutter: float = 0.0,
     other_cameras: dict[str, RigCamera] | None = None,
+    imu_intrinsics: ImuIntrinsics | None = None,
 ) -> Recording:
     """A camera + IMU recording of the analytic motion, optionally noisy.
 
@@ -320,6 +331,8 @@ def make_recording(
             the calibrator does not model.
         other_cameras: a rig's other cameras (``cam1``, ...) on the same trigger: each one's frames
             carry the same stamps and show the scene at IMU time ``t_cam + its time_offset``.
+        imu_intrinsics: the IMU's scale, misalignment and g-sensitivity (None: exact axes), applied to
+            the true readings before biases and noise.
     """
     if abs(time_offset) >= 0.1:
         raise ValueError(f"time_offset must be within +-0.1 s for this generator, got {time_offset}")
@@ -335,7 +348,9 @@ def make_recording(
     t_imu_ns = np.arange(0, round(duration * NS_PER_S) + 1, round(NS_PER_S / noise.rate_hz), dtype=np.int64)
     t_imu = t_imu_ns.astype(float) / NS_PER_S
     T_wi, v_w, gyro_true, accel_true = imu_kinematics(excitation, target, T_cam_imu, t_imu)
-    gyro, accel = gyro_true + gb, accel_true + ab
+    intrinsics = imu_intrinsics or ImuIntrinsics()
+    gyro, accel = intrinsics.distort(gyro_true, accel_true)
+    gyro, accel = gyro + gb, accel + ab
     if imu_noise is not None:
         dg, da = _imu_noise_samples(noise, len(t_imu), rng)
         gyro, accel = gyro + dg, accel + da
@@ -347,7 +362,7 @@ def make_recording(
     scene = (excitation, target, T_cam_imu, T_world_target, pixel_sigma, rolling_shutter, rng)
     corners, ids = _camera_frames(scene, RigCamera(camera, T_cam_imu, time_offset), t_cam_ns)
     others = {name: _camera_frames(scene, rig, t_cam_ns) for name, rig in (other_cameras or {}).items()}
-    truth = SensorTruth(camera, T_cam_imu, float(time_offset), noise, gb, ab)
+    truth = SensorTruth(camera, T_cam_imu, float(time_offset), noise, gb, ab, intrinsics)
     trajectory = Trajectory(EPOCH_NS + t_imu_ns, T_wi, v_w, gyro_true)
     return Recording(
         imu=ImuSamples(EPOCH_NS + t_imu_ns, gyro, accel),

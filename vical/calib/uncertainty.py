@@ -55,8 +55,33 @@ def thresholds(camera: CameraModel) -> dict[str, float]:
     return t
 
 
+# IMU intrinsics (vical.data.ImuIntrinsics): 1-sigma above which they count as weak; a 20 s recording of the
+# synthetic motion (vical.calib.synthetic) reaches 0.02-0.1 % and 0.01-0.07 deg.
+IMU_INTRINSIC_THRESHOLDS = {
+    **{f"{s}_scale_{a}": 0.002 for s in ("accel", "gyro") for a in "xyz"},  # [-] 0.2 %
+    **{f"{s}_misalign_{m}": np.deg2rad(0.1) for s in ("accel", "gyro") for m in ("yx", "zx", "zy")},  # [rad]
+    **{f"gyro_rot_{a}": np.deg2rad(0.1) for a in "xyz"},  # [rad]
+    **{f"g_sens_{r}{c}": 0.001 for r in "xyz" for c in "xyz"},  # [(rad/s)/(m/s^2)]
+}
+
+
+def _imu_intrinsic_hint(name: str) -> str:
+    axis = name[-1] if name[-1] in "xyz" else name[-2]
+    if name.startswith("gyro_scale_"):
+        return f"rotate faster about the IMU's {axis} axis, both ways: a gyro scale error grows with the rate"
+    if name.startswith(("gyro_misalign_", "gyro_rot_")):
+        return "rotate fast about every IMU axis in turn: a gyro axis misalignment shows as rate leaking between axes"
+    if name.startswith("accel_scale_"):
+        return f"hold the sensor with the IMU's {axis} axis up and then down (gravity along it, both signs)"
+    if name.startswith("accel_misalign_"):
+        return "hold the sensor in several orientations, gravity moving between the IMU's axes"
+    return "rotate fast while the sensor points in several directions relative to gravity"
+
+
 def hint(name: str) -> str:
     """Plain-language advice on the motion that would observe ``name`` better."""
+    if name in IMU_INTRINSIC_THRESHOLDS:
+        return _imu_intrinsic_hint(name)
     if name in ("fx", "fy"):
         return _TILT_HINT
     if name == "cx":
@@ -82,7 +107,7 @@ def weak_parameters(names: list[str], covariance: np.ndarray, camera: CameraMode
         covariance: (P, P) marginal covariance.
         camera: the calibrated camera (scales the intrinsic thresholds).
     """
-    limits = thresholds(camera)
+    limits = thresholds(camera) | IMU_INTRINSIC_THRESHOLDS
     sigmas = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     weak = [
         WeakParameter(n, float(s), limits[n], hint(n))
@@ -101,6 +126,8 @@ GROUPS = {
     "time offset": ("time_offset",),
     "accelerometer bias": ("ba_x", "ba_y", "ba_z"),
     "gyroscope bias": ("bg_x", "bg_y", "bg_z"),
+    "accelerometer intrinsics": tuple(n for n in IMU_INTRINSIC_THRESHOLDS if n.startswith("accel_")),
+    "gyroscope intrinsics": tuple(n for n in IMU_INTRINSIC_THRESHOLDS if not n.startswith("accel_")),
 }
 STRONG_CORRELATION = 0.9  # |rho| above which two parameters are hard to tell apart
 _PAIR_HINTS = {
@@ -117,6 +144,10 @@ _PAIR_HINTS = {
     frozenset(("time offset", "extrinsic rotation")): "move with faster and changing rotation rates",
     frozenset(("extrinsic translation", "accelerometer bias")): (
         "rotate more about all axes and hold the sensor in several orientations relative to gravity"
+    ),
+    frozenset(("extrinsic rotation", "gyroscope intrinsics")): (
+        "the camera-IMU rotation is the accelerometer's, the gyro's axes follow the camera's turns: hold the sensor "
+        "in several orientations relative to gravity and accelerate along every axis to tell the two apart"
     ),
 }
 

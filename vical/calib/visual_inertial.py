@@ -12,7 +12,10 @@ Layout (navigation frame = target frame, so no gauge prior is needed):
 - factors: one corner factor per frame on ``(X_i, V_i, E, D[, K])``, which projects the known
   target points from the pose at the exposure instant ``X_i Exp([omega_i; R_i^T V_i] D) E``
   (``vical.calib.corner_factors``), ``CombinedImuFactorWithGravityDirection`` between consecutive
-  states (rotation-compensated midpoint preintegration), a weak prior on the first bias.
+  states (rotation-compensated midpoint preintegration), a weak prior on the first bias;
+- with ``imu_model="scale-misalignment"`` the IMU intrinsics ``I`` (scale, misalignment, optionally
+  the gyro's g-sensitivity) are a variable of every IMU factor (``vical.calib.imu_intrinsics``), with
+  a weak prior; known intrinsics (``ViOptions.imu_intrinsics``) otherwise correct the readings.
 
 Initialisation: PnP poses with the (known or intrinsically calibrated) camera; time offset,
 ``R_cam_imu`` and gyro bias in closed form (``time_alignment``); translation from the guess;
@@ -32,6 +35,8 @@ from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError, CalibrationSettingError
 from vical.calib.frame_log import FrameLog, build_frame_log, left_out
 from vical.calib.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
+from vical.calib.imu_intrinsics import IntervalReadings, IntrinsicImuFactor, check_excitation, prior_sigmas
+from vical.calib.imu_intrinsics import check_model as check_imu_model
 from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses
 from vical.calib.intrinsics import check_model, estimated_pixel_sigma, intrinsic_names
 from vical.calib.nominal import nominal_T_cam_imu
@@ -45,6 +50,7 @@ from vical.calib.time_alignment import align, increment_mismatch, rotation_incre
 from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
 from vical.calib.variance import used_dof, variance_factor
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target, seconds_since
+from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel, invert_transform, make_transform, skew
 
 GRAVITY_MAGNITUDE = 9.81  # [m/s^2]
@@ -67,7 +73,7 @@ GAP_WARNING_FACTOR = 5.0  # ... this many typical frame intervals) is reported
 TRACE_HALF_WIDTH = 0.05  # [s] the report's time-offset plot shows the mismatch this far either side of the estimate
 TRACE_POINTS = 201
 
-E_KEY, G_KEY, D_KEY, K_KEY = (gtsam.symbol(c, 0) for c in "egdk")
+E_KEY, G_KEY, D_KEY, K_KEY, I_KEY = (gtsam.symbol(c, 0) for c in "egdki")
 EXTRINSIC_NAMES = ["rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "time_offset"]
 BIAS_NAMES = ["ba_x", "ba_y", "ba_z", "bg_x", "bg_y", "bg_z"]  # GTSAM's ConstantBias order: accel, then gyro
 
@@ -91,6 +97,11 @@ class ViOptions:
             high-rate recordings (the accuracy cost is measured in docs/calibration.md).
         memory_limit_mb: [MB] a recording whose solve would need more is refused before solving,
             with the stride that fits (``vical.calib.checks``).
+        imu_model: ``calibrated`` (the readings, corrected by ``imu_intrinsics`` when given, are
+            exact up to noise and bias) or ``scale-misalignment`` (estimate the IMU intrinsics,
+            starting from ``imu_intrinsics``; Kalibr's model of that name).
+        g_sensitivity: with ``scale-misalignment``, also estimate the gyro's g-sensitivity.
+        imu_intrinsics: the IMU's known intrinsics (e.g. from Kalibr's imu.yaml), or None (identity).
     """
 
     estimate_time_offset: bool = True
@@ -101,6 +112,9 @@ class ViOptions:
     gravity_magnitude: float = GRAVITY_MAGNITUDE
     frame_stride: int = 1
     memory_limit_mb: float = 4000.0
+    imu_model: str = "calibrated"
+    g_sensitivity: bool = False
+    imu_intrinsics: ImuIntrinsics | None = None
 
     def __post_init__(self) -> None:
         checks = {
@@ -123,6 +137,15 @@ class ViOptions:
         for name, (value, allowed, ok) in checks.items():
             if not ok:
                 raise CalibrationError(f"calibration option {name} must be {allowed}, got {value!r}")
+        check_imu_model(self.imu_model, self.g_sensitivity)
+
+    @property
+    def estimate_imu_intrinsics(self) -> bool:
+        return self.imu_model == "scale-misalignment"
+
+    def initial_imu_theta(self) -> np.ndarray:
+        """The intrinsics' starting parameters (``ImuIntrinsics.vector``)."""
+        return (self.imu_intrinsics or ImuIntrinsics()).vector(self.g_sensitivity)
 
 
 @dataclass
@@ -156,6 +179,7 @@ class _Estimate:
     tau0: float
     gyro_bias: np.ndarray
     accel_bias: np.ndarray
+    imu_theta: np.ndarray | None = None  # IMU intrinsics (ImuIntrinsics.vector) when estimated
 
 
 # ---------------------------------------------------------------------------------------- preparation
@@ -200,6 +224,11 @@ def _prepare(
     sigma = options.pixel_sigma
     if sigma is None:
         sigma = max(estimated_pixel_sigma(residuals, 6 * len(ids)), MIN_PIXEL_SIGMA)
+    gyro, accel = imu.gyro, imu.accel
+    if options.estimate_imu_intrinsics:
+        check_excitation(gyro, accel)
+    elif options.imu_intrinsics is not None:
+        gyro, accel = options.imu_intrinsics.correct(gyro, accel)
     return _Problem(
         camera=camera,
         target=target,
@@ -208,8 +237,8 @@ def _prepare(
         frame_times=seconds_since(frame_t_ns[ids], t0_ns),
         T_target_cam=np.array([invert_transform(poses[k]) for k in ids]),
         t_imu=seconds_since(imu.t, t0_ns),
-        gyro=imu.gyro,
-        accel=imu.accel,
+        gyro=gyro,
+        accel=accel,
         noise=noise,
         options=options,
         t0_ns=t0_ns,
@@ -224,9 +253,11 @@ def _initial_estimate(problem: _Problem, T_guess: np.ndarray, tau_guess: float) 
     inc = rotation_increments(problem.frame_times, problem.T_target_cam[:, :3, :3])
     opts = problem.options
     alignment = align(problem.t_imu, problem.gyro, inc, opts.max_time_offset, tau_guess, opts.estimate_time_offset)
+    theta = opts.initial_imu_theta() if opts.estimate_imu_intrinsics else None
     return _Estimate(
-        make_transform(alignment.R_cam_imu, T_guess[:3, 3]), alignment.time_offset, alignment.gyro_bias, np.zeros(3)
-    )
+        make_transform(alignment.R_cam_imu, T_guess[:3, 3]), alignment.time_offset, alignment.gyro_bias, np.zeros(3),
+        theta,
+    )  # fmt: skip
 
 
 # ---------------------------------------------------------------------------------------- graph
@@ -274,6 +305,8 @@ def _insert_states(values: gtsam.Values, problem: _Problem, states: list[int], e
 def _add_imu_factors(graph: gtsam.NonlinearFactorGraph, problem: _Problem, times: np.ndarray, est: _Estimate) -> list:
     params = preintegration_params(problem.noise)
     bias = gtsam.imuBias.ConstantBias(est.accel_bias, est.gyro_bias)
+    if est.imu_theta is not None:
+        return _add_intrinsic_imu_factors(graph, problem, times, params, bias)
     factors = []
     for n in range(len(times) - 1):
         segments = midpoint_segments(problem.t_imu, problem.gyro, problem.accel, times[n], times[n + 1])
@@ -284,8 +317,28 @@ def _add_imu_factors(graph: gtsam.NonlinearFactorGraph, problem: _Problem, times
         )  # fmt: skip
         graph.add(f)
         factors.append((n, f, times[n + 1] - times[n]))
+    _add_bias_prior(graph, bias)
+    return factors
+
+
+def _add_bias_prior(graph: gtsam.NonlinearFactorGraph, bias: gtsam.imuBias.ConstantBias) -> None:
     sigmas = np.r_[np.full(3, ACCEL_BIAS_PRIOR_SIGMA), np.full(3, GYRO_BIAS_PRIOR_SIGMA)]
     graph.add(gtsam.PriorFactorConstantBias(_key("b", 0), bias, gtsam.noiseModel.Diagonal.Sigmas(sigmas)))
+
+
+def _add_intrinsic_imu_factors(graph, problem: _Problem, times: np.ndarray, params, bias) -> list:
+    """IMU factors that also take the intrinsics ``I_KEY``, a weak prior on them and on the first bias."""
+    factors = []
+    for n in range(len(times) - 1):
+        readings = IntervalReadings(problem.t_imu, problem.gyro, problem.accel, times[n], times[n + 1])
+        keys = [_key("x", n), _key("v", n), _key("x", n + 1), _key("v", n + 1), _key("b", n), _key("b", n + 1), G_KEY]
+        f = IntrinsicImuFactor(keys, I_KEY, readings, params, bias, problem.options.gravity_magnitude)
+        graph.add(f.factor)
+        factors.append((n, f, times[n + 1] - times[n]))
+    opts = problem.options
+    sigmas = gtsam.noiseModel.Diagonal.Sigmas(prior_sigmas(opts.g_sensitivity))
+    graph.add(gtsam.PriorFactorVector(I_KEY, opts.initial_imu_theta(), sigmas))
+    _add_bias_prior(graph, bias)
     return factors
 
 
@@ -312,13 +365,16 @@ def _build(problem: _Problem, est: _Estimate, joint: bool) -> _Graph:
         values.insert(D_KEY, np.zeros(1))
     if joint:
         values.insert(K_KEY, problem.camera.parameters)
+    if est.imu_theta is not None:
+        values.insert(I_KEY, est.imu_theta)
     times = _insert_states(values, problem, states, est)
     imu_factors = _add_imu_factors(graph, problem, times, est)
     corners = _corner_factors(problem, states, times, est, joint)
     first_corner_factor = graph.size()
     for factor in corners.factors():
         graph.add(factor)
-    factor_states = [*range(len(imu_factors)), -1, *range(len(states))]
+    priors = first_corner_factor - len(imu_factors)  # the first bias's (and the IMU intrinsics')
+    factor_states = [*range(len(imu_factors)), *[-1] * priors, *range(len(states))]
     others = []
     for other in problem.others:
         factors, paired, frames = _other_corner_factors(problem, other, states, times, est, joint, values)
@@ -372,7 +428,8 @@ def _estimate_of(values: gtsam.Values, est: _Estimate) -> _Estimate:
     bias = values.atConstantBias(_key("b", 0))
     T_cam_imu = invert_transform(values.atPose3(E_KEY).matrix())
     tau = est.tau0 + (float(values.atVector(D_KEY)[0]) if values.exists(D_KEY) else 0.0)
-    return _Estimate(T_cam_imu, tau, np.asarray(bias.gyroscope()), np.asarray(bias.accelerometer()))
+    theta = np.asarray(values.atVector(I_KEY)) if values.exists(I_KEY) else None
+    return _Estimate(T_cam_imu, tau, np.asarray(bias.gyroscope()), np.asarray(bias.accelerometer()), theta)
 
 
 def _solve_rounds(problem: _Problem, est: _Estimate, joint: bool):
@@ -506,16 +563,24 @@ def _clusters(g: _Graph, num_factors: int) -> np.ndarray:
 
 
 def _parameter_covariance(
-    g: _Graph, values: gtsam.Values, T_cam_imu: np.ndarray, joint: bool, fixed_offset: bool, index: int = 0
+    g: _Graph,
+    values: gtsam.Values,
+    T_cam_imu: np.ndarray,
+    joint: bool,
+    fixed_offset: bool,
+    index: int = 0,
+    imu_theta: np.ndarray | None = None,
 ):
     """(P, P) covariance in the order of the result's parameter names and its widening (P,) over the noise model's.
 
-    Of camera ``index``'s variables (0: the first camera's) and the first bias. The noise model's covariance
+    Of camera ``index``'s variables (0: the first camera's), the first bias and, with ``imu_theta`` (the
+    estimated IMU intrinsics), those. The noise model's covariance
     widened wherever the cluster-robust one (``vical.calib.robust_covariance``) is larger; a fixed time offset
     gets zero variance.
     """
     offset_keys = [] if fixed_offset else [_key("d", index)]
-    keys = ([_key("k", index)] if joint else []) + [_key("e", index), *offset_keys, _key("b", 0)]
+    intrinsic_keys = [] if imu_theta is None else [I_KEY]
+    keys = ([_key("k", index)] if joint else []) + [_key("e", index), *offset_keys, _key("b", 0), *intrinsic_keys]
     linear = g.graph.linearize(values)
     model = covariance_or_unobservable(linear, values, keys)
     robust = robust_covariance(linear, values, keys, _clusters(g, linear.size()))
@@ -523,6 +588,7 @@ def _parameter_covariance(
     offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
     camera_block = [np.eye(values.atVector(_key("k", index)).size)] if joint else []
     blocks = camera_block + [_extrinsic_jacobian(T_cam_imu), offset_block, np.eye(6)]
+    blocks += [] if imu_theta is None else [np.eye(len(imu_theta))]
     J = np.zeros((sum(b.shape[0] for b in blocks), cov.shape[0]))
     r = c = 0
     for b in blocks:
@@ -583,7 +649,7 @@ def _imu_residuals(g: _Graph, values: gtsam.Values, gravity_magnitude: float) ->
     gravity = np.asarray(values.atUnit3(G_KEY).point3()) * gravity_magnitude
     rows = []
     for n, f, dt in g.imu_factors:
-        pim = f.preintegratedMeasurements()
+        pim = f.measurement(values) if isinstance(f, IntrinsicImuFactor) else f.preintegratedMeasurements()
         bias_hat, bias = pim.biasHat(), values.atConstantBias(_key("b", n))
         X0, X1 = values.atPose3(_key("x", n)), values.atPose3(_key("x", n + 1))
         v0, v1 = values.atVector(_key("v", n)), values.atVector(_key("v", n + 1))
@@ -604,15 +670,18 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
     values = solution.values
     camera = problem.camera
     covariance, widening = _parameter_covariance(
-        g, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset
+        g, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset, imu_theta=est.imu_theta
     )
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
+    if est.imu_theta is not None:
+        names += ImuIntrinsics.parameter_names(problem.options.g_sensitivity)
     found = correlations(names, covariance)
     problem.warnings += _widening_warning(names, widening) + correlation_warnings(found)
     problem.warnings += unobservable_warnings(names, covariance)
     estimate = np.concatenate(
         ([camera.intrinsics, camera.dist] if joint else [])
         + [np.zeros(3), est.T_cam_imu[:3, 3], [est.tau0], est.accel_bias, est.gyro_bias]
+        + ([] if est.imu_theta is None else [est.imu_theta])
     )
     residuals, frame_index = _reprojection(problem, g, values)
     gravity = np.asarray(values.atUnit3(G_KEY).point3()) * problem.options.gravity_magnitude
@@ -642,7 +711,13 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
         imu_noise_scale=problem.imu_noise_scale,
         reprojection_pixels=g.corners.measured,
         time_offset_trace=_time_offset_trace(problem, est),
+        imu_intrinsics=_imu_intrinsics(problem.options, est),
     )
+
+
+def _imu_intrinsics(options: ViOptions, est: _Estimate) -> ImuIntrinsics | None:
+    """The estimated intrinsics, the given ones when they were kept fixed, or None."""
+    return options.imu_intrinsics if est.imu_theta is None else ImuIntrinsics.from_vector(est.imu_theta)
 
 
 def _other_result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, entry, first: CalibrationResult):

@@ -1,5 +1,6 @@
 """Typed containers shared by the simulator, the calibrator and the file formats."""
 
+from vical.data.imu_model import ImuIntrinsics
 from vical.data.target import Target, TargetError
 from vical.data.types import (
     FIRST_CAMERA,
@@ -20,6 +21,7 @@ __all__ = [
     "NS_PER_S",
     "CameraFrames",
     "DataError",
+    "ImuIntrinsics",
     "ImuNoise",
     "ImuSamples",
     "PathProfile",

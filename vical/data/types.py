@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from vical.data.imu_model import ImuIntrinsics
 from vical.data.target import Target
 from vical.geometry.camera import CameraModel
 
@@ -205,6 +206,7 @@ class SensorTruth:
             at IMU time ``t_cam + time_offset``.
         imu_noise: the IMU noise model.
         gyro_bias: (3,) [rad/s] initial gyro bias; accel_bias: (3,) [m/s^2] initial accel bias.
+        imu_intrinsics: the IMU's scale, misalignment and g-sensitivity (identity: exact axes).
     """
 
     camera: CameraModel
@@ -213,6 +215,7 @@ class SensorTruth:
     imu_noise: ImuNoise = field(default_factory=ImuNoise)
     gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
     accel_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    imu_intrinsics: ImuIntrinsics = field(default_factory=ImuIntrinsics)
 
     def __post_init__(self) -> None:
         T = np.asarray(self.T_cam_imu, dtype=np.float64)
@@ -233,6 +236,7 @@ class SensorTruth:
             "imu_noise": self.imu_noise.to_dict(),
             "gyro_bias": self.gyro_bias.tolist(),
             "accel_bias": self.accel_bias.tolist(),
+            "imu_intrinsics": self.imu_intrinsics.to_dict(),
         }
 
     @classmethod
@@ -244,6 +248,7 @@ class SensorTruth:
             imu_noise=ImuNoise.from_dict(d["imu_noise"]),
             gyro_bias=np.asarray(d.get("gyro_bias", [0, 0, 0]), dtype=np.float64),
             accel_bias=np.asarray(d.get("accel_bias", [0, 0, 0]), dtype=np.float64),
+            imu_intrinsics=ImuIntrinsics.from_dict(d["imu_intrinsics"]) if "imu_intrinsics" in d else ImuIntrinsics(),
         )
 
 

@@ -3,7 +3,7 @@
 See ``docs/formats.md``. This package depends only on ``vical.geometry`` and ``vical.data``.
 """
 
-from vical.io.bag import read_bag, write_bag
+from vical.io.bag import read_bag, read_bag_imu, write_bag
 from vical.io.checks import FormatWarning
 from vical.io.csvfiles import read_corners_csv, read_imu_csv, write_corners_csv, write_imu_csv
 from vical.io.errors import (
@@ -17,6 +17,7 @@ from vical.io.euroc import read_euroc, write_euroc
 from vical.io.images import ImageDetector, read_image_folder
 from vical.io.kalibr import (
     read_camchain,
+    read_imu_intrinsics,
     read_imu_yaml,
     read_target_yaml,
     write_camchain_imucam,
@@ -33,7 +34,7 @@ from vical.io.kalibr_chain import (
     write_imu_file,
 )
 from vical.io.recording import is_recording_dir, load_recording, save_recording
-from vical.io.sources import detect_source, open_recording
+from vical.io.sources import detect_source, open_imu, open_recording
 
 __all__ = [
     "BagFormatError",
@@ -49,8 +50,10 @@ __all__ = [
     "detect_source",
     "is_recording_dir",
     "load_recording",
+    "open_imu",
     "open_recording",
     "read_bag",
+    "read_bag_imu",
     "read_camchain",
     "read_chain",
     "read_corners_csv",
@@ -58,6 +61,7 @@ __all__ = [
     "read_image_folder",
     "read_imu_csv",
     "read_imu_file",
+    "read_imu_intrinsics",
     "read_imu_yaml",
     "read_target_yaml",
     "save_recording",

@@ -196,6 +196,32 @@ def read_bag(
     return Recording(imu_samples, cameras[0][0], target, metadata=metadata, other_frames=other)
 
 
+def read_bag_imu(
+    path: str | os.PathLike, imu_topic: str = "/imu0", gyro_unit: str = "rad/s", accel_unit: str = "m/s^2"
+) -> ImuSamples:
+    """The IMU samples on ``imu_topic`` of a ROS1 bag (no images needed: a static IMU recording).
+
+    Raises ``BagFormatError`` naming the bag and topic as ``read_bag`` does.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise BagFormatError(f"{path} does not exist or is not a file")
+    try:
+        with Reader(path) as reader:
+            connections = _connections(reader, path, [], imu_topic)
+            _, imu = _read_streams(reader, connections, path, None, None, False)
+    except ReaderError as exc:
+        raise BagFormatError(f"{path} cannot be read as a ROS1 bag (corrupt or truncated?): {exc}") from exc
+    if not imu:
+        raise BagFormatError(f"{path} topic {imu_topic}: no IMU messages")
+    try:
+        return _imu_samples(imu, f"{path} topic {imu_topic}", gyro_unit, accel_unit)
+    except UnitError:
+        raise  # it names the unit setting to change
+    except (FormatError, DataError) as exc:
+        raise BagFormatError(str(exc)) from exc
+
+
 def _connections(reader: Reader, path: Path, image_topics: list[str], imu_topic: str | None) -> dict[str, Any]:
     topics = {c.topic: c for c in reader.connections}
     wanted = [(topic, (IMAGE_TYPE, COMPRESSED_TYPE), "image_topic") for topic in image_topics]
@@ -219,7 +245,7 @@ def _read_streams(
     reader: Reader,
     connections: dict[str, Any],
     path: Path,
-    target: Target,
+    target: Target | None,
     detector: ImageDetector | None,
     keep_images: bool,
 ) -> tuple[dict[str, list], list]:

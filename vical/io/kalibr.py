@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from vical.data import ImuNoise, Target, TargetError
+from vical.data import ImuIntrinsics, ImuNoise, Target, TargetError
 from vical.geometry.camera import CameraModel, CameraModelError
 from vical.geometry.transforms import invert_transform
 from vical.io.checks import warn
@@ -229,19 +229,66 @@ def _timeshift(entry: dict[str, Any], where: str) -> float | None:
 
 
 # ------------------------------------------------------------------------------- IMU
-def write_imu_yaml(path: str | os.PathLike, noise: ImuNoise, rostopic: str = "/imu0") -> None:
-    """Write Kalibr's IMU configuration (``imu.yaml``) for ``noise``, atomically."""
-    dump_yaml(
-        path,
-        {
-            "accelerometer_noise_density": float(noise.accel_noise_density),
-            "accelerometer_random_walk": float(noise.accel_random_walk),
-            "gyroscope_noise_density": float(noise.gyro_noise_density),
-            "gyroscope_random_walk": float(noise.gyro_random_walk),
-            "update_rate": float(noise.rate_hz),
-            "rostopic": str(rostopic),
-        },
-    )
+def write_imu_yaml(
+    path: str | os.PathLike,
+    noise: ImuNoise,
+    rostopic: str = "/imu0",
+    comment: str | None = None,
+    intrinsics: ImuIntrinsics | None = None,
+) -> None:
+    """Write Kalibr's IMU configuration (``imu.yaml``) for ``noise``, atomically, headed by ``comment`` (``#`` lines).
+
+    Units: noise densities in rad/s/sqrt(Hz) (gyro) and m/s^2/sqrt(Hz) (accel), random walks in
+    rad/s^2/sqrt(Hz) and m/s^3/sqrt(Hz), ``update_rate`` in Hz. With ``intrinsics``, also Kalibr's
+    ``scale-misalignment`` keys: ``model``, ``accelerometers: {M}``, ``gyroscopes: {M, A, C_gyro_i}``
+    (``vical.data.ImuIntrinsics``; ``A`` in (rad/s)/(m/s^2)).
+    """
+    data = {
+        "accelerometer_noise_density": float(noise.accel_noise_density),
+        "accelerometer_random_walk": float(noise.accel_random_walk),
+        "gyroscope_noise_density": float(noise.gyro_noise_density),
+        "gyroscope_random_walk": float(noise.gyro_random_walk),
+        "update_rate": float(noise.rate_hz),
+        "rostopic": str(rostopic),
+    }
+    if intrinsics is not None:
+        data["model"] = "scale-misalignment"
+        data["accelerometers"] = {"M": intrinsics.M_accel.tolist()}
+        data["gyroscopes"] = {
+            "M": intrinsics.M_gyro.tolist(), "A": intrinsics.A_gyro.tolist(), "C_gyro_i": intrinsics.C_gyro_i.tolist()
+        }  # fmt: skip
+    dump_yaml(path, data, comment=comment)
+
+
+IMU_MODELS = ("calibrated", "scale-misalignment")
+INTRINSIC_KEYS = (("accelerometers", "M"), ("gyroscopes", "M"), ("gyroscopes", "A"), ("gyroscopes", "C_gyro_i"))
+
+
+def read_imu_intrinsics(path: str | os.PathLike) -> ImuIntrinsics | None:
+    """The IMU intrinsics of a Kalibr IMU file (``model: scale-misalignment``), or None (``calibrated``, no model).
+
+    Reads the flat file or Kalibr's result (``imu0`` section); refuses other models and matrices that
+    are not Kalibr's (``M`` lower triangular with a positive diagonal, ``C_gyro_i`` a rotation).
+    """
+    data = load_mapping(path, KalibrFormatError)
+    entry, where = (data["imu0"], f"{path} [imu0]") if isinstance(data.get("imu0"), dict) else (data, str(path))
+    model = entry.get("model", "calibrated")
+    if model not in IMU_MODELS:
+        raise KalibrFormatError(f"{where}: IMU model {model!r} is not supported; vical reads {list(IMU_MODELS)}")
+    if model == "calibrated":
+        return None
+    matrices = []
+    for group, key in INTRINSIC_KEYS:
+        section = require(entry, group, where, KalibrFormatError)
+        if not isinstance(section, dict):
+            raise KalibrFormatError(f"{where}: {group} must be a mapping with {key}")
+        matrices.append(as_floats(require(section, key, f"{where} [{group}]", KalibrFormatError), 9, key, where,
+                                  KalibrFormatError).reshape(3, 3))  # fmt: skip
+    M_accel, M_gyro, A_gyro, C_gyro_i = matrices
+    try:
+        return ImuIntrinsics(M_accel, M_gyro, C_gyro_i, A_gyro)
+    except ValueError as exc:
+        raise KalibrFormatError(f"{where}: {exc}") from exc
 
 
 def read_imu_yaml(path: str | os.PathLike) -> ImuNoise:
@@ -275,8 +322,8 @@ def imu_noise_of(entry: dict[str, Any], where: str) -> ImuNoise:
     return ImuNoise(**values)
 
 
-# IMU models of Kalibr's result files and OpenVINS's configs; vical calibrates an ideal IMU.
-IMU_MODELS = ("calibrated", "kalibr", "rpng", "scale-misalignment", "scale-misalignment-size-effect")
+# IMU models of Kalibr's result files and OpenVINS's configs; vical applies scale-misalignment (IMU_MODELS).
+KNOWN_IMU_MODELS = ("calibrated", "kalibr", "rpng", "scale-misalignment", "scale-misalignment-size-effect")
 # (path of the key, the value of an ideal IMU): Kalibr's scale-misalignment model, then OpenVINS's.
 IDEAL_IMU = (
     (("accelerometers", "M"), np.eye(3)),
@@ -297,15 +344,21 @@ IDEAL_IMU = (
 
 
 def refuse_imu_intrinsics(entry: dict[str, Any], where: str) -> None:
-    """Refuse IMU intrinsics other than an ideal IMU's: vical's solve would use the raw samples uncorrected.
+    """Refuse IMU intrinsics vical does not apply (all but Kalibr's ``scale-misalignment`` model's, which
+    ``read_imu_intrinsics`` reads): vical's solve would use the raw samples uncorrected.
 
     ``T_i_b`` (the IMU in the body frame) and ``time_offset`` (to the reference IMU) describe a second
     IMU of a Kalibr chain; vical calibrates one IMU, the reference (identity, 0).
     """
     model = entry.get("model", "calibrated")
-    if model not in IMU_MODELS:
-        raise KalibrFormatError(f"{where}: model {model!r} is not a Kalibr or OpenVINS IMU model {list(IMU_MODELS)}")
+    if model not in KNOWN_IMU_MODELS:
+        raise KalibrFormatError(
+            f"{where}: model {model!r} is not a Kalibr or OpenVINS IMU model {list(KNOWN_IMU_MODELS)}"
+        )
+    applied = set(INTRINSIC_KEYS) if model == "scale-misalignment" else set()  # read_imu_intrinsics reads them
     for path, ideal in IDEAL_IMU:
+        if path in applied:
+            continue
         value: Any = entry
         for key in path:
             value = value.get(key) if isinstance(value, dict) else None
@@ -316,9 +369,10 @@ def refuse_imu_intrinsics(entry: dict[str, Any], where: str) -> None:
         if not np.allclose(values, ideal, rtol=0.0, atol=1e-12):
             what = "the reference IMU's" if path[0] in ("T_i_b", "time_offset") else "an ideal IMU's"
             raise KalibrFormatError(
-                f"{where}: {name} differs from {what} ({'identity' if ideal.any() else 'zero'}); vical calibrates "
-                "one ideal IMU (no scale, misalignment, g-sensitivity or second-IMU pose) and would use the samples "
-                f"uncorrected: correct the samples with {name} first, or give an imu.yaml without it"
+                f"{where}: {name} differs from {what} ({'identity' if ideal.any() else 'zero'}); vical applies IMU "
+                "intrinsics of Kalibr's model: scale-misalignment only (no size effect, OpenVINS matrices or "
+                f"second-IMU pose) and would use the samples uncorrected: correct the samples with {name} first, or "
+                "give an imu.yaml without it"
             )
 
 

@@ -7,6 +7,9 @@ Recognised, in this order:
 3. a ROS1 bag (a file starting with ``#ROSBAG V2.0``),
 4. a corner CSV (``*.csv``), with the IMU from ``imu_csv`` (EuRoC format) when given,
 5. a folder of images (intrinsic-only: no IMU; timestamps from file order at ``rate_hz``).
+
+``open_imu`` reads an IMU-only recording (a static one, for ``vical-imu-noise``): an EuRoC folder or
+IMU CSV, or a bag's IMU topic.
 """
 
 from __future__ import annotations
@@ -18,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from vical.data import ImuSamples, Recording, Target
-from vical.io.bag import read_bag
+from vical.io.bag import read_bag, read_bag_imu
+from vical.io.checks import GYRO_UNITS
 from vical.io.csvfiles import read_corners_csv, read_imu_csv
 from vical.io.errors import FormatError, SourceSettingError
 from vical.io.euroc import find_euroc_root, read_euroc
@@ -104,3 +108,31 @@ def open_recording(
 
 def _no_imu() -> ImuSamples:
     return ImuSamples(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+
+
+def open_imu(
+    path: str | os.PathLike, imu_topic: str = "/imu0", gyro_unit: str = "rad/s", accel_unit: str = "m/s^2"
+) -> ImuSamples:
+    """The IMU samples of an IMU-only recording: an EuRoC folder (``imu0/data.csv`` in it or in its
+    ``mav0/``), an EuRoC IMU CSV, or a ROS1 bag's ``imu_topic``; no camera needed.
+
+    The gyro is read as rad/s and converted afterwards: the readers' unit check expects a calibration
+    motion, which would take a resting gyro logged in deg/s for one logged in rad/s.
+    """
+    path = Path(path)
+    if gyro_unit not in GYRO_UNITS:
+        raise FormatError(f"gyro_unit must be one of {list(GYRO_UNITS)}, got {gyro_unit!r}")
+    if not path.exists():
+        raise FormatError(f"{path} does not exist")
+    if path.is_dir():
+        csv = next((c for c in (path / "mav0" / "imu0" / "data.csv", path / "imu0" / "data.csv") if c.is_file()), None)
+        if csv is None:
+            raise FormatError(f"{path} holds no IMU CSV: neither {path}/imu0/data.csv nor {path}/mav0/imu0/data.csv")
+        imu = read_imu_csv(csv, "rad/s", accel_unit)
+    else:
+        with open(path, "rb") as f:
+            is_bag = f.read(len(BAG_MAGIC)) == BAG_MAGIC
+        if not is_bag and path.suffix.lower() != ".csv":
+            raise FormatError(f"{path} is neither an EuRoC IMU CSV (.csv), a ROS1 bag nor an EuRoC folder")
+        imu = read_bag_imu(path, imu_topic, "rad/s", accel_unit) if is_bag else read_imu_csv(path, "rad/s", accel_unit)
+    return ImuSamples(imu.t, imu.gyro * GYRO_UNITS[gyro_unit], imu.accel)

@@ -41,11 +41,14 @@ _TolerantLoader.add_constructor(
 )
 
 
-def dump_yaml(path: str | os.PathLike, data: dict[str, Any], header: str | None = None) -> None:
+def dump_yaml(
+    path: str | os.PathLike, data: dict[str, Any], *, header: str | None = None, comment: str | None = None
+) -> None:
     """Write ``data`` as block YAML with inline lists (Kalibr's look), atomically; ``header`` (e.g. OpenCV's
-    ``%YAML:1.0``) becomes the first line."""
-    text = yaml.safe_dump(data, sort_keys=False, default_flow_style=None)
-    write_text_atomic(path, text if header is None else f"{header}\n{text}")
+    ``%YAML:1.0``) becomes the first line, then ``comment``'s lines as ``# `` comments."""
+    lines = [] if header is None else [f"{header}\n"]
+    lines += [f"# {line}".rstrip() + "\n" for line in comment.splitlines()] if comment else []
+    write_text_atomic(path, "".join(lines) + yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
 
 
 def require(d: dict[str, Any], key: str, where: str, error: type[FormatError]) -> Any:

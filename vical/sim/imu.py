@@ -9,6 +9,10 @@ out instead of folding into the samples; centring keeps the samples free of a gr
 would otherwise masquerade as a camera-IMU time offset). ``docs/sensors.md`` has the measured
 effect of the choice.
 
+Intrinsics (``vical.data.ImuIntrinsics``, Kalibr's ``scale-misalignment``): the ideal readings are
+first scaled, misaligned and (gyro) made sensitive to specific force, ``M_a a`` and
+``M_g C w + A C a``.
+
 Noise (Kalibr's model, ``vical.data.ImuNoise``): per axis, the measurement is
 ``truth + bias_k + n_k`` with white ``n_k ~ N(0, density^2 * rate)`` and a bias random walk
 ``bias_{k+1} = bias_k + w_k``, ``w_k ~ N(0, random_walk^2 / rate)``; ``bias_0`` is the sensor's
@@ -22,7 +26,7 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
-from vical.data import ImuNoise, ImuSamples
+from vical.data import ImuIntrinsics, ImuNoise, ImuSamples
 from vical.sim.sampling import IMU_SAMPLING
 
 
@@ -199,6 +203,7 @@ class ImuSimulator:
         noise: Kalibr noise model (None: noise-free, bias-free samples).
         rng: generator for the noise (needed when ``noise`` is given).
         gyro_bias, accel_bias: (3,) initial biases [rad/s], [m/s^2].
+        intrinsics: the IMU's scale, misalignment and g-sensitivity (None: exact axes).
 
     Samples fall on multiples of the IMU period in the physics clock; a sample is complete once
     every reading of its window has arrived. Noise is drawn in sample order when samples are
@@ -214,8 +219,10 @@ class ImuSimulator:
         rng: np.random.Generator | None = None,
         gyro_bias: np.ndarray | None = None,
         accel_bias: np.ndarray | None = None,
+        intrinsics: ImuIntrinsics | None = None,
     ) -> None:
         self.step_ns = int(step_ns)
+        self._intrinsics = intrinsics
         self.period_steps = int(steps_per_sample)
         offsets, self._weights = window_weights(steps_per_sample, sampling)
         self._first_offset, self._last_offset = int(offsets[0]), int(offsets[-1])
@@ -277,6 +284,8 @@ class ImuSimulator:
         if self._ideal:
             ideal = np.asarray(self._ideal)
             gyro, accel = ideal[:, :3], ideal[:, 3:]
+            if self._intrinsics is not None:
+                gyro, accel = self._intrinsics.distort(gyro, accel)
             if self._noise is not None:
                 gyro, accel, _ = self._noise.apply(gyro, accel)
             self._t = np.concatenate([self._t, np.asarray(self._ideal_t, dtype=np.int64)])

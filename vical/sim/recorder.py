@@ -112,6 +112,7 @@ class SensorRecorder:
             imu_rng,
             truth.gyro_bias,
             truth.accel_bias,
+            None if truth.imu_intrinsics.is_identity() else truth.imu_intrinsics,
         )
         if self.render is not None:
             self.render.set_camera(truth.camera)

@@ -1,4 +1,4 @@
-"""Per-episode sensor sampling: camera intrinsics, camera-IMU extrinsic, time offset, IMU noise.
+"""Per-episode sensor sampling: camera intrinsics, camera-IMU extrinsic, time offset, IMU noise and intrinsics.
 
 The distributions mirror ``conf/sensor/paper.yaml`` (the paper's simulation settings). Every
 draw goes through an explicit ``numpy.random.Generator``; the result is a ``SensorTruth`` that
@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from vical.config import ConfigError, from_mapping, require, require_range
-from vical.data import ImuNoise, SensorTruth
+from vical.data import ImuIntrinsics, ImuNoise, SensorTruth
 from vical.geometry import (
     CAMERA_MODELS,
     CameraModel,
@@ -32,6 +32,9 @@ from vical.geometry import (
 from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
 
 NOISE_UNITS = ("continuous", "discrete")
+INTRINSIC_STDS = (
+    "accel_scale_std", "accel_misalignment_std", "gyro_scale_std", "gyro_misalignment_std", "g_sensitivity_std"
+)  # fmt: skip
 IMU_SAMPLING = ("average", "instant")
 CAMERA_BACKENDS = ("project", "render")
 # Redraws of a camera whose distortion folds over inside the image before giving up.
@@ -140,6 +143,12 @@ class ImuSampling:
         gyro_noise, gyro_random_walk: gyro noise (rad/s based units above).
         accel_bias_std: sigma of the initial accelerometer bias [m/s^2] (0: no bias).
         gyro_bias_std: sigma of the initial gyro bias [rad/s] (0: no bias).
+        accel_scale_std, gyro_scale_std: sigma of the scale factors' departure from 1 [-].
+        accel_misalignment_std: sigma of the accelerometer's axis misalignments [rad].
+        gyro_misalignment_std: sigma of the gyro's axis misalignments and of each component of
+            its rotation from the IMU frame [rad].
+        g_sensitivity_std: sigma of each entry of the gyro's g-sensitivity [(rad/s)/(m/s^2)].
+            All five 0 (the default): exact axes, and nothing is drawn (``vical.data.ImuIntrinsics``).
     """
 
     rate_hz: float = 200.0
@@ -151,6 +160,11 @@ class ImuSampling:
     gyro_random_walk: float = 0.000038785
     accel_bias_std: float = 0.0
     gyro_bias_std: float = 0.0
+    accel_scale_std: float = 0.0
+    accel_misalignment_std: float = 0.0
+    gyro_scale_std: float = 0.0
+    gyro_misalignment_std: float = 0.0
+    g_sensitivity_std: float = 0.0
 
     def __post_init__(self) -> None:
         key = "sensor.imu"
@@ -161,6 +175,16 @@ class ImuSampling:
             require_range(f"{key}.{name}", getattr(self, name), 0.0)
         require_range(f"{key}.accel_bias_std", self.accel_bias_std, 0.0)
         require_range(f"{key}.gyro_bias_std", self.gyro_bias_std, 0.0)
+        for name in INTRINSIC_STDS:
+            require_range(f"{key}.{name}", getattr(self, name), 0.0, 0.1)
+
+    def intrinsics_spread(self) -> np.ndarray:
+        """(24,) sigmas of ``ImuIntrinsics.vector(g_sensitivity=True)``."""
+        return np.repeat(
+            [self.accel_scale_std, self.accel_misalignment_std, self.gyro_scale_std, self.gyro_misalignment_std,
+             self.gyro_misalignment_std, self.g_sensitivity_std],
+            [3, 3, 3, 3, 3, 9],
+        )  # fmt: skip
 
     def kalibr_noise(self) -> ImuNoise:
         """The noise model as Kalibr densities (converting per-sample sigmas when ``discrete``)."""
@@ -276,15 +300,19 @@ def sample_imu_pose(cfg: ExtrinsicSampling, rng: np.random.Generator) -> np.ndar
 
 
 def sample_sensor(cfg: SensorSampling, rng: np.random.Generator, asymmetric: bool = False) -> SensorTruth:
-    """Draw one sensor (camera, extrinsic, time offset, initial IMU biases) from ``cfg``.
+    """Draw one sensor (camera, extrinsic, time offset, initial IMU biases, IMU intrinsics) from ``cfg``.
 
-    The draws happen in a fixed order, so one seed gives one sensor.
+    The draws happen in a fixed order, so one seed gives one sensor; the IMU intrinsics are drawn
+    last and only when their spread is not zero, so configurations without them give the sensors
+    they always gave.
     """
     camera = sample_camera(cfg.camera, rng, asymmetric)
     T_body_imu = sample_imu_pose(cfg.extrinsic, rng)
     time_offset = cfg.time_offset.draw(rng)
     gyro_bias = cfg.imu.gyro_bias_std * rng.standard_normal(3)
     accel_bias = cfg.imu.accel_bias_std * rng.standard_normal(3)
+    spread = cfg.imu.intrinsics_spread()
+    intrinsics = ImuIntrinsics.from_vector(spread * rng.standard_normal(24)) if spread.any() else ImuIntrinsics()
     return SensorTruth(
         camera=camera,
         T_cam_imu=cam_imu_from_body_imu(T_body_imu),
@@ -292,6 +320,7 @@ def sample_sensor(cfg: SensorSampling, rng: np.random.Generator, asymmetric: boo
         imu_noise=cfg.imu.kalibr_noise(),
         gyro_bias=gyro_bias,
         accel_bias=accel_bias,
+        imu_intrinsics=intrinsics,
     )
 
 
