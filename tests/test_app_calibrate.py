@@ -3,6 +3,7 @@ the data do not support (a gyro logged in deg/s) fails with its cause; --out is 
 
 import numpy as np
 import pytest
+import yaml
 
 from vical.apps.calibrate import main
 from vical.calib.checks import check_memory
@@ -58,11 +59,18 @@ def test_intrinsic_then_extrinsic_with_the_written_camchain(recording_dir, tmp_p
     assert np.abs(camera.intrinsics - rec.truth.camera.intrinsics).max() < 3.0
     known = tmp_path / "known.yaml"
     write_camchain_imucam(known, rec.truth.camera, None, None)
+    # keys vical does not interpret, in the camera's section and beside it, come through to the result
+    given = yaml.safe_load(known.read_text())
+    given["cam0"].update(camera_name="left", rostopic="/left/image_raw")
+    known.write_text(yaml.safe_dump({**given, "rig_serial": "B-0042"}, sort_keys=False))
     argv = [str(path), "--task", "extrinsic", "--intrinsics", str(known), "--out", str(tmp_path / "b"), "--no-report"]
     assert main(argv) == 0
     _, T_cam_imu, shift = read_camchain(tmp_path / "b" / "camchain-imucam.yaml")
     assert np.rad2deg(transform_error(T_cam_imu, rec.truth.T_cam_imu)[0]) < 0.5
     assert abs(shift - 0.012) < 0.001
+    written = yaml.safe_load((tmp_path / "b" / "camchain-imucam.yaml").read_text())
+    assert written["rig_serial"] == "B-0042" and written["cam0"]["camera_name"] == "left"
+    assert written["cam0"]["rostopic"] == "/left/image_raw"
 
 
 def test_errors_exit_with_status_2_and_a_message(recording_dir, tmp_path, capsys):

@@ -49,6 +49,7 @@ from vical.apps.calibrate_rig import (
     camera_list,
     check_chain_topics,
     image_topics,
+    rig_chain,
     rig_image_size,
     rig_problems,
     select_cameras,
@@ -88,7 +89,7 @@ from vical.io.kalibr import (
     write_camchain_imucam,
     write_imu_yaml,
 )
-from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain
+from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain, write_chain
 from vical.io.sources import detect_source, open_recording
 from vical.io.yamlfile import load_mapping
 
@@ -411,7 +412,7 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     failure = (
         f"the calibration failed: {'; '.join(problems)}; {_cause(result, rec.frames, rec, args)}" if problems else None
     )
-    _write_outputs(out, result, rec, args, noise, failure)
+    _write_outputs(out, result, rec, args, noise, failure, chain)
     if failure:
         raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
     return result
@@ -521,19 +522,31 @@ def _cause(result: CalibrationResult, frames, rec: Recording, args) -> str:
 
 
 def _write_outputs(
-    out: Path, result: CalibrationResult, rec: Recording, args, noise: ImuNoise | None, failure: str | None
+    out: Path,
+    result: CalibrationResult,
+    rec: Recording,
+    args,
+    noise: ImuNoise | None,
+    failure: str | None,
+    given: CameraChain | None = None,
 ) -> None:
-    """Write every output into ``out`` at once (replacing it whole), then print the summary."""
+    """Write every output into ``out`` at once (replacing it whole), then print the summary.
+
+    With an ``--intrinsics`` camchain ``given``, the written camchain keeps its other keys and spelling.
+    """
     errors = calibration_errors(result, rec.truth) if rec.truth is not None else None
     name = "camchain.yaml" if noise is None else "camchain-imucam.yaml"
     if failure:  # kept for diagnosis under a name no tool reads as a result
         name = name.replace(".yaml", ".failed.yaml")
     try:
         with atomic_directory(out, overwrite=out.exists()) as tmp:
-            if noise is None:
+            if given is not None:
+                write_chain(tmp / name, rig_chain({"cam0": result}, rec, given))
+            elif noise is None:
                 write_camchain_imucam(tmp / name, result.camera, None, None)
-            else:
-                write_camchain_imucam(tmp / name, result.camera, result.T_cam_imu, result.time_offset)
+            if noise is not None:
+                if given is None:
+                    write_camchain_imucam(tmp / name, result.camera, result.T_cam_imu, result.time_offset)
                 write_imu_yaml(tmp / "imu.yaml", noise, intrinsics=result.imu_intrinsics)
             write_results_text(tmp / "results.txt", result, errors, failure)
             write_frames_csv(tmp / "frames.csv", result.frame_log)

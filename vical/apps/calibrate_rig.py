@@ -294,7 +294,7 @@ def write_rig_outputs(
         with atomic_directory(out, overwrite=out.exists()) as tmp:
             write_chain(tmp / name, chain)
             if noise is not None:
-                write_imu_yaml(tmp / "imu.yaml", noise)
+                write_imu_yaml(tmp / "imu.yaml", noise, intrinsics=next(iter(results.values())).imu_intrinsics)
             write_text_atomic(tmp / "results.txt", rig_results_text(results, errors, chain, rec, args.task, failure))
             if not args.no_report:
                 for camera, result in results.items():
