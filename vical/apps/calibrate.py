@@ -56,7 +56,7 @@ from vical.apps.calibrate_rig import (
     topic_list,
     write_rig_outputs,
 )
-from vical.apps.cli import ArgumentParser, OutputError, cannot_write, one_line_warnings, report_error
+from vical.apps.cli import ArgumentParser, OutputError, argparse_main, cannot_write
 from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
 from vical.calib.board_size import MAX_SAMPLE, board_size_hint
 from vical.calib.calibrate import (
@@ -75,7 +75,6 @@ from vical.calib.plausibility import gyro_scale, implausibilities, likely_gyro_u
 from vical.calib.report import summary_table, write_frames_csv, write_report, write_results_text
 from vical.calib.result import CalibrationResult
 from vical.calib.visual_inertial import ViOptions
-from vical.config import SettingError
 from vical.data import DataError, ImuNoise, Recording, Target
 from vical.data.target import TargetError
 from vical.geometry import CAMERA_MODELS, CameraModel, CameraModelError
@@ -563,25 +562,10 @@ def _write_outputs(
     print(f"outputs written to {out}")
 
 
-def _message(err: Exception) -> str:
-    """The error's message, with the settings it names spelled as this command line's flags."""
-    return err.with_flags(FLAGS) if isinstance(err, SettingError) else str(err)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the exit status (0 ok, 2 bad input or failed calibration)."""
-    one_line_warnings()
-    try:
-        args = build_parser().parse_args(argv)
-    except SystemExit as done:  # --help (0), or a bad argument whose line argparse printed (2)
-        return int(done.code or 0)
-    try:
-        run(args)
-    except (CalibrationError, FormatError, DataError, TargetError, CameraModelError, OutputError) as exc:
-        return report_error(APP, _message(exc))
-    except OSError as exc:  # a file the readers could not open: the path and the reason, without [Errno N]
-        return report_error(APP, f"{exc.filename}: {(exc.strerror or str(exc)).lower()}")
-    return 0
+    errors = (CalibrationError, FormatError, DataError, TargetError, CameraModelError, OutputError)
+    return argparse_main(APP, build_parser(), run, errors, FLAGS, argv)
 
 
 if __name__ == "__main__":

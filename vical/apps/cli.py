@@ -26,7 +26,7 @@ from hydra.errors import HydraException, OverrideParseException
 from omegaconf import DictConfig
 from omegaconf.errors import OmegaConfBaseException
 
-from vical.config import ConfigError
+from vical.config import ConfigError, SettingError
 
 EXIT_USER_ERROR = 2
 
@@ -58,6 +58,34 @@ def cannot_write(flag: str, out: str | os.PathLike, err: OSError) -> str:
     what = "it" if err.filename is None or Path(err.filename) == Path(out) else str(err.filename)
     reason = (err.strerror or str(err)).lower()
     return f"{flag} {out}: cannot write {what} ({reason}); choose another directory"
+
+
+def argparse_main(
+    app: str,
+    parser: argparse.ArgumentParser,
+    run: Callable[[argparse.Namespace], Any],
+    errors: tuple[type[Exception], ...],
+    flags: dict[str, str],
+    argv: list[str] | None,
+) -> int:
+    """The console entry point of an argparse command: exit status 0, or 2 with one line on stderr.
+
+    ``errors`` are the refusals whose message is the user's to read, settings they name spelled as the
+    command's ``flags`` (``vical.config.SettingError``); a file the readers could not open gives its path
+    and the reason, without Python's ``[Errno N]``.
+    """
+    one_line_warnings()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # --help (0), or a bad argument whose line argparse printed (2)
+        return int(done.code or 0)
+    try:
+        run(args)
+    except errors as exc:
+        return report_error(app, exc.with_flags(flags) if isinstance(exc, SettingError) else str(exc))
+    except OSError as exc:
+        return report_error(app, f"{exc.filename}: {(exc.strerror or str(exc)).lower()}")
+    return 0
 
 
 def _one_line(message, category, filename, lineno, line=None) -> str:

@@ -34,7 +34,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from vical.apps.calibrate import _number, check_out
-from vical.apps.cli import ArgumentParser, OutputError, cannot_write, one_line_warnings, report_error
+from vical.apps.cli import ArgumentParser, OutputError, argparse_main, cannot_write
 from vical.calib.allan import (
     AXES,
     AxisNoise,
@@ -46,7 +46,6 @@ from vical.calib.allan import (
     sample_rate,
 )
 from vical.calib.allan_plot import write_allan_png
-from vical.config import SettingError
 from vical.data import NS_PER_S, DataError, ImuNoise, ImuSamples
 from vical.io.atomic import atomic_directory
 from vical.io.errors import FormatError
@@ -202,27 +201,10 @@ def run(args: argparse.Namespace) -> NoiseIdentification:
     return result
 
 
-def _message(err: Exception) -> str:
-    """The error's message, with a fix it names spelled as this command line's flag."""
-    if isinstance(err, SettingError) and err.setting in FLAGS:
-        return err.spelled(f"{FLAGS[err.setting]} {err.cli_value}")
-    return str(err)
-
-
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the exit status (0 ok, 2 bad input)."""
-    one_line_warnings()
-    try:
-        args = build_parser().parse_args(argv)
-    except SystemExit as done:  # --help (0), or a bad argument whose line argparse printed (2)
-        return int(done.code or 0)
-    try:
-        run(args)
-    except (NoiseIdentificationError, FormatError, DataError, OutputError) as exc:
-        return report_error(APP, _message(exc))
-    except OSError as exc:  # a file the readers could not open: the path and the reason, without [Errno N]
-        return report_error(APP, f"{exc.filename}: {(exc.strerror or str(exc)).lower()}")
-    return 0
+    errors = (NoiseIdentificationError, FormatError, DataError, OutputError)
+    return argparse_main(APP, build_parser(), run, errors, FLAGS, argv)
 
 
 if __name__ == "__main__":
