@@ -13,8 +13,9 @@ import numpy as np
 from test_io_samples import make_recording
 
 from vical.apps.export import kalibr_commands, main
-from vical.data import CameraFrames
+from vical.data import CameraFrames, ImuIntrinsics
 from vical.io import open_recording, read_camchain, read_imu_yaml, read_target_yaml, save_recording
+from vical.io.kalibr import read_imu_intrinsics
 
 
 def test_export_writes_kalibr_inputs_that_read_back(tmp_path, capsys):
@@ -35,7 +36,21 @@ def test_export_writes_kalibr_inputs_that_read_back(tmp_path, capsys):
         assert np.array_equal(back.imu.t, rec.imu.t) and np.array_equal(back.imu.gyro, rec.imu.gyro)
     printed = capsys.readouterr().out
     assert f"kalibr_calibrate_imu_camera --bag {out / 'data.bag'} --cams {out / 'camchain.yaml'}" in printed
-    assert "--time-calibration" in printed
+    assert "--time-calibration" in printed and "--imu-models" not in printed
+    assert not (out / "imu-truth.yaml").exists()  # an exact IMU: nothing more to compare
+
+
+def test_an_imu_with_intrinsics_exports_their_truth_and_has_kalibr_estimate_them(tmp_path, capsys):
+    rec = make_recording()
+    intrinsics = ImuIntrinsics.from_vector(np.r_[0.01, -0.005, 0.002, np.radians([0.3, -0.2, 0.1]), np.zeros(9)])
+    rec = replace(rec, truth=replace(rec.truth, imu_intrinsics=intrinsics))
+    save_recording(rec, tmp_path / "rec")
+    out = tmp_path / "kalibr_in"
+    assert main([str(tmp_path / "rec"), "--out", str(out)]) == 0
+    assert read_imu_yaml(out / "imu.yaml") == rec.truth.imu_noise  # Kalibr's input: the noise only
+    assert read_imu_intrinsics(out / "imu.yaml") is None
+    np.testing.assert_array_equal(read_imu_intrinsics(out / "imu-truth.yaml").M_accel, intrinsics.M_accel)
+    assert "--time-calibration --imu-models scale-misalignment" in capsys.readouterr().out
 
 
 def test_export_refuses_recordings_without_images_and_full_outputs(tmp_path, capsys):

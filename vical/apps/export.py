@@ -49,18 +49,24 @@ KALIBR_MODELS = {"radtan": "pinhole-radtan", "equidistant": "pinhole-equi", "ds"
 
 
 def kalibr_commands(
-    out: Path, has_truth: bool, image_topic: str = "/cam0/image_raw", distortion: str = "radtan"
+    out: Path,
+    has_truth: bool,
+    image_topic: str = "/cam0/image_raw",
+    distortion: str = "radtan",
+    imu_model: str = "calibrated",
 ) -> list[str]:
     """The Kalibr command lines for the exported files (camera first, then camera-IMU).
 
-    Without the truth, the camera-IMU step takes the camera calibration Kalibr's first step writes.
+    Without the truth, the camera-IMU step takes the camera calibration Kalibr's first step writes;
+    ``imu_model`` ``scale-misalignment`` (an IMU with intrinsics) has Kalibr estimate them.
     """
+    imu_models = "" if imu_model == "calibrated" else f" --imu-models {imu_model}"
     cams = out / "camchain.yaml" if has_truth else Path(kalibr_result_name("camchain", out / "data.bag"))
     return [
         f"kalibr_calibrate_cameras --bag {out / 'data.bag'} --topics {image_topic} "
         f"--models {KALIBR_MODELS[distortion]} --target {out / 'target.yaml'}",
         f"kalibr_calibrate_imu_camera --bag {out / 'data.bag'} --cams {cams} --imu {out / 'imu.yaml'} "
-        f"--target {out / 'target.yaml'} --time-calibration",
+        f"--target {out / 'target.yaml'} --time-calibration{imu_models}",
     ]
 
 
@@ -92,6 +98,10 @@ def export(rec: Recording, out: Path, image_topic: str, imu_topic: str, overwrit
         path = out / "camchain-imucam-truth.yaml"
         write_camchain_imucam(path, truth.camera, truth.T_cam_imu, truth.time_offset, rostopic=image_topic)
         written += [out / "camchain.yaml", path]
+        if not truth.imu_intrinsics.is_identity():  # the truth to compare Kalibr's scale-misalignment result with
+            path = out / "imu-truth.yaml"
+            write_imu_yaml(path, noise, rostopic=imu_topic, intrinsics=truth.imu_intrinsics)
+            written.append(path)
     return written
 
 
@@ -119,7 +129,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {path}")
     print("Kalibr, on a machine with Kalibr installed:")
     distortion = rec.truth.camera.distortion if rec.truth is not None else "radtan"
-    for command in kalibr_commands(out, rec.truth is not None, args.image_topic, distortion):
+    exact = rec.truth is None or rec.truth.imu_intrinsics.is_identity()
+    imu_model = "calibrated" if exact else "scale-misalignment"
+    for command in kalibr_commands(out, rec.truth is not None, args.image_topic, distortion, imu_model):
         print(f"  {command}")
     return 0
 
