@@ -128,3 +128,9 @@ def test_ray_actors_give_the_local_processes_parameters(tmp_path):
 def test_bad_num_envs_is_refused_by_key(tmp_path, num_envs):
     with pytest.raises(ConfigError, match=r"train\.num_envs"):
         train(vector_config(tmp_path / "run", num_envs=num_envs))
+
+
+@pytest.mark.parametrize("policy_lag", [0, 65, 2.0])
+def test_bad_policy_lag_is_refused_by_key(tmp_path, policy_lag):
+    with pytest.raises(ConfigError, match=r"train\.policy_lag"):
+        train(vector_config(tmp_path / "run", policy_lag=policy_lag))

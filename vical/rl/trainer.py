@@ -37,6 +37,9 @@ log = logging.getLogger(__name__)
 CHECKPOINT = "checkpoint.pt"  # latest episode-boundary checkpoint: what resume=<run dir> continues from
 LAST_GOOD = "last_good.pt"  # state just before a non-finite loss/observation, for inspection
 AGENT = "agent.pt"  # final networks + agent config, for evaluation and deployment
+# A policy version is kept per round of lag (a copy of the policy network): beyond this, memory grows for no gain
+# (4 rounds already keep 2 workers busy, docs/scaling.md).
+MAX_POLICY_LAG = 64
 EVAL_SEED_OFFSET = 1_000_000  # evaluation episodes reset with seed + offset + i: the same starts every time
 
 
@@ -64,6 +67,9 @@ class TrainConfig:
             _require_int(f"train.{name}", getattr(self, name), 1)
         _require_int("train.num_envs", self.num_envs, 1)
         _require_int("train.policy_lag", self.policy_lag, 1)
+        require(
+            self.policy_lag <= MAX_POLICY_LAG, "train.policy_lag", f"at most {MAX_POLICY_LAG} rounds", self.policy_lag
+        )
         require(
             self.num_envs <= MAX_WORKERS, "train.num_envs", f"at most {MAX_WORKERS} (worker processes)", self.num_envs
         )
