@@ -103,3 +103,11 @@ def test_tasks_run_on_a_local_ray_instance_in_order(local_ray):
 def test_a_task_error_on_ray_reaches_the_caller(local_ray):
     with pytest.raises(ValueError, match="task 3 cannot be done"):
         list(imap_ordered(fail_on_three, range(6), local_ray))
+
+
+def test_errors_while_other_tasks_finish_leave_the_caller_running(local_ray):
+    # Tasks that finish as the error reaches the caller: cancelling them could abort this process inside Ray.
+    for _ in range(12):
+        with pytest.raises(ValueError, match="task 3 cannot be done"):
+            list(imap_ordered(fail_on_three, range(10), local_ray))
+    assert list(imap_ordered(fail_on_three, range(3), local_ray)) == [0, 1, 2]

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import collections
 import contextlib
+import itertools
 import multiprocessing
 import os
 import socket
@@ -20,6 +22,8 @@ MAX_WORKERS = 1024  # more processes than any machine or allocation this runs on
 BACKENDS = ("local", "ray")
 RAY_CONNECT_TIMEOUT_S = 3.0  # an address that does not answer within this is refused (never a hang)
 RAY_DEFAULT_PORTS = {"ray": 10001, "": 6379}  # Ray client (ray://) and GCS ports
+# Tasks submitted ahead per worker: a slow task holds back the yield of later ones, not their running.
+RAY_WINDOW_PER_WORKER = 4
 
 
 class WorkerCrashed(RuntimeError):
@@ -66,8 +70,8 @@ class ParallelConfig:
 def imap_ordered(fn: Callable[[Any], Any], tasks: Sequence[Any], config: ParallelConfig) -> Iterator[Any]:
     """``fn(task)`` for every task, yielded in task order as soon as each (and all before it) is done.
 
-    An exception of ``fn`` is re-raised here (the remaining tasks are cancelled); a worker process
-    that dies raises ``WorkerCrashed``.
+    An exception of ``fn`` is re-raised here (tasks not started are dropped, running ones finish first);
+    a worker process that dies raises ``WorkerCrashed``.
     """
     if config.serial:
         return (fn(task) for task in tasks)
@@ -126,21 +130,30 @@ def worker_environment() -> dict[str, str]:
 
 # ------------------------------------------------------------------------------------------------ Ray
 def _ray_imap(fn: Callable[[Any], Any], tasks: Sequence[Any], config: ParallelConfig) -> Iterator[Any]:
+    # Tasks are submitted a window ahead and never cancelled: ray.cancel on a task that finishes at that
+    # moment can abort the calling process (a failed check in Ray's task manager, seen with Ray 2.60).
+    # A stopped iteration waits for the window's tasks instead, as the local pool waits for its running ones.
     ray = connect_ray(config)
     remote = ray.remote(num_cpus=1, max_retries=0)(fn)
-    refs = [remote.remote(task) for task in tasks]
+    upcoming = iter(enumerate(tasks))
+    ahead = RAY_WINDOW_PER_WORKER * config.workers
+    window = collections.deque((index, remote.remote(task)) for index, task in itertools.islice(upcoming, ahead))
     try:
-        for index, ref in enumerate(refs):
+        while window:
+            index, ref = window[0]
             try:
-                yield ray.get(ref)
+                result = ray.get(ref)
             except ray.exceptions.WorkerCrashedError as err:
                 raise WorkerCrashed(
                     f"a Ray worker died (killed, or out of memory) while task {index} of {len(tasks)} ran; "
                     "start the run again"
                 ) from err
+            window.popleft()
+            window.extend((i, remote.remote(task)) for i, task in itertools.islice(upcoming, 1))
+            yield result
     finally:
-        for ref in refs:
-            ray.cancel(ref, force=True)
+        if window:
+            ray.wait([ref for _, ref in window], num_returns=len(window))
 
 
 def import_ray():

@@ -210,7 +210,12 @@ class RayWorkers:
             raise WorkerError(f"env worker {i} raised:\n{err}") from err
 
     def close(self, kill: bool = False) -> None:
-        """Kill the actors (an actor holds nothing that needs closing beyond its process)."""
+        """Kill the actors (an actor holds nothing that needs closing beyond its process).
+
+        Unless ``kill``, the commands still running are answered first (at most ``CLOSE_TIMEOUT_S``).
+        """
+        if self._pending and not kill:
+            self._ray.wait(list(self._pending), num_returns=len(self._pending), timeout=CLOSE_TIMEOUT_S)
         for actor in self.actors:
             self._ray.kill(actor)
 
