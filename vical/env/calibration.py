@@ -28,6 +28,7 @@ from vical.calib.aprilgrid import detect_aprilgrid
 from vical.calib.detection import detect_checkerboard
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask, run_task
+from vical.config import ConfigError
 from vical.data import Recording, SensorTruth
 from vical.env.actions import action_to_step
 from vical.env.config import MdpConfig
@@ -45,6 +46,18 @@ OBS_SIZE = 24  # the coverage state: 18 coverage terms and the pose offset
 INFO_OBS_SIZE = len(GROUPS) + 7  # the information state: a value per group, the pose offset, the step fraction
 
 
+def mixed_tasks(task_mix: Mapping[str, Mapping[str, Any]] | None) -> list[CalibrationTask]:
+    """The tasks of ``env.task_mix`` (None or empty: none)."""
+    if not task_mix:
+        return []
+    if not isinstance(task_mix, Mapping):
+        raise ConfigError(
+            f"env.task_mix must map task names to task configs (e.g. /task@env.task_mix.intrinsic: intrinsic "
+            f"in the defaults), got {task_mix!r}"
+        )
+    return [CalibrationTask.from_config(task) for task in task_mix.values()]
+
+
 class CalibrationEnv(gym.Env):
     """The calibration MDP (``conf/env/calibration.yaml``).
 
@@ -52,14 +65,24 @@ class CalibrationEnv(gym.Env):
         sim: the ``sim`` config group (``vical.sim.SimConfig``).
         sensor: the ``sensor`` config group (``vical.sim.sampling.SensorSampling``).
         task: the ``task`` config group (``vical.calib.tasks.CalibrationTask``).
+        task_mix: more tasks by name (each a ``task`` config group): every episode draws its task
+            from ``task`` and these with equal probability, so that one policy learns them all.
         **mdp: the MDP constants (``vical.env.config.MdpConfig``).
     """
 
     metadata: ClassVar[dict] = {"render_modes": []}
 
-    def __init__(self, sim: Mapping[str, Any], sensor: Mapping[str, Any], task: Mapping[str, Any], **mdp: Any) -> None:
+    def __init__(
+        self,
+        sim: Mapping[str, Any],
+        sensor: Mapping[str, Any],
+        task: Mapping[str, Any],
+        task_mix: Mapping[str, Mapping[str, Any]] | None = None,
+        **mdp: Any,
+    ) -> None:
         self.config = MdpConfig.from_config(mdp)
-        self.task = CalibrationTask.from_config(task)
+        self.tasks = [CalibrationTask.from_config(task), *mixed_tasks(task_mix)]
+        self.task = self.tasks[0]
         self.sampling = SensorSampling.from_config(sensor)
         self.sim = PandaSim(SimConfig.from_mapping(sim))
         self.target = self.sim.cfg.board.target
@@ -91,6 +114,8 @@ class CalibrationEnv(gym.Env):
         if stream < 0:
             raise ValueError(f"options['noise_stream'] must be an integer >= 0, got {stream}")
         sim_seed, sensor_seed, noise_seed = self.np_random.integers(2**63 - 1, size=3)
+        if len(self.tasks) > 1:  # drawn after the seeds: a single task's episodes are unchanged
+            self.task = self.tasks[int(self.np_random.integers(len(self.tasks)))]
         self.sim.reset(seed=int(sim_seed))
         self.truth = sample_sensor(
             self.sampling, np.random.default_rng(sensor_seed), asymmetric=self.task.asymmetric_distortion
