@@ -131,6 +131,38 @@ def test_the_intrinsic_task_tracks_the_camera_only():
         env.close()
 
 
+def test_a_task_mix_draws_each_episodes_task_by_its_seed():
+    """``+experiment=train_information_policy_mix``: joint and intrinsic episodes, the same task for the same seed."""
+    env = make_env(composed("train", ["+experiment=train_information_policy_mix"])["env"])
+    single = information_env("joint")
+    try:
+        drawn = {}
+        for seed in range(8):
+            obs, info = env.reset(seed=seed)
+            drawn[seed] = env.task.name
+            tracked = {k.removeprefix("information/").removesuffix("_ratio") for k in info if "ratio" in k}
+            assert tracked == (set(GROUPS) if env.task.name == "joint" else set(GROUPS[:3]))
+            assert np.all(obs[3:6] > 0.0) == (env.task.name == "joint")  # the intrinsic task leaves them at 0
+            assert env.recording().metadata["task"] == env.task.name
+            if env.task.name == "joint":  # the task is drawn after the seeds: the sensor is the single task's
+                single.reset(seed=seed)
+                assert env.truth.camera == single.truth.camera
+        assert set(drawn.values()) == {"joint", "intrinsic"}
+        assert [(env.reset(seed=s), env.task.name)[1] for s in drawn] == list(drawn.values())
+    finally:
+        env.close()
+        single.close()
+
+
+def test_a_task_mix_that_is_not_a_mapping_of_tasks_is_refused_by_key():
+    with pytest.raises(InstantiationException, match=r"env\.task_mix must map task names") as raised:
+        information_env("joint", "+env.task_mix=[intrinsic]")
+    assert isinstance(raised.value.__cause__, ConfigError)
+    with pytest.raises(InstantiationException, match=r"task\.calibrate") as raised:
+        information_env("joint", "+env.task_mix={other: {name: other, calibrate: fisheye}}")
+    assert isinstance(raised.value.__cause__, ConfigError)
+
+
 @pytest.mark.parametrize(
     "override, key",
     [
