@@ -1,8 +1,9 @@
 """The paper's error metrics and the absolute errors, on hand-computed cases."""
 
 import numpy as np
+import pytest
 
-from vical.calib.metrics import calibration_errors, extrinsic_relative_error, intrinsic_relative_error
+from vical.calib.metrics import calibration_errors, extrinsic_relative_error, group_errors_px, intrinsic_relative_error
 from vical.calib.result import CalibrationResult, ResidualStats
 from vical.data import SensorTruth
 from vical.geometry import CameraModel, euler_to_matrix, make_transform
@@ -14,6 +15,20 @@ def test_intrinsic_relative_error_is_the_norm_of_fx_fy_cx_cy():
     expected = 100 * 5.0 / np.linalg.norm([500, 500, 320, 240])
     assert np.isclose(intrinsic_relative_error(est, truth), expected)
     assert intrinsic_relative_error(truth, truth) == 0.0
+
+
+def test_group_errors_of_focal_length_principal_point_and_distortion_at_the_corner():
+    truth = CameraModel("radtan", 640, 480, 500.0, 510.0, 320.0, 240.0, np.array([-0.2, 0.05, 0.0, 0.0]))
+    est = truth.with_intrinsics(500.3, 509.6, 320.6, 240.8, truth.dist + [1e-4, 0.0, 0.0, 0.0])
+    errors = group_errors_px(est, truth)
+    assert errors["focal"] == pytest.approx(0.5) and errors["principal_point"] == pytest.approx(1.0)
+    # k1 adds x r^2 dk1 to the normalised corner (x, y): (fx x, fy y) r^2 dk1 in px, to first order
+    x, y = 319.0 / 500.0, 239.0 / 510.0
+    r2 = x * x + y * y
+    expected = np.hypot(500.0 * x, 510.0 * y) * r2 * 1e-4
+    assert errors["distortion"] == pytest.approx(expected, rel=1e-3)
+    fisheye = CameraModel("equidistant", 640, 480, 500.0, 510.0, 320.0, 240.0)
+    assert group_errors_px(fisheye, truth)["distortion"] is None  # coefficients of another model: not comparable
 
 
 def test_extrinsic_relative_error_of_the_12_vector():

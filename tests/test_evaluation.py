@@ -48,6 +48,8 @@ def test_rows_and_summary_hold_the_episodes_real_values():
     assert row.score_pct == pytest.approx(outcome.score, rel=1e-6)
     assert row.intrinsic_pct == row.score_pct
     assert row.intrinsic_px == pytest.approx(np.linalg.norm(outcome.errors.intrinsic_abs_px), rel=1e-6)
+    assert np.hypot(row.focal_px, row.principal_point_px) == pytest.approx(row.intrinsic_px, rel=1e-6)
+    assert 0.0 < row.distortion_px < 5.0
     assert row.extrinsic_pct is None and row.rotation_deg is None and row.time_offset_ms is None
     assert 0.0 < row.calib_time_s < 10.0
     summary = summarize("x", rows)

@@ -89,6 +89,31 @@ def parameter_errors(
     )
 
 
+def corner_ray(camera: CameraModel) -> np.ndarray:
+    """(1, 3) the ray ``camera`` images at its image corner; for a wide-angle lens whose image circle leaves the
+    corner dark, at the right edge: where the distortion moves a point farthest."""
+    if camera.is_wide_angle:
+        right = camera.width - 1.0
+        rays, seen = camera.bearings(np.array([[right, camera.height - 1.0], [right, camera.cy]]))
+        return rays[:1] if seen[0] else rays[1:]
+    return np.array([[(camera.width - 1 - camera.cx) / camera.fx, (camera.height - 1 - camera.cy) / camera.fy, 1.0]])
+
+
+def group_errors_px(camera: CameraModel, truth: CameraModel) -> dict[str, float | None]:
+    """The intrinsic parameter groups' errors [px]: ``focal`` (norm of the fx, fy errors), ``principal_point``
+    (cx, cy) and ``distortion``: how far the estimated coefficients move the image corner from where the true
+    ones image its ray, with the true focal lengths and principal point (None for another camera model)."""
+    d = camera.intrinsics[:4] - truth.intrinsics[:4]
+    distortion = None
+    if camera.distortion == truth.distortion:
+        ray = corner_ray(truth)
+        true_uv, _ = truth.project(ray)
+        estimated_uv, seen = truth.with_intrinsics(truth.fx, truth.fy, truth.cx, truth.cy, camera.dist).project(ray)
+        distortion = float(np.linalg.norm(estimated_uv[0] - true_uv[0])) if seen[0] else float("inf")
+    focal, principal_point = float(np.hypot(d[0], d[1])), float(np.hypot(d[2], d[3]))
+    return {"focal": focal, "principal_point": principal_point, "distortion": distortion}
+
+
 def image_differences_px(camera: CameraModel, truth: CameraModel, step: float = 8.0) -> np.ndarray:
     """Distances (N,) [px] between where ``truth`` and ``camera`` image the same rays, over the image.
 

@@ -34,6 +34,7 @@ from scipy.stats import chi2
 from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
 from vical.calib.initialization import MIN_INIT_CORNERS, pnp
+from vical.calib.metrics import corner_ray
 from vical.calib.observations import FrameObservation
 from vical.calib.outliers import robust_sigma_of_norms
 from vical.data import ImuNoise, ImuSamples, Target
@@ -284,12 +285,7 @@ class InformationTracker:
     def _distortion_px(self, cov: np.ndarray) -> float:
         """1-sigma [px] of the distortion's displacement at the image corner (RMS over the two axes; a wide-angle
         lens whose image circle leaves the corner dark: at the right edge)."""
-        cam = self.guess.camera
-        corner = np.array([[(cam.width - 1 - cam.cx) / cam.fx, (cam.height - 1 - cam.cy) / cam.fy, 1.0]])
-        if cam.is_wide_angle:
-            rays, seen = cam.bearings(np.array([[cam.width - 1.0, cam.height - 1.0], [cam.width - 1.0, cam.cy]]))
-            corner = rays[:1] if seen[0] else rays[1:]
-        _, _, d_params = cam.project_jacobians(corner)
+        _, _, d_params = self.guess.camera.project_jacobians(corner_ray(self.guess.camera))
         J = d_params[0][:, 4:]
         return float(np.sqrt(0.5 * np.trace(J @ cov @ J.T)))
 

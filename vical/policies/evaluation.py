@@ -34,11 +34,12 @@ from hydra.errors import InstantiationException
 from tqdm import tqdm
 
 from vical.calib.errors import CalibrationError
-from vical.calib.metrics import parameter_errors
+from vical.calib.metrics import group_errors_px, parameter_errors
 from vical.calib.tasks import CalibrationTask, TaskOutcome, run_task, task_score
 from vical.config import ConfigError, require
 from vical.data import CameraFrames, Recording, SensorTruth
 from vical.env.calibration import CalibrationEnv
+from vical.geometry import CameraModel
 from vical.parallel import ParallelConfig, connect_ray, imap_ordered
 from vical.policies.base import Policy
 from vical.sim.sampling import mean_sensor
@@ -125,6 +126,8 @@ class EpisodeRow:
         score_pct: the task's error [%] (the paper's tables).
         intrinsic_pct, extrinsic_pct: relative errors [%].
         intrinsic_px: ``||[fx, fy, cx, cy] - gt||`` [px].
+        focal_px, principal_point_px, distortion_px: the intrinsic groups' errors [px] as the information
+            state's tolerances measure them (``vical.calib.metrics.group_errors_px``).
         rotation_deg, translation_mm: extrinsic ``T_cam_imu`` errors [deg], [mm].
         time_offset_ms: |time offset error| [ms].
         prior_score_pct: the task's error [%] of the nominal parameters (the distributions' means):
@@ -147,6 +150,9 @@ class EpisodeRow:
     intrinsic_pct: float | None = None
     extrinsic_pct: float | None = None
     intrinsic_px: float | None = None
+    focal_px: float | None = None
+    principal_point_px: float | None = None
+    distortion_px: float | None = None
     rotation_deg: float | None = None
     translation_mm: float | None = None
     time_offset_ms: float | None = None
@@ -262,11 +268,14 @@ def _optional(value: float | None) -> float | None:
     return None if value is None else float(value)
 
 
-def _fill_outcome(row: EpisodeRow, outcome: TaskOutcome) -> None:
+def _fill_outcome(row: EpisodeRow, outcome: TaskOutcome, truth_camera: CameraModel) -> None:
     e = outcome.errors
     row.score_pct = float(outcome.score)
     row.intrinsic_pct = float(e.intrinsic_pct)
     row.intrinsic_px = float(np.linalg.norm(e.intrinsic_abs_px))
+    groups = group_errors_px(outcome.result.camera, truth_camera)
+    row.focal_px, row.principal_point_px = groups["focal"], groups["principal_point"]
+    row.distortion_px = groups["distortion"]
     row.extrinsic_pct = _optional(e.extrinsic_pct)
     row.rotation_deg = _optional(e.rotation_deg)
     row.translation_mm = _optional(e.translation_mm)
@@ -285,7 +294,7 @@ def calibrate_row(
     except CalibrationError as err:
         row.failed, row.error, row.calib_time_s = True, str(err), time.perf_counter() - start
         return row
-    _fill_outcome(row, outcome)
+    _fill_outcome(row, outcome, recording.truth.camera)
     return row
 
 
