@@ -132,8 +132,8 @@ def test_the_intrinsic_task_tracks_the_camera_only():
 
 
 def test_a_task_mix_draws_each_episodes_task_by_its_seed():
-    """``+experiment=train_information_policy_mix``: joint and intrinsic episodes, the same task for the same seed."""
-    env = make_env(composed("train", ["+experiment=train_information_policy_mix"])["env"])
+    """``+experiment=train_information_policy``: joint and intrinsic episodes, the same task for the same seed."""
+    env = make_env(composed("train", ["+experiment=train_information_policy"])["env"])
     single = information_env("joint")
     try:
         drawn = {}
