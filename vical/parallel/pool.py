@@ -70,8 +70,8 @@ class ParallelConfig:
 def imap_ordered(fn: Callable[[Any], Any], tasks: Sequence[Any], config: ParallelConfig) -> Iterator[Any]:
     """``fn(task)`` for every task, yielded in task order as soon as each (and all before it) is done.
 
-    An exception of ``fn`` is re-raised here (tasks not started are dropped, running ones finish first);
-    a worker process that dies raises ``WorkerCrashed``.
+    An exception of ``fn`` is re-raised here (the tasks already handed to workers finish first, the
+    rest are dropped); a worker process that dies raises ``WorkerCrashed``.
     """
     if config.serial:
         return (fn(task) for task in tasks)
