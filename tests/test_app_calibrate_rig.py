@@ -21,7 +21,7 @@ from vical.apps.calibrate_rig import camera_list, image_topics, topic_list
 from vical.calib.calibrate import calibrate_rig
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.synthetic import Excitation, RigCamera, default_camera, make_recording
-from vical.data import ImuNoise, ImuSamples
+from vical.data import CameraFrames, ImuNoise, ImuSamples
 from vical.geometry import euler_to_matrix, make_transform, transform_error
 from vical.io import save_recording, write_bag, write_euroc, write_imu_yaml, write_target_yaml
 from vical.io.kalibr_chain import CameraChain, ChainCamera, read_chain, write_chain
@@ -288,3 +288,20 @@ def test_a_rig_whose_gyro_logs_deg_per_s_fails_naming_the_cameras_and_the_flag(t
     assert line.count("the IMU residuals") == 1 and "it logs deg/s; pass --gyro-unit deg/s" in line
     assert sorted(p.name for p in out.iterdir()) == ["camchain-imucam.failed.yaml", "imu.yaml", "results.txt"]
     assert (out / "results.txt").read_text().startswith("FAILED: the calibration failed: cam0, cam1:")
+
+
+def cropped(frames: CameraFrames, u_max: float) -> CameraFrames:
+    """The frames with their detections left of ``u_max`` [px] (the rest of the board unseen)."""
+    keep = [c[:, 0] < u_max for c in frames.corners]
+    corners = [c[k] for c, k in zip(frames.corners, keep, strict=True)]
+    return CameraFrames(frames.t, corners, [i[k] for i, k in zip(frames.ids, keep, strict=True)], frames.images)
+
+
+def test_a_first_camera_that_sees_fewer_corners_than_the_second_gets_each_its_own_report(tmp_path, capsys):
+    rec = stereo_recording(6.0)
+    save_recording(replace(rec, frames=cropped(rec.frames, 480.0)), tmp_path / "rec")  # cam0: fewer corners
+    out = tmp_path / "out"
+    assert main([str(tmp_path / "rec"), "--out", str(out)]) == 0
+    for name in ("cam0", "cam1"):
+        assert (out / name / "report.pdf").read_bytes().startswith(b"%PDF"), name
+    capsys.readouterr()

@@ -31,6 +31,7 @@ REASON_COLOURS = {
     "no_pose": "tab:brown",
     "outlier": "tab:red",
     "outside_imu": "tab:pink",
+    "unpaired": "tab:cyan",
 }
 
 
