@@ -11,10 +11,12 @@ combined (its errors are those of the two ``T_cam_imu``, partly cancelling: the 
 
 from __future__ import annotations
 
+import csv
 from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_calib_report import pdf_pages_and_text
 
 from vical.apps.calibrate import main
 from vical.apps.calibrate_rig import camera_list, image_topics, topic_list
@@ -112,6 +114,32 @@ def test_stereo_rig_joint_from_euroc_matches_the_truth(rig, in_memory, tmp_path,
     printed = capsys.readouterr().out
     assert "== cam0 ==" in printed and "== cam1 ==" in printed and "T_cn_cnm1 cam1 <- cam0: translation" in printed
     assert "baseline 60.0" in printed  # 6 cm, to 0.1 mm
+
+
+def test_a_rig_writes_each_cameras_frames_and_its_errors_against_the_truth_in_its_report(rig, tmp_path, capsys):
+    rec, _, argv = rig
+    out = tmp_path / "out"
+    assert main([*argv, "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    text = (out / "results.txt").read_text()
+    for name in ("cam0", "cam1"):
+        frames = rec.frames_of(name)
+        with open(out / name / "frames.csv") as f:
+            rows = list(csv.DictReader(f))
+        assert [int(r["timestamp_ns"]) for r in rows] == frames.t.tolist(), name
+        assert [int(r["corners_found"]) for r in rows] == frames.num_detections.tolist(), name
+        used = sum(int(r["corners_used"]) for r in rows)
+        assert f"frames: {len(frames)} frames, the board detected in" in printed
+        assert f"({used} of {frames.num_detections.sum()} corners)" in printed
+        assert f"(every frame with its reason: {out / name / 'frames.csv'})" in printed
+        # the report's first page has the errors that results.txt gives ("ff" is one glyph in the PDF: left out)
+        section = text.split(f"==================== {name} ====================\n")[1]
+        truth = section.split("errors against the truth:\n")[1].splitlines()[:2]  # intrinsic, extrinsic
+        _, shown = pdf_pages_and_text(out / name / "report.pdf")
+        shown = " ".join(shown.split())
+        assert "errors against the truth" in shown
+        for line in truth:
+            assert " ".join(line.split()) in shown, (name, line)
 
 
 def test_one_named_camera_is_calibrated_alone_as_the_chains_first(rig, tmp_path):
@@ -286,7 +314,10 @@ def test_a_rig_whose_gyro_logs_deg_per_s_fails_naming_the_cameras_and_the_flag(t
     (line,) = errors(capsys.readouterr().err)
     assert line.startswith("vical-calibrate: error: the calibration failed: cam0, cam1: the IMU residuals")
     assert line.count("the IMU residuals") == 1 and "it logs deg/s; pass --gyro-unit deg/s" in line
-    assert sorted(p.name for p in out.iterdir()) == ["camchain-imucam.failed.yaml", "imu.yaml", "results.txt"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "cam0", "cam1", "camchain-imucam.failed.yaml", "imu.yaml", "results.txt"
+    ]  # fmt: skip
+    assert [p.name for p in (out / "cam1").iterdir()] == ["frames.csv"]  # --no-report: no plots
     assert (out / "results.txt").read_text().startswith("FAILED: the calibration failed: cam0, cam1:")
 
 

@@ -19,7 +19,8 @@ those ``--cameras cam0,cam1`` names (``vical.apps.calibrate_rig``). A bag's imag
 ``--image-topic`` (several times or comma-separated, cam0's first), else from the ``rostopic`` of
 each camera of an ``--intrinsics`` camchain. The camchain written has a section per camera
 (``T_cn_cnm1``, ``cam_overlaps``; every key of an ``--intrinsics`` camchain kept), ``results.txt`` a
-section per camera and the relative poses, the plots a folder per camera (``cam0/report.pdf``, ...).
+section per camera and the relative poses, and each camera has a folder with its ``frames.csv`` and plots
+(``cam0/frames.csv``, ``cam0/report.pdf``, ...).
 
 Outputs in ``--out``: ``camchain.yaml`` (intrinsic) or ``camchain-imucam.yaml`` + ``imu.yaml``,
 ``results.txt``, ``reprojection.png`` / ``imu.png`` / ``report.pdf``, written as one directory
