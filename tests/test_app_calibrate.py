@@ -4,6 +4,7 @@ the data do not support (a gyro logged in deg/s) fails with its cause; --out is 
 import numpy as np
 import pytest
 import yaml
+from test_io_kalibr_chain import OPENVINS_IMU_CHAIN
 
 from vical.apps.calibrate import main
 from vical.calib.checks import check_memory
@@ -205,3 +206,20 @@ def test_too_little_motion_for_the_imu_intrinsics_names_the_flag(tmp_path, capsy
     assert "too little motion to estimate the IMU intrinsics" in err and err.rstrip().endswith(
         "or leave --imu-model calibrated"
     )
+
+
+def test_an_openvins_imu_chain_with_an_ideal_imu_is_accepted_and_one_with_intrinsics_refused_by_key(
+    recording_dir, tmp_path, capsys
+):
+    path, _ = recording_dir
+    imu_chain = tmp_path / "kalibr_imu_chain.yaml"
+    imu_chain.write_text(OPENVINS_IMU_CHAIN)  # model "kalibr", identity Tw, Ta, R_IMUtoGYRO, R_IMUtoACC, zero Tg
+    argv = [str(path), "--imu-yaml", str(imu_chain), "--no-report"]
+    assert main([*argv, "--out", str(tmp_path / "ok")]) == 0
+    assert read_imu_yaml(tmp_path / "ok" / "imu.yaml") == read_imu_yaml(imu_chain)
+    capsys.readouterr()
+    imu_chain.write_text(OPENVINS_IMU_CHAIN.replace("Ta:\n    - [ 1.0", "Ta:\n    - [ 1.01"))
+    assert main([*argv, "--out", str(tmp_path / "scaled")]) == 2
+    err = capsys.readouterr().err
+    assert f"{imu_chain} [imu0]: Ta differs from an ideal IMU's (identity)" in err
+    assert not (tmp_path / "scaled").exists()
