@@ -50,7 +50,7 @@ def rig(tmp_path_factory):
     root = tmp_path_factory.mktemp("rig")
     write_euroc(rec, root / "euroc")
     write_target_yaml(root / "target.yaml", rec.target)
-    write_imu_yaml(root / "imu.yaml", rec.truth.imu_noise)
+    write_imu_yaml(root / "imu.yaml", rec.truth.imu_noise, rostopic="/imu/data", comment="the bench IMU")
     argv = [str(root / "euroc"), "--target", str(root / "target.yaml"), "--imu-yaml", str(root / "imu.yaml")]
     return rec, root, [*argv, "--stored-corners"]
 
@@ -117,9 +117,10 @@ def test_stereo_rig_joint_from_euroc_matches_the_truth(rig, in_memory, tmp_path,
 
 
 def test_a_rig_writes_each_cameras_frames_and_its_errors_against_the_truth_in_its_report(rig, tmp_path, capsys):
-    rec, _, argv = rig
+    rec, root, argv = rig
     out = tmp_path / "out"
     assert main([*argv, "--out", str(out)]) == 0
+    assert load_mapping(out / "imu.yaml", ValueError) == load_mapping(root / "imu.yaml", ValueError)  # its rostopic
     printed = capsys.readouterr().out
     text = (out / "results.txt").read_text()
     for name in ("cam0", "cam1"):

@@ -55,6 +55,7 @@ from vical.apps.calibrate_rig import (
     rig_problems,
     select_cameras,
     topic_list,
+    write_imu_output,
     write_rig_outputs,
 )
 from vical.apps.cli import ArgumentParser, OutputError, argparse_main, cannot_write
@@ -87,7 +88,6 @@ from vical.io.kalibr import (
     read_imu_yaml,
     read_target_yaml,
     write_camchain_imucam,
-    write_imu_yaml,
 )
 from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain, write_chain
 from vical.io.sources import detect_source, open_recording
@@ -547,7 +547,7 @@ def _write_outputs(
             if noise is not None:
                 if given is None:
                     write_camchain_imucam(tmp / name, result.camera, result.T_cam_imu, result.time_offset)
-                write_imu_yaml(tmp / "imu.yaml", noise, intrinsics=result.imu_intrinsics)
+                write_imu_output(tmp / "imu.yaml", args.imu_yaml, noise, result.imu_intrinsics)
             write_results_text(tmp / "results.txt", result, errors, failure)
             write_frames_csv(tmp / "frames.csv", result.frame_log)
             if not args.no_report:

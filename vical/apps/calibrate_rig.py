@@ -23,12 +23,12 @@ from vical.calib.plausibility import implausibilities
 from vical.calib.report import results_text, summary_table, write_frames_csv, write_report
 from vical.calib.result import CalibrationResult
 from vical.calib.rig import pair
-from vical.data import CameraFrames, ImuNoise, Recording, seconds_since
+from vical.data import CameraFrames, ImuIntrinsics, ImuNoise, Recording, seconds_since
 from vical.geometry import invert_transform, matrix_to_euler, transform_error
 from vical.io.atomic import atomic_directory, write_text_atomic
 from vical.io.bag import bag_image_topics
 from vical.io.kalibr import write_imu_yaml
-from vical.io.kalibr_chain import CameraChain, ChainCamera, write_chain
+from vical.io.kalibr_chain import CameraChain, ChainCamera, imu_file_with, read_imu_file, write_chain, write_imu_file
 
 CAMERA_NAME = re.compile(r"cam(\d+)")
 FRAMES_CSV = "frames.csv"  # each camera's, in its folder of the outputs
@@ -282,6 +282,15 @@ def rig_problems(results: dict[str, CalibrationResult], guesses: dict[str, np.nd
     return "; ".join(f"{', '.join(names)}: {problem}" for problem, names in cameras.items()), failed[0]
 
 
+def write_imu_output(path: Path, imu_yaml: str | None, noise: ImuNoise, intrinsics: ImuIntrinsics | None) -> None:
+    """``imu.yaml``: the ``--imu-yaml`` file kept whole (its ``rostopic``, ``T_i_b``, ``%YAML:1.0`` header and every
+    other key) with the noise and IMU intrinsics of the calibration put in; else Kalibr's ``imu.yaml`` of them."""
+    if imu_yaml:
+        write_imu_file(path, imu_file_with(read_imu_file(imu_yaml), noise, intrinsics))
+    else:
+        write_imu_yaml(path, noise, intrinsics=intrinsics)
+
+
 def write_rig_outputs(
     out: Path,
     results: dict[str, CalibrationResult],
@@ -302,7 +311,7 @@ def write_rig_outputs(
         with atomic_directory(out, overwrite=out.exists()) as tmp:
             write_chain(tmp / name, chain)
             if noise is not None:
-                write_imu_yaml(tmp / "imu.yaml", noise, intrinsics=next(iter(results.values())).imu_intrinsics)
+                write_imu_output(tmp / "imu.yaml", args.imu_yaml, noise, next(iter(results.values())).imu_intrinsics)
             write_text_atomic(tmp / "results.txt", rig_results_text(results, errors, chain, rec, args.task, failure))
             for camera, result in results.items():
                 if result.frame_log is not None:
