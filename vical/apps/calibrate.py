@@ -74,7 +74,7 @@ from vical.calib.intrinsics import MIN_VIEWS, calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.plausibility import gyro_scale, implausibilities, likely_gyro_unit
-from vical.calib.report import summary_table, write_frames_csv, write_report, write_results_text
+from vical.calib.report import summary_table, weak_sigma_text, write_frames_csv, write_report, write_results_text
 from vical.calib.result import CalibrationResult
 from vical.calib.visual_inertial import ViOptions
 from vical.data import DataError, ImuNoise, Recording, Target
@@ -559,7 +559,7 @@ def _write_outputs(
     for w in result.warnings:
         print(f"warning: {w}")
     for w in result.weak_parameters[:3]:
-        print(f"weak: {w.name} (1-sigma {w.sigma:.3g}): {w.hint}")
+        print(f"weak: {w.name} ({weak_sigma_text(w)}): {w.hint}")
     print(f"outputs written to {out}")
 
 

@@ -20,7 +20,7 @@ from vical.calib.errors import CalibrationError
 from vical.calib.metrics import CalibrationErrors, calibration_errors
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.plausibility import implausibilities
-from vical.calib.report import results_text, summary_table, write_frames_csv, write_report
+from vical.calib.report import results_text, summary_table, weak_sigma_text, write_frames_csv, write_report
 from vical.calib.result import CalibrationResult
 from vical.calib.rig import pair
 from vical.data import CameraFrames, ImuIntrinsics, ImuNoise, Recording, seconds_since
@@ -234,7 +234,7 @@ def rig_summary(
         )
     for name, result in results.items():
         lines += [f"warning: {_named(name, w)}" for w in result.warnings]
-        lines += [f"weak: {name}: {w.name} (1-sigma {w.sigma:.3g}): {w.hint}" for w in result.weak_parameters[:3]]
+        lines += [f"weak: {name}: {w.name} ({weak_sigma_text(w)}): {w.hint}" for w in result.weak_parameters[:3]]
     return lines
 
 
