@@ -103,8 +103,8 @@ def image_coverage_warnings(observations: Sequence[FrameObservation], size: tupl
     if sparse:
         where.append(f"under {SPARSE_REGION_SHARE:.0%} of the corners in the {', '.join(sparse)}")
     if borders:
-        plural = "s" if len(borders) > 1 else ""
-        where.append(f"no corner in the outer {EDGE_BAND_SHARE:.0%} along the {' and '.join(borders)} border{plural}")
+        along = "any border" if len(borders) == 4 else f"the {_and_list(borders)} border{'s' * (len(borders) > 1)}"
+        where.append(f"no corner in the outer {EDGE_BAND_SHARE:.0%} along {along}")
     located = f" ({'; '.join(where)})" if where else ""
     return [
         f"the board's corners covered only {share:.0%} of the image{located}: the lens distortion there is "
@@ -135,3 +135,8 @@ def empty_borders(points: np.ndarray, size: tuple[int, int]) -> list[str]:
         "right": u >= (1 - EDGE_BAND_SHARE) * width,
     }
     return [border for border, inside in bands.items() if not inside.any()]
+
+
+def _and_list(items: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
