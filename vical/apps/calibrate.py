@@ -22,8 +22,9 @@ each camera of an ``--intrinsics`` camchain. The camchain written has a section 
 section per camera and the relative poses, and each camera has a folder with its ``frames.csv`` and plots
 (``cam0/frames.csv``, ``cam0/report.pdf``, ...).
 
-Outputs in ``--out``: ``camchain.yaml`` (intrinsic) or ``camchain-imucam.yaml`` + ``imu.yaml``,
-``results.txt``, ``reprojection.png`` / ``imu.png`` / ``report.pdf``, written as one directory
+Outputs in ``--out``: ``camchain.yaml`` (intrinsic) or ``camchain-imucam.yaml`` + ``imu.yaml`` (an
+``--imu-yaml`` file kept whole, the calibration's noise and IMU intrinsics put in), ``results.txt``,
+``frames.csv``, ``reprojection.png`` / ``imu.png`` / ``report.pdf``, written as one directory
 atomically; an existing ``--out`` that holds files is refused unless ``--overwrite`` (which
 replaces it whole). A summary table goes to the terminal, with the errors against the truth when
 the recording carries it.
