@@ -4,6 +4,7 @@ the data do not support (a gyro logged in deg/s) fails with its cause; --out is 
 import numpy as np
 import pytest
 import yaml
+from test_io_kalibr_chain import OPENVINS_IMU_CHAIN
 
 from vical.apps.calibrate import main
 from vical.calib.checks import check_memory
@@ -184,8 +185,21 @@ def test_imu_intrinsics_are_estimated_and_written_in_kalibrs_keys(tmp_path, caps
     save_recording(rec, tmp_path / "rec")
     known = tmp_path / "known.yaml"
     write_camchain_imucam(known, rec.truth.camera, None, None)
+    imu_chain = tmp_path / "kalibr_imu_chain.yaml"  # OpenVINS's, an ideal IMU, with the recording's noise
+    noise = {"2.0000e-3": 0.004, "3.0000e-3": 0.006, "1.6968e-04": 0.0003394, "1.9393e-05": 3.8785e-05}
+    text = OPENVINS_IMU_CHAIN.replace("rostopic: /imu0", "rostopic: /imu/data")
+    for given, value in noise.items():
+        text = text.replace(given, repr(value))
+    imu_chain.write_text(text)
     argv = [str(tmp_path / "rec"), "--task", "extrinsic", "--intrinsics", str(known), "--no-report"]
+    argv += ["--imu-yaml", str(imu_chain)]
     assert main([*argv, "--imu-model", "scale-misalignment", "--out", str(tmp_path / "out")]) == 0
+    written = (tmp_path / "out" / "imu.yaml").read_text()
+    imu0 = opencv_yaml(tmp_path / "out" / "imu.yaml")["imu0"]
+    assert written.startswith("%YAML:1.0") and imu0["rostopic"] == "/imu/data" and imu0["time_offset"] == 0.0
+    assert imu0["T_i_b"] == np.eye(4).tolist() and imu0["model"] == "scale-misalignment"
+    assert not {"Tw", "Ta", "Tg", "R_IMUtoGYRO", "R_IMUtoACC"} & set(imu0)  # OpenVINS's identities give way
+    assert read_imu_yaml(tmp_path / "out" / "imu.yaml") == ImuNoise()
     found = read_imu_intrinsics(tmp_path / "out" / "imu.yaml")
     # 0.5 % and 0.3 deg: the 3-sigma checks are in tests/test_calib_imu_intrinsics.py; this one checks the file
     np.testing.assert_allclose(found.M_accel, truth.M_accel, atol=0.005)
@@ -205,3 +219,30 @@ def test_too_little_motion_for_the_imu_intrinsics_names_the_flag(tmp_path, capsy
     assert "too little motion to estimate the IMU intrinsics" in err and err.rstrip().endswith(
         "or leave --imu-model calibrated"
     )
+
+
+def opencv_yaml(path) -> dict:
+    """The mapping of a YAML file that starts with OpenCV's ``%YAML:1.0`` line (which PyYAML refuses)."""
+    return yaml.safe_load(path.read_text().split("\n", 1)[1])
+
+
+def test_an_openvins_imu_chain_with_an_ideal_imu_is_accepted_and_one_with_intrinsics_refused_by_key(
+    recording_dir, tmp_path, capsys
+):
+    path, _ = recording_dir
+    imu_chain = tmp_path / "kalibr_imu_chain.yaml"
+    # model "kalibr", identity Tw, Ta, R_IMUtoGYRO, R_IMUtoACC, zero Tg; the topic a real driver publishes
+    imu_chain.write_text(OPENVINS_IMU_CHAIN.replace("rostopic: /imu0", "rostopic: /imu/data"))
+    argv = [str(path), "--imu-yaml", str(imu_chain), "--no-report"]
+    assert main([*argv, "--out", str(tmp_path / "ok")]) == 0
+    written = tmp_path / "ok" / "imu.yaml"
+    assert read_imu_yaml(written) == read_imu_yaml(imu_chain)
+    # kept whole for OpenVINS: its header, rostopic, T_i_b, time_offset, model and matrices
+    assert written.read_text().startswith("%YAML:1.0")
+    assert opencv_yaml(written) == opencv_yaml(imu_chain)
+    capsys.readouterr()
+    imu_chain.write_text(OPENVINS_IMU_CHAIN.replace("Ta:\n    - [ 1.0", "Ta:\n    - [ 1.01"))
+    assert main([*argv, "--out", str(tmp_path / "scaled")]) == 2
+    err = capsys.readouterr().err
+    assert f"{imu_chain} [imu0]: Ta differs from an ideal IMU's (identity)" in err
+    assert not (tmp_path / "scaled").exists()

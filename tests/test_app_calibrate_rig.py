@@ -11,17 +11,19 @@ combined (its errors are those of the two ``T_cam_imu``, partly cancelling: the 
 
 from __future__ import annotations
 
+import csv
 from dataclasses import replace
 
 import numpy as np
 import pytest
+from test_calib_report import pdf_pages_and_text
 
 from vical.apps.calibrate import main
 from vical.apps.calibrate_rig import camera_list, image_topics, topic_list
 from vical.calib.calibrate import calibrate_rig
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.synthetic import Excitation, RigCamera, default_camera, make_recording
-from vical.data import ImuNoise, ImuSamples
+from vical.data import CameraFrames, ImuNoise, ImuSamples
 from vical.geometry import euler_to_matrix, make_transform, transform_error
 from vical.io import save_recording, write_bag, write_euroc, write_imu_yaml, write_target_yaml
 from vical.io.kalibr_chain import CameraChain, ChainCamera, read_chain, write_chain
@@ -48,7 +50,7 @@ def rig(tmp_path_factory):
     root = tmp_path_factory.mktemp("rig")
     write_euroc(rec, root / "euroc")
     write_target_yaml(root / "target.yaml", rec.target)
-    write_imu_yaml(root / "imu.yaml", rec.truth.imu_noise)
+    write_imu_yaml(root / "imu.yaml", rec.truth.imu_noise, rostopic="/imu/data", comment="the bench IMU")
     argv = [str(root / "euroc"), "--target", str(root / "target.yaml"), "--imu-yaml", str(root / "imu.yaml")]
     return rec, root, [*argv, "--stored-corners"]
 
@@ -112,6 +114,33 @@ def test_stereo_rig_joint_from_euroc_matches_the_truth(rig, in_memory, tmp_path,
     printed = capsys.readouterr().out
     assert "== cam0 ==" in printed and "== cam1 ==" in printed and "T_cn_cnm1 cam1 <- cam0: translation" in printed
     assert "baseline 60.0" in printed  # 6 cm, to 0.1 mm
+
+
+def test_a_rig_writes_each_cameras_frames_and_its_errors_against_the_truth_in_its_report(rig, tmp_path, capsys):
+    rec, root, argv = rig
+    out = tmp_path / "out"
+    assert main([*argv, "--out", str(out)]) == 0
+    assert load_mapping(out / "imu.yaml", ValueError) == load_mapping(root / "imu.yaml", ValueError)  # its rostopic
+    printed = capsys.readouterr().out
+    text = (out / "results.txt").read_text()
+    for name in ("cam0", "cam1"):
+        frames = rec.frames_of(name)
+        with open(out / name / "frames.csv") as f:
+            rows = list(csv.DictReader(f))
+        assert [int(r["timestamp_ns"]) for r in rows] == frames.t.tolist(), name
+        assert [int(r["corners_found"]) for r in rows] == frames.num_detections.tolist(), name
+        used = sum(int(r["corners_used"]) for r in rows)
+        assert f"frames: {len(frames)} frames, the board detected in" in printed
+        assert f"({used} of {frames.num_detections.sum()} corners)" in printed
+        assert f"(every frame with its reason: {out / name / 'frames.csv'})" in printed
+        # the report's first page has the errors that results.txt gives ("ff" is one glyph in the PDF: left out)
+        section = text.split(f"==================== {name} ====================\n")[1]
+        truth = section.split("errors against the truth:\n")[1].splitlines()[:2]  # intrinsic, extrinsic
+        _, shown = pdf_pages_and_text(out / name / "report.pdf")
+        shown = " ".join(shown.split())
+        assert "errors against the truth" in shown
+        for line in truth:
+            assert " ".join(line.split()) in shown, (name, line)
 
 
 def test_one_named_camera_is_calibrated_alone_as_the_chains_first(rig, tmp_path):
@@ -286,5 +315,25 @@ def test_a_rig_whose_gyro_logs_deg_per_s_fails_naming_the_cameras_and_the_flag(t
     (line,) = errors(capsys.readouterr().err)
     assert line.startswith("vical-calibrate: error: the calibration failed: cam0, cam1: the IMU residuals")
     assert line.count("the IMU residuals") == 1 and "it logs deg/s; pass --gyro-unit deg/s" in line
-    assert sorted(p.name for p in out.iterdir()) == ["camchain-imucam.failed.yaml", "imu.yaml", "results.txt"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "cam0", "cam1", "camchain-imucam.failed.yaml", "imu.yaml", "results.txt"
+    ]  # fmt: skip
+    assert [p.name for p in (out / "cam1").iterdir()] == ["frames.csv"]  # --no-report: no plots
     assert (out / "results.txt").read_text().startswith("FAILED: the calibration failed: cam0, cam1:")
+
+
+def cropped(frames: CameraFrames, u_max: float) -> CameraFrames:
+    """The frames with their detections left of ``u_max`` [px] (the rest of the board unseen)."""
+    keep = [c[:, 0] < u_max for c in frames.corners]
+    corners = [c[k] for c, k in zip(frames.corners, keep, strict=True)]
+    return CameraFrames(frames.t, corners, [i[k] for i, k in zip(frames.ids, keep, strict=True)], frames.images)
+
+
+def test_a_first_camera_that_sees_fewer_corners_than_the_second_gets_each_its_own_report(tmp_path, capsys):
+    rec = stereo_recording(6.0)
+    save_recording(replace(rec, frames=cropped(rec.frames, 480.0)), tmp_path / "rec")  # cam0: fewer corners
+    out = tmp_path / "out"
+    assert main([str(tmp_path / "rec"), "--out", str(out)]) == 0
+    for name in ("cam0", "cam1"):
+        assert (out / name / "report.pdf").read_bytes().startswith(b"%PDF"), name
+    capsys.readouterr()

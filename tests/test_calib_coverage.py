@@ -29,6 +29,20 @@ def test_corners_in_one_quarter_name_the_regions_no_corner_reached():
     assert image_coverage_warnings(everywhere, SIZE) == []
 
 
+def test_regions_reached_by_a_few_stray_corners_and_empty_borders_are_named():
+    rng = np.random.default_rng(1)
+    board = [observation(rng.uniform([0, 0], [400, 300], (400, 2))) for _ in range(5)]  # 39 % of the image
+    stray = observation(np.array([[430.0, 150.0], [435.0, 180.0], [440.0, 200.0]]))  # 3 of 2003 in the right edge
+    (warning,) = image_coverage_warnings([*board, stray], SIZE)
+    assert "covered only 4" in warning
+    sparse = warning.split("under 1% of the corners in the ")[1].split(";")[0]
+    assert sparse.split(", ") == [
+        "top-right corner", "right edge", "bottom-left corner", "bottom edge", "bottom-right corner"
+    ]  # fmt: skip
+    assert "no corner in the outer 10% along the bottom and right borders" in warning  # v > 432, u > 576 px: none
+    assert "()" not in warning
+
+
 def in_quadrant(frames: CameraFrames, width: int, height: int) -> CameraFrames:
     """The frames' detections restricted to the top-left quarter of the image (the rest of the board unseen)."""
     keep = [(c[:, 0] < width / 2) & (c[:, 1] < height / 2) for c in frames.corners]

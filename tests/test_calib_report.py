@@ -6,6 +6,7 @@ import zlib
 import numpy as np
 import pytest
 
+from vical.calib import report_figures as figures
 from vical.calib.calibrate import calibrate_joint
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
@@ -102,3 +103,24 @@ def test_the_time_offset_page_shows_the_camera_rates_matching_the_gyro_at_the_of
     rms_rate = np.sqrt(np.mean(np.sum(gyro**2, axis=1)))
     rms_difference = np.sqrt(np.mean(np.sum((trace.omega_camera - gyro) ** 2, axis=1)))
     assert rms_rate > 0.5 and rms_difference < 0.05 * rms_rate
+
+
+def test_weak_parameters_are_named_in_the_units_of_the_first_page_and_the_plots_are_labelled(tmp_path):
+    little_rotation = Excitation().scaled(rotation=0.3)
+    rec = make_recording(duration=6.0, excitation=little_rotation, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=4)
+    result = calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", SIZE, rec.truth.imu_noise)
+    weak = {w.name: w for w in result.weak_parameters}
+    assert {"t_x", "rot_z", "fx", "k2"} <= set(weak)  # measured 4.0 mm, 0.16 deg, 1.8 px, 0.015
+    write_report(tmp_path, result)
+    _, text = pdf_pages_and_text(tmp_path / "report.pdf")
+    notes = " ".join(text[text.index("Notes") :].split())
+    first_page = " ".join(text[: text.index("Reprojection residuals")].split())
+    t_x = weak["t_x"].sigma * 1e3
+    assert f"+- {t_x:.4g} mm" in first_page and f"t_x: 1-sigma {t_x:.3g} mm > 2 mm ->" in notes
+    assert f"fx: 1-sigma {weak['fx'].sigma:.3g} px > {weak['fx'].threshold:.3g} px ->" in notes
+    assert f"rot_z: 1-sigma {np.rad2deg(weak['rot_z'].sigma):.3g} deg > 0.1 deg ->" in notes
+    assert f"k2: 1-sigma {weak['k2'].sigma:.3g} > 0.01 ->" in notes  # a distortion coefficient has no unit
+    arrows = figures.reprojection_page(result)
+    assert "|residual| [px] (arrow colour)" in [ax.get_ylabel() for ax in arrows.axes]  # the arrows' colour bar
+    counts = figures.frames_page(result.frame_log).axes[0]
+    assert counts.get_ylim()[0] == 0.0

@@ -318,7 +318,11 @@ def test_imu_intrinsics_round_trip_in_kalibrs_scale_misalignment_keys(tmp_path):
 @pytest.mark.parametrize(
     ("change", "match"),
     [
-        ({"model": "scale-misalignment-size-effect"}, "IMU model 'scale-misalignment-size-effect' is not supported"),
+        (
+            {"model": "scale-misalignment-size-effect", "accelerometers": {"M": [[1.01, 0, 0], [0, 1, 0], [0, 0, 1]]}},
+            "accelerometers.M differs from an ideal IMU's",
+        ),
+        ({"model": "bosch"}, "model 'bosch' is not a Kalibr or OpenVINS IMU model"),
         ({"accelerometers": {"M": [[1, 0.1, 0], [0, 1, 0], [0, 0, 1]]}}, "M_accel must be lower triangular"),
         ({"gyroscopes": {"M": np.eye(3).tolist(), "A": np.zeros((3, 3)).tolist()}}, "required key 'C_gyro_i'"),
     ],

@@ -288,10 +288,12 @@ def test_plain_kalibr_imu_yaml_round_trips(tmp_path):
     assert read_imu_yaml(out) == ImuNoise(1.86e-03, 4.33e-04, 1.87e-04, 2.66e-05, 200.0)
 
 
-def test_ideal_imu_intrinsics_are_accepted_for_calibration(tmp_path):
+@pytest.mark.parametrize("model", ["kalibr", "rpng"])
+def test_ideal_imu_intrinsics_are_accepted_for_calibration(tmp_path, model):
     path = tmp_path / "kalibr_imu_chain.yaml"
-    path.write_text(OPENVINS_IMU_CHAIN)
+    path.write_text(OPENVINS_IMU_CHAIN.replace('model: "kalibr"', f'model: "{model}"'))
     assert read_imu_yaml(path) == ImuNoise(2e-3, 3e-3, 1.6968e-04, 1.9393e-05, 200.0)
+    assert read_imu_intrinsics(path) is None  # nothing to correct the samples with (--imu-yaml reads both)
 
 
 def test_kalibrs_scale_misalignment_intrinsics_are_read_for_calibration(tmp_path):

@@ -19,10 +19,12 @@ those ``--cameras cam0,cam1`` names (``vical.apps.calibrate_rig``). A bag's imag
 ``--image-topic`` (several times or comma-separated, cam0's first), else from the ``rostopic`` of
 each camera of an ``--intrinsics`` camchain. The camchain written has a section per camera
 (``T_cn_cnm1``, ``cam_overlaps``; every key of an ``--intrinsics`` camchain kept), ``results.txt`` a
-section per camera and the relative poses, the plots a folder per camera (``cam0/report.pdf``, ...).
+section per camera and the relative poses, and each camera has a folder with its ``frames.csv`` and plots
+(``cam0/frames.csv``, ``cam0/report.pdf``, ...).
 
-Outputs in ``--out``: ``camchain.yaml`` (intrinsic) or ``camchain-imucam.yaml`` + ``imu.yaml``,
-``results.txt``, ``reprojection.png`` / ``imu.png`` / ``report.pdf``, written as one directory
+Outputs in ``--out``: ``camchain.yaml`` (intrinsic) or ``camchain-imucam.yaml`` + ``imu.yaml`` (an
+``--imu-yaml`` file kept whole, the calibration's noise and IMU intrinsics put in), ``results.txt``,
+``frames.csv``, ``reprojection.png`` / ``imu.png`` / ``report.pdf``, written as one directory
 atomically; an existing ``--out`` that holds files is refused unless ``--overwrite`` (which
 replaces it whole). A summary table goes to the terminal, with the errors against the truth when
 the recording carries it.
@@ -54,6 +56,7 @@ from vical.apps.calibrate_rig import (
     rig_problems,
     select_cameras,
     topic_list,
+    write_imu_output,
     write_rig_outputs,
 )
 from vical.apps.cli import ArgumentParser, OutputError, argparse_main, cannot_write
@@ -72,7 +75,7 @@ from vical.calib.intrinsics import MIN_VIEWS, calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.plausibility import gyro_scale, implausibilities, likely_gyro_unit
-from vical.calib.report import summary_table, write_frames_csv, write_report, write_results_text
+from vical.calib.report import summary_table, weak_sigma_text, write_frames_csv, write_report, write_results_text
 from vical.calib.result import CalibrationResult
 from vical.calib.visual_inertial import ViOptions
 from vical.data import DataError, ImuNoise, Recording, Target
@@ -86,7 +89,6 @@ from vical.io.kalibr import (
     read_imu_yaml,
     read_target_yaml,
     write_camchain_imucam,
-    write_imu_yaml,
 )
 from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain, write_chain
 from vical.io.sources import detect_source, open_recording
@@ -546,7 +548,7 @@ def _write_outputs(
             if noise is not None:
                 if given is None:
                     write_camchain_imucam(tmp / name, result.camera, result.T_cam_imu, result.time_offset)
-                write_imu_yaml(tmp / "imu.yaml", noise, intrinsics=result.imu_intrinsics)
+                write_imu_output(tmp / "imu.yaml", args.imu_yaml, noise, result.imu_intrinsics)
             write_results_text(tmp / "results.txt", result, errors, failure)
             write_frames_csv(tmp / "frames.csv", result.frame_log)
             if not args.no_report:
@@ -558,7 +560,7 @@ def _write_outputs(
     for w in result.warnings:
         print(f"warning: {w}")
     for w in result.weak_parameters[:3]:
-        print(f"weak: {w.name} (1-sigma {w.sigma:.3g}): {w.hint}")
+        print(f"weak: {w.name} ({weak_sigma_text(w)}): {w.hint}")
     print(f"outputs written to {out}")
 
 

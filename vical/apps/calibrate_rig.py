@@ -20,17 +20,18 @@ from vical.calib.errors import CalibrationError
 from vical.calib.metrics import CalibrationErrors, calibration_errors
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.plausibility import implausibilities
-from vical.calib.report import results_text, summary_table, write_report
+from vical.calib.report import results_text, summary_table, weak_sigma_text, write_frames_csv, write_report
 from vical.calib.result import CalibrationResult
 from vical.calib.rig import pair
-from vical.data import CameraFrames, ImuNoise, Recording, seconds_since
+from vical.data import CameraFrames, ImuIntrinsics, ImuNoise, Recording, seconds_since
 from vical.geometry import invert_transform, matrix_to_euler, transform_error
 from vical.io.atomic import atomic_directory, write_text_atomic
 from vical.io.bag import bag_image_topics
 from vical.io.kalibr import write_imu_yaml
-from vical.io.kalibr_chain import CameraChain, ChainCamera, write_chain
+from vical.io.kalibr_chain import CameraChain, ChainCamera, imu_file_with, read_imu_file, write_chain, write_imu_file
 
 CAMERA_NAME = re.compile(r"cam(\d+)")
+FRAMES_CSV = "frames.csv"  # each camera's, in its folder of the outputs
 # Where each source's cameras come from, for the message that lists them.
 CAMERAS_OF = {
     "euroc": "its camN folders",
@@ -211,12 +212,19 @@ def _relative_pose_lines(names, chain, rec, results) -> list[str]:
 
 
 def rig_summary(
-    results: dict[str, CalibrationResult], errors: dict[str, CalibrationErrors | None], chain: CameraChain
+    results: dict[str, CalibrationResult],
+    errors: dict[str, CalibrationErrors | None],
+    chain: CameraChain,
+    out: Path,
 ) -> list[str]:
-    """The terminal's lines: each camera's summary table, its warnings and weak parameters, the relative poses."""
+    """The terminal's lines: each camera's summary table and frame counts, the relative poses, each camera's
+    warnings and weak parameters."""
     lines = []
     for name, result in results.items():
         lines += [f"== {name} ==", summary_table(result, errors[name])]
+        if result.frame_log is not None:
+            where = out / name / FRAMES_CSV
+            lines.append(f"frames: {result.frame_log.summary()} (every frame with its reason: {where})")
     for name, previous, T in relative_poses(list(results), chain):
         t = T[:3, 3] * 1e3
         angle = np.rad2deg(np.arccos(np.clip((np.trace(T[:3, :3]) - 1) / 2, -1.0, 1.0)))
@@ -226,7 +234,7 @@ def rig_summary(
         )
     for name, result in results.items():
         lines += [f"warning: {_named(name, w)}" for w in result.warnings]
-        lines += [f"weak: {name}: {w.name} (1-sigma {w.sigma:.3g}): {w.hint}" for w in result.weak_parameters[:3]]
+        lines += [f"weak: {name}: {w.name} ({weak_sigma_text(w)}): {w.hint}" for w in result.weak_parameters[:3]]
     return lines
 
 
@@ -274,6 +282,15 @@ def rig_problems(results: dict[str, CalibrationResult], guesses: dict[str, np.nd
     return "; ".join(f"{', '.join(names)}: {problem}" for problem, names in cameras.items()), failed[0]
 
 
+def write_imu_output(path: Path, imu_yaml: str | None, noise: ImuNoise, intrinsics: ImuIntrinsics | None) -> None:
+    """``imu.yaml``: the ``--imu-yaml`` file kept whole (its ``rostopic``, ``T_i_b``, ``%YAML:1.0`` header and every
+    other key) with the noise and IMU intrinsics of the calibration put in; else Kalibr's ``imu.yaml`` of them."""
+    if imu_yaml:
+        write_imu_file(path, imu_file_with(read_imu_file(imu_yaml), noise, intrinsics))
+    else:
+        write_imu_yaml(path, noise, intrinsics=intrinsics)
+
+
 def write_rig_outputs(
     out: Path,
     results: dict[str, CalibrationResult],
@@ -283,8 +300,8 @@ def write_rig_outputs(
     given: CameraChain | None,
     failure: str | None,
 ) -> None:
-    """Write the rig's camchain, ``imu.yaml``, ``results.txt`` and a report folder per camera into ``out`` at
-    once, then print the summary."""
+    """Write the rig's camchain, ``imu.yaml``, ``results.txt`` and a folder per camera (its ``frames.csv`` and,
+    unless ``--no-report``, its report) into ``out`` at once, then print the summary."""
     errors = {n: calibration_errors(r, rec.truth_of(n)) if rec.truth_of(n) else None for n, r in results.items()}
     name = "camchain.yaml" if noise is None else "camchain-imucam.yaml"
     if failure:
@@ -294,12 +311,15 @@ def write_rig_outputs(
         with atomic_directory(out, overwrite=out.exists()) as tmp:
             write_chain(tmp / name, chain)
             if noise is not None:
-                write_imu_yaml(tmp / "imu.yaml", noise, intrinsics=next(iter(results.values())).imu_intrinsics)
+                write_imu_output(tmp / "imu.yaml", args.imu_yaml, noise, next(iter(results.values())).imu_intrinsics)
             write_text_atomic(tmp / "results.txt", rig_results_text(results, errors, chain, rec, args.task, failure))
-            if not args.no_report:
-                for camera, result in results.items():
-                    write_report(tmp / camera, result)
+            for camera, result in results.items():
+                if result.frame_log is not None:
+                    (tmp / camera).mkdir()
+                    write_frames_csv(tmp / camera / FRAMES_CSV, result.frame_log)
+                if not args.no_report:
+                    write_report(tmp / camera, result, errors[camera], failure)
     except OSError as err:
         raise OutputError(cannot_write("--out", out, err)) from None
-    print("\n".join(rig_summary(results, errors, chain)))
+    print("\n".join(rig_summary(results, errors, chain, out)))
     print(f"outputs written to {out}")

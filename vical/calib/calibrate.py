@@ -196,7 +196,7 @@ def calibrate_rig(
     observations = {name: collect_observations(f, target) for name, f in frames.items()}
     guesses, offsets = initial_T_cam_imu or {}, initial_time_offsets or {}
     first, *rest = frames
-    others = [CameraInput(n, observations[n], models[n], guesses.get(n), offsets.get(n, 0.0)) for n in rest]
+    others = [CameraInput(n, observations[n], models[n], guesses.get(n), offsets.get(n, 0.0), frames[n]) for n in rest]
     results = run_visual_inertial(
         "joint" if task == "joint" else "extrinsic", frames[first], imu, target, models[first],
         imu_noise or ImuNoise(), guesses.get(first), offsets.get(first, 0.0), opts, start, others,

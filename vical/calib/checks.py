@@ -30,6 +30,11 @@ BYTES_PER_FRAME = 25_000
 
 # Below this share of the image inside the hull of all corners, the lens model is extrapolated.
 MIN_IMAGE_COVERAGE = 0.5
+# Where it is extrapolated: a ninth of the image holding under this share of all corners (a few stray
+# corners reach a ninth without measuring the distortion there) ...
+SPARSE_REGION_SHARE = 0.01
+# ... and a band this share of the width (height) wide along a border that holds no corner at all.
+EDGE_BAND_SHARE = 0.1
 IMAGE_REGIONS = (
     ("top-left corner", "top edge", "top-right corner"),
     ("left edge", "centre", "right edge"),
@@ -84,7 +89,8 @@ def check_memory(frames: int, corners: int, limit_mb: float, stride: int) -> Non
 
 def image_coverage_warnings(observations: Sequence[FrameObservation], size: tuple[int, int]) -> list[str]:
     """A warning when the corners of all views cover less than ``MIN_IMAGE_COVERAGE`` of the image
-    (their convex hull), naming the ninths of the image that no corner reached."""
+    (their convex hull), naming where: the ninths of the image with under ``SPARSE_REGION_SHARE`` of the
+    corners, and the borders whose outer ``EDGE_BAND_SHARE`` band holds none."""
     points = np.concatenate([o.uv for o in observations]).astype(np.float32) if observations else np.zeros((0, 2))
     width, height = size
     if len(points) < 3:
@@ -92,11 +98,45 @@ def image_coverage_warnings(observations: Sequence[FrameObservation], size: tupl
     share = cv2.contourArea(cv2.convexHull(points)) / (width * height)
     if share >= MIN_IMAGE_COVERAGE:
         return []
+    sparse, borders = sparse_regions(points, size), empty_borders(points, size)
+    where = []
+    if sparse:
+        where.append(f"under {SPARSE_REGION_SHARE:.0%} of the corners in the {', '.join(sparse)}")
+    if borders:
+        along = "any border" if len(borders) == 4 else f"the {_and_list(borders)} border{'s' * (len(borders) > 1)}"
+        where.append(f"no corner in the outer {EDGE_BAND_SHARE:.0%} along {along}")
+    located = f" ({'; '.join(where)})" if where else ""
+    return [
+        f"the board's corners covered only {share:.0%} of the image{located}: the lens distortion there is "
+        "extrapolated, not measured; show the board near every edge and corner of the image"
+    ]
+
+
+def sparse_regions(points: np.ndarray, size: tuple[int, int]) -> list[str]:
+    """The ninths of the image (``IMAGE_REGIONS``) holding under ``SPARSE_REGION_SHARE`` of the corners (N, 2) [px]."""
+    width, height = size
     col = np.clip((points[:, 0] * 3 // width).astype(int), 0, 2)
     row = np.clip((points[:, 1] * 3 // height).astype(int), 0, 2)
-    seen = set(zip(row.tolist(), col.tolist(), strict=True))
-    empty = [IMAGE_REGIONS[r][c] for r in range(3) for c in range(3) if (r, c) not in seen]
-    return [
-        f"the board's corners covered only {share:.0%} of the image (none in the {', '.join(empty)}): the lens "
-        "distortion there is extrapolated, not measured; show the board near every edge and corner of the image"
-    ]
+    counts = np.zeros((3, 3), dtype=np.int64)
+    np.add.at(counts, (row, col), 1)
+    limit = SPARSE_REGION_SHARE * len(points)
+    return [IMAGE_REGIONS[r][c] for r in range(3) for c in range(3) if counts[r, c] < limit]
+
+
+def empty_borders(points: np.ndarray, size: tuple[int, int]) -> list[str]:
+    """The image borders (``top``, ``bottom``, ``left``, ``right``) with no corner (N, 2) [px] in their band
+    ``EDGE_BAND_SHARE`` of the image's height (width) wide."""
+    width, height = size
+    u, v = points[:, 0], points[:, 1]
+    bands = {
+        "top": v < EDGE_BAND_SHARE * height,
+        "bottom": v >= (1 - EDGE_BAND_SHARE) * height,
+        "left": u < EDGE_BAND_SHARE * width,
+        "right": u >= (1 - EDGE_BAND_SHARE) * width,
+    }
+    return [border for border, inside in bands.items() if not inside.any()]
+
+
+def _and_list(items: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"

@@ -3,7 +3,8 @@
 Every frame of the input gets one ``FrameRecord``: how many corners were detected in it, how many
 entered the final solve, and, when not all of them did, the reason (``REASONS``). The pipeline
 knows the reasons it decides (thinned by the frame stride, dropped as an outlier, outside the
-IMU's time span); the others follow from the detections (no board, too few corners for a pose).
+IMU's time span, a rig camera's view without a simultaneous view of the first camera); the others
+follow from the detections (no board, too few corners for a pose).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ REASONS = {
     "no_pose": "no target pose fits its corners",
     "outlier": "outlier: fits no target pose even without its worst corners",
     "outside_imu": "outside the IMU's time span",
+    "unpaired": "no view of the first camera taken with it (within 5 ms) entered the solve",
     "outlier_corners": "used; some of its corners were left out as outliers",
 }
 

@@ -16,7 +16,7 @@ from matplotlib.backends.backend_pdf import PdfPages
 from vical.calib import report_figures as figures
 from vical.calib.frame_log import REASONS, FrameLog, short_reason
 from vical.calib.metrics import CalibrationErrors
-from vical.calib.result import CalibrationResult, ResidualStats
+from vical.calib.result import CalibrationResult, ResidualStats, WeakParameter
 from vical.calib.uncertainty import IMU_INTRINSIC_THRESHOLDS
 from vical.geometry import matrix_to_euler
 from vical.io.atomic import atomic_file, write_text_atomic
@@ -88,6 +88,35 @@ def _intrinsic_unit(name: str) -> tuple[float, str]:
     return float(np.rad2deg(1.0)), "deg"
 
 
+# (factor, unit) in which the report prints each camera-IMU parameter (its value in the parameter's unit x factor).
+_DISPLAY_UNITS = {
+    **dict.fromkeys(("fx", "fy", "cx", "cy"), (1.0, "px")),
+    **dict.fromkeys(("rot_x", "rot_y", "rot_z"), (float(np.rad2deg(1.0)), "deg")),
+    **dict.fromkeys(("t_x", "t_y", "t_z"), (1e3, "mm")),
+    "time_offset": (1e3, "ms"),
+    **dict.fromkeys(("bg_x", "bg_y", "bg_z"), (1.0, "rad/s")),
+    **dict.fromkeys(("ba_x", "ba_y", "ba_z"), (1.0, "m/s^2")),
+}
+
+
+def display_unit(name: str) -> tuple[float, str]:
+    """(factor, unit) in which a parameter is printed, as on the report's first page: pixels, mm, ms, deg, the IMU
+    intrinsics' % and deg; distortion coefficients have no unit (``""``)."""
+    if name in _DISPLAY_UNITS:
+        return _DISPLAY_UNITS[name]
+    if name in IMU_INTRINSIC_THRESHOLDS:
+        return _intrinsic_unit(name)
+    return 1.0, ""
+
+
+def weak_sigma_text(weak: WeakParameter, with_threshold: bool = False) -> str:
+    """``1-sigma 6.33 mm`` (``... > 2 mm`` with the threshold) in the parameter's printed unit (``display_unit``)."""
+    scale, unit = display_unit(weak.name)
+    unit = f" {unit}" if unit else ""
+    text = f"1-sigma {weak.sigma * scale:.3g}{unit}"
+    return text + (f" > {weak.threshold * scale:.3g}{unit}" if with_threshold else "")
+
+
 def _stats_line(name: str, stats: ResidualStats, unit: str) -> str:
     return (
         f"  {name:<14} mean {stats.mean:.4g}  median {stats.median:.4g}  std {stats.std:.4g}  "
@@ -148,7 +177,7 @@ def _weak_lines(result: CalibrationResult) -> list[str]:
         return ["weakly observed parameters: none"]
     lines = ["weakly observed parameters (weakest first):"]
     for w in result.weak_parameters:
-        lines.append(f"  {w.name}: 1-sigma {w.sigma:.4g} > {w.threshold:.4g} -> {w.hint}")
+        lines.append(f"  {w.name}: {weak_sigma_text(w, with_threshold=True)} -> {w.hint}")
     return lines
 
 

@@ -31,6 +31,7 @@ REASON_COLOURS = {
     "no_pose": "tab:brown",
     "outlier": "tab:red",
     "outside_imu": "tab:pink",
+    "unpaired": "tab:cyan",
 }
 
 
@@ -102,11 +103,7 @@ def reprojection_page(result: CalibrationResult) -> Figure:
         ax2.axis("off")
         ax3.axis("off")
     else:
-        arrows = _spread(len(r), MAX_ARROWS)
-        scale = 0.05 * cam.width / max(float(np.percentile(norms, 99)), 1e-9)  # the 99th percentile: 5 % of the width
-        ax2.quiver(pixels[arrows, 0], pixels[arrows, 1], r[arrows, 0] * scale, r[arrows, 1] * scale, norms[arrows],
-                   angles="xy", scale_units="xy", scale=1, width=0.002, cmap="viridis")  # fmt: skip
-        _image_axes(ax2, cam.width, cam.height, f"residuals over the image (arrows x {scale:.0f})")
+        _residual_arrows(fig, ax2, pixels, r, cam.width, cam.height)
         cells = _cell_means(pixels, norms, cam.width, cam.height)
         im = ax3.imshow(
             cells, extent=(-0.5, cam.width - 0.5, cam.height - 0.5, -0.5), cmap="magma", interpolation="nearest"
@@ -116,6 +113,17 @@ def reprojection_page(result: CalibrationResult) -> Figure:
     fig.suptitle("Reprojection residuals (measured - predicted corner)", fontsize=13)
     fig.tight_layout()
     return fig
+
+
+def _residual_arrows(fig: Figure, ax, pixels: np.ndarray, r: np.ndarray, width: int, height: int) -> None:
+    """Residuals (N, 2) [px] as arrows from their corners (N, 2) [px], enlarged to be seen, coloured by length."""
+    norms = np.linalg.norm(r, axis=1)
+    pick = _spread(len(r), MAX_ARROWS)
+    scale = 0.05 * width / max(float(np.percentile(norms, 99)), 1e-9)  # the 99th percentile: 5 % of the width
+    u, v, du, dv = pixels[pick, 0], pixels[pick, 1], r[pick, 0] * scale, r[pick, 1] * scale
+    arrows = ax.quiver(u, v, du, dv, norms[pick], angles="xy", scale_units="xy", scale=1, width=0.002, cmap="viridis")
+    fig.colorbar(arrows, ax=ax, label="|residual| [px] (arrow colour)", shrink=0.8)
+    _image_axes(ax, width, height, f"residuals over the image (arrows x {scale:.0f})")
 
 
 def _cells(width: int, height: int, cols: int = HEAT_CELLS) -> tuple[np.ndarray, np.ndarray]:
@@ -169,6 +177,7 @@ def frames_page(log: FrameLog) -> Figure:
         mask = np.array([r.reason == reason for r in log.records])
         if mask.any():
             ax0.plot(seconds[mask], found[mask], "x", ms=4, color=colour, label=f"not used: {short_reason(reason)}")
+    ax0.set_ylim(0, 1.1 * max(int(found.max(initial=0)), 1))  # from 0: a steady count is a full line, not noise
     ax0.set_xlabel("time since the first frame [s]")
     ax0.set_ylabel("corners")
     ax0.legend(loc="lower right", fontsize=7, ncol=2)

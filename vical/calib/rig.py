@@ -53,6 +53,7 @@ class OtherCamera:
     tau0: float = 0.0
     initial_T_cam_imu: np.ndarray | None = None
     warnings: list[str] = field(default_factory=list)
+    outliers: list[int] = field(default_factory=list)  # frame indices of its frames dropped as outliers
 
 
 def prepare_other(
@@ -83,7 +84,7 @@ def prepare_other(
     warnings = [f"{name}: {w}" for w in rejection.warnings]
     return OtherCamera(
         name, index, camera, used, seconds_since(t_ns, t0_ns), T_target_cam, float(sigma),
-        initial_T_cam_imu=initial_T_cam_imu, warnings=warnings,
+        initial_T_cam_imu=initial_T_cam_imu, warnings=warnings, outliers=list(rejection.dropped),
     )  # fmt: skip
 
 

@@ -627,18 +627,31 @@ def _frame_log(
     return build_frame_log(frames, used, min(MIN_INIT_CORNERS, problem.target.num_points), decided)
 
 
-def _time_offset_trace(problem: _Problem, est: _Estimate) -> TimeOffsetTrace:
-    """The PnP poses' rotation rates against the bias-corrected gyro, and the mismatch around the offset."""
-    inc = rotation_increments(problem.frame_times, problem.T_target_cam[:, :3, :3])
+def _time_offset_trace(
+    problem: _Problem,
+    frame_times: np.ndarray,
+    T_target_cam: np.ndarray,
+    T_cam_imu: np.ndarray,
+    tau0: float,
+    gyro_bias: np.ndarray,
+) -> TimeOffsetTrace:
+    """One camera's PnP rotation rates against the bias-corrected gyro, and the mismatch around its offset.
+
+    Args:
+        frame_times: (F,) [s] the camera's frames with a target pose (camera clock, since the recording start).
+        T_target_cam: (F, 4, 4) their PnP poses; T_cam_imu: (4, 4) and tau0 [s]: the camera's estimates.
+        gyro_bias: (3,) [rad/s] the estimated gyro bias.
+    """
+    inc = rotation_increments(frame_times, T_target_cam[:, :3, :3])
     dt = inc.t_end - inc.t_start
-    R_imu_cam = est.T_cam_imu[:3, :3].T
-    shifts = est.tau0 + np.linspace(-TRACE_HALF_WIDTH, TRACE_HALF_WIDTH, TRACE_POINTS)
-    mismatch = increment_mismatch(problem.t_imu, problem.gyro, inc, est.T_cam_imu[:3, :3], est.gyro_bias, shifts)
+    R_imu_cam = T_cam_imu[:3, :3].T
+    shifts = tau0 + np.linspace(-TRACE_HALF_WIDTH, TRACE_HALF_WIDTH, TRACE_POINTS)
+    mismatch = increment_mismatch(problem.t_imu, problem.gyro, inc, T_cam_imu[:3, :3], gyro_bias, shifts)
     return TimeOffsetTrace(
         t_camera=0.5 * (inc.t_start + inc.t_end),
         omega_camera=(inc.theta_cam / dt[:, None]) @ R_imu_cam.T,
         t_imu=problem.t_imu,
-        gyro=problem.gyro - est.gyro_bias,
+        gyro=problem.gyro - gyro_bias,
         shifts=shifts,
         mismatch=mismatch,
     )
@@ -710,7 +723,9 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
         warnings=problem.warnings,
         imu_noise_scale=problem.imu_noise_scale,
         reprojection_pixels=g.corners.measured,
-        time_offset_trace=_time_offset_trace(problem, est),
+        time_offset_trace=_time_offset_trace(
+            problem, problem.frame_times, problem.T_target_cam, est.T_cam_imu, est.tau0, est.gyro_bias
+        ),
         imu_intrinsics=_imu_intrinsics(problem.options, est),
     )
 
@@ -720,8 +735,18 @@ def _imu_intrinsics(options: ViOptions, est: _Estimate) -> ImuIntrinsics | None:
     return options.imu_intrinsics if est.imu_theta is None else ImuIntrinsics.from_vector(est.imu_theta)
 
 
-def _other_result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, entry, first: CalibrationResult):
-    """Another camera's result: its parameters with the shared biases, its residuals, the shared IMU residuals."""
+def _other_result(
+    task: str,
+    problem: _Problem,
+    g: _Graph,
+    solution,
+    est: _Estimate,
+    entry,
+    given: CameraInput,
+    first: CalibrationResult,
+):
+    """Another camera's result: its parameters with the shared biases, its residuals, corners, frames and time-offset
+    evidence, the shared IMU residuals."""
     other, factors, paired, frame_index = entry
     joint = task == "joint"
     values = solution.values
@@ -740,6 +765,9 @@ def _other_result(task: str, problem: _Problem, g: _Graph, solution, est: _Estim
         + [np.zeros(3), other.T_cam_imu[:3, 3], [other.tau0], est.accel_bias, est.gyro_bias]
     )
     residuals = factors.residuals(values)
+    used_frames = frame_index[factors.frame_of]
+    trace = _time_offset_trace(problem, other.frame_times, other.T_target_cam, other.T_cam_imu, other.tau0,
+                               est.gyro_bias)  # fmt: skip
     return replace(
         first,
         camera=camera,
@@ -751,11 +779,26 @@ def _other_result(task: str, problem: _Problem, g: _Graph, solution, est: _Estim
         correlations=found,
         reprojection=ResidualStats.of(residuals),
         reprojection_residuals=residuals,
-        reprojection_frames=frame_index[factors.frame_of],
+        reprojection_frames=used_frames,
+        reprojection_pixels=factors.measured,
         pixel_sigma=other.sigma_px,
         num_frames=len(paired),
         warnings=notes + unobservable_warnings(names, covariance),
+        frame_log=_other_frame_log(problem, other, given, used_frames),
+        time_offset_trace=trace,
     )
+
+
+def _other_frame_log(problem: _Problem, other: OtherCamera, given: CameraInput, used_frames: np.ndarray):
+    """Another camera's ``FrameLog`` over its own frames (None without them): its views with a target pose that no
+    first-camera state took are ``unpaired``."""
+    if given.frames is None:
+        return None
+    paired = set(used_frames.tolist())
+    unpaired = {o.index: "unpaired" for o in other.observations if o.index not in paired}
+    strided = given.observations[:: problem.options.frame_stride]
+    decided = left_out(given.observations, strided, other.outliers) | unpaired
+    return build_frame_log(given.frames, used_frames, min(MIN_INIT_CORNERS, problem.target.num_points), decided)
 
 
 @dataclass(frozen=True)
@@ -767,6 +810,7 @@ class CameraInput:
         observations: its frames' detections; camera: its model (the intrinsic stage's, or known).
         initial_T_cam_imu: (4, 4) guess whose translation is used, or None (from the first camera's).
         initial_time_offset: [s] centre of its time-offset scan.
+        frames: its input frames (``observations`` were collected from them), for its frame log; None: no log.
     """
 
     name: str
@@ -774,6 +818,7 @@ class CameraInput:
     camera: CameraModel
     initial_T_cam_imu: np.ndarray | None = None
     initial_time_offset: float = 0.0
+    frames: CameraFrames | None = None
 
 
 def run_visual_inertial(
@@ -817,7 +862,10 @@ def run_visual_inertial(
     problem.warnings += _imu_noise_warning(problem.imu_noise_scale)
     first = _result(task, problem, g, solution, est, iterations + more, start)
     first = replace(first, frame_log=_frame_log(frames, every, problem, g, first.reprojection_frames))
-    return [first] + [_other_result(task, problem, g, solution, est, entry, first) for entry in g.others]
+    return [first] + [
+        _other_result(task, problem, g, solution, est, entry, given, first)
+        for entry, given in zip(g.others, others, strict=True)
+    ]
 
 
 def _initial_other(problem: _Problem, est: _Estimate, index: int, given: CameraInput) -> OtherCamera:

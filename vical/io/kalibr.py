@@ -260,22 +260,22 @@ def write_imu_yaml(
     dump_yaml(path, data, comment=comment)
 
 
-IMU_MODELS = ("calibrated", "scale-misalignment")
 INTRINSIC_KEYS = (("accelerometers", "M"), ("gyroscopes", "M"), ("gyroscopes", "A"), ("gyroscopes", "C_gyro_i"))
 
 
 def read_imu_intrinsics(path: str | os.PathLike) -> ImuIntrinsics | None:
-    """The IMU intrinsics of a Kalibr IMU file (``model: scale-misalignment``), or None (``calibrated``, no model).
+    """The IMU intrinsics of a Kalibr IMU file (``model: scale-misalignment``), or None: no model, ``calibrated``,
+    or another Kalibr or OpenVINS model (``kalibr``, ``rpng``, ...) whose intrinsics are those of an ideal IMU.
 
-    Reads the flat file or Kalibr's result (``imu0`` section); refuses other models and matrices that
-    are not Kalibr's (``M`` lower triangular with a positive diagonal, ``C_gyro_i`` a rotation).
+    Reads the flat file or Kalibr's result / OpenVINS's ``kalibr_imu_chain.yaml`` (``imu0`` section);
+    refuses unknown models and intrinsics vical would not apply, by key (``refuse_imu_intrinsics``), and
+    scale-misalignment matrices that are not Kalibr's (``M`` lower triangular with a positive diagonal,
+    ``C_gyro_i`` a rotation).
     """
     data = load_mapping(path, KalibrFormatError)
     entry, where = (data["imu0"], f"{path} [imu0]") if isinstance(data.get("imu0"), dict) else (data, str(path))
-    model = entry.get("model", "calibrated")
-    if model not in IMU_MODELS:
-        raise KalibrFormatError(f"{where}: IMU model {model!r} is not supported; vical reads {list(IMU_MODELS)}")
-    if model == "calibrated":
+    refuse_imu_intrinsics(entry, where)
+    if entry.get("model", "calibrated") != "scale-misalignment":
         return None
     matrices = []
     for group, key in INTRINSIC_KEYS:
@@ -322,7 +322,8 @@ def imu_noise_of(entry: dict[str, Any], where: str) -> ImuNoise:
     return ImuNoise(**values)
 
 
-# IMU models of Kalibr's result files and OpenVINS's configs; vical applies scale-misalignment (IMU_MODELS).
+# IMU models of Kalibr's result files and OpenVINS's configs; vical applies scale-misalignment's intrinsics
+# (read_imu_intrinsics) and accepts the others with an ideal IMU's.
 KNOWN_IMU_MODELS = ("calibrated", "kalibr", "rpng", "scale-misalignment", "scale-misalignment-size-effect")
 # (path of the key, the value of an ideal IMU): Kalibr's scale-misalignment model, then OpenVINS's.
 IDEAL_IMU = (

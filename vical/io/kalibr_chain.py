@@ -11,7 +11,8 @@ files with ``cv::FileStorage``) is kept. YAML comments are not kept.
 ``read_imu_file`` / ``write_imu_file`` do the same for Kalibr's ``imu.yaml``, Kalibr's IMU result
 (``imu0:`` with ``T_i_b``, ``model``, ``time_offset``, ``accelerometers: {M}``,
 ``gyroscopes: {M, A, C_gyro_i}``) and OpenVINS's ``kalibr_imu_chain.yaml`` (``Tw``, ``Ta``, ``Tg``,
-``R_IMUtoGYRO``, ``R_IMUtoACC``).
+``R_IMUtoGYRO``, ``R_IMUtoACC``); ``imu_file_with`` puts a calibration's noise and IMU intrinsics into such
+a file, the rest kept.
 
 Refused, with the key and the reason: camera sections that skip a number (``cam0``, ``cam2``),
 ``cam_overlaps`` naming a camera the chain lacks, and a ``T_cn_cnm1`` that disagrees with the two
@@ -29,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from vical.data import ImuNoise, Recording
+from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel
 from vical.geometry.transforms import invert_transform
 from vical.io.errors import FormatError, KalibrFormatError, read_text_file
@@ -337,3 +339,28 @@ def write_imu_file(path: str | os.PathLike, imu: ImuFile) -> None:
     section = {k: new.pop(k) if k in new else v for k, v in old.items()} | new
     data = ({"imu0": section} | imu.top) if imu.in_section else section
     dump_yaml(path, data, header=OPENCV_HEADER if imu.opencv_header else None)
+
+
+# OpenVINS's intrinsic matrices: they give way to Kalibr's keys when intrinsics are written (vical reads
+# them only when they are an ideal IMU's, so nothing measured is lost).
+OPENVINS_INTRINSIC_KEYS = ("Tw", "Ta", "Tg", "R_IMUtoGYRO", "R_IMUtoACC")
+
+
+def imu_file_with(imu: ImuFile, noise: ImuNoise, intrinsics: ImuIntrinsics | None) -> ImuFile:
+    """``imu`` with the noise ``noise`` and, when given, ``intrinsics`` in Kalibr's scale-misalignment keys
+    (``model``, ``accelerometers: {M}``, ``gyroscopes: {M, A, C_gyro_i}``; OpenVINS's ``OPENVINS_INTRINSIC_KEYS``
+    left out); every other key (``rostopic``, ``T_i_b``, ``time_offset``, ...) as read."""
+    section = dict(imu.section)
+    if intrinsics is not None:
+        for key in OPENVINS_INTRINSIC_KEYS:
+            section.pop(key, None)
+        accelerometers = section.get("accelerometers")
+        gyroscopes = section.get("gyroscopes")
+        section["model"] = "scale-misalignment"
+        section["accelerometers"] = (accelerometers if isinstance(accelerometers, dict) else {}) | {
+            "M": intrinsics.M_accel.tolist()
+        }
+        section["gyroscopes"] = (gyroscopes if isinstance(gyroscopes, dict) else {}) | {
+            "M": intrinsics.M_gyro.tolist(), "A": intrinsics.A_gyro.tolist(), "C_gyro_i": intrinsics.C_gyro_i.tolist()
+        }  # fmt: skip
+    return replace(imu, noise=noise, section=section)
