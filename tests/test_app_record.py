@@ -65,11 +65,12 @@ def test_existing_output_is_refused(tmp_path):
         ("steps=[]", r"steps must be a non-empty list"),
         ("sensor.imu.rate_hz=300.0", r"sensor\.imu\.rate_hz"),
         ("sensor.camera.hfov.mean=3.5", r"sensor\.camera\.hfov\.mean"),
+        ("sensor.camera.distortion=eucm sensor.camera.beta.mean=-1", r"sensor\.camera\.beta\.mean must be > 0"),
     ],
 )
 def test_bad_config_names_the_key(tmp_path, override, match):
     with pytest.raises(ConfigError, match=match):
-        record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, override))
+        record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, *override.split()))
     assert not (tmp_path / "rec").exists()
 
 

@@ -11,6 +11,7 @@ from vical.calib.metrics import calibration_errors, image_differences_px
 from vical.calib.report import results_text
 from vical.calib.synthetic import Excitation, default_camera, make_recording, scattered_views, wide_angle_camera
 from vical.data import ImuNoise, Target
+from vical.geometry import COEFFICIENT_NAMES
 from vical.io.csvfiles import write_corners_csv
 from vical.io.kalibr import read_camchain, write_target_yaml
 
@@ -78,9 +79,6 @@ def fisheye_recording(request):
     )  # fmt: skip
 
 
-WIDE_ANGLE_PARAMETERS = {"ds": ["xi", "alpha"], "eucm": ["alpha", "beta"]}
-
-
 def test_extrinsic_graph_with_a_known_wide_angle_camera(fisheye_recording):
     rec = fisheye_recording
     result = calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, rec.truth.imu_noise)
@@ -95,7 +93,7 @@ def test_joint_graph_estimates_the_wide_angle_camera_with_the_extrinsic(fisheye_
     result = calibrate_joint(rec.frames, rec.imu, rec.target, model, SIZE, rec.truth.imu_noise)
     errors = calibration_errors(result, rec.truth)
     print(f"joint: {errors.rotation_deg:.4f} deg, {errors.translation_mm:.2f} mm, {errors.time_offset_ms:.3f} ms")
-    assert result.camera.distortion == model and result.parameter_names[4:6] == WIDE_ANGLE_PARAMETERS[model]
+    assert result.camera.distortion == model and result.parameter_names[4:6] == list(COEFFICIENT_NAMES[model])
     assert errors.rotation_deg < 0.1 and errors.translation_mm < 4.0 and errors.time_offset_ms < 0.3
     sigmas = np.sqrt(np.diag(result.covariance))[:6]
     assert np.all(np.abs(result.estimate[:6] - rec.truth.camera.parameters) < 3.5 * sigmas)
