@@ -1,6 +1,7 @@
 """vical-record: composes from conf/record.yaml, writes a loadable recording and PNG frames, refuses bad input,
-warns about a step the arm cannot execute and about too few board views, and a run killed while writing (SIGKILL
-of a real subprocess) leaves nothing that blocks the next one."""
+warns about a step the arm cannot execute and about too few board views, renders a 180 deg fisheye whose small
+squares are found, and a run killed while writing (SIGKILL of a real subprocess) leaves nothing that blocks the
+next one."""
 
 import os
 
@@ -10,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import cv2
@@ -17,9 +19,10 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from vical.apps.record import ClampedStepWarning, FewViewsWarning, record
+from vical.apps.record import ClampedStepWarning, FewViewsWarning, record, square_px
 from vical.config import ConfigError
 from vical.io.recording import load_recording
+from vical.sim.config import BoardConfig
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 SHORT = ["steps=[[0.0,0.04,0.0,0.0,0.0,0.1]]", "settle_time=0.05", "progress=false"]
@@ -84,6 +87,16 @@ def test_an_unreachable_step_is_executed_as_far_as_it_goes_with_a_warning(tmp_pa
     asked, moved = (float(part.split(" m,")[0]) for part in message.split("asked for ")[1].split("the arm moved "))
     assert asked == pytest.approx(2.0) and 0.0 < moved < 1.0
     assert load_recording(tmp_path / "rec").path_length < 1.0  # the executed motion, not the requested one
+
+
+def test_a_180_deg_fisheye_render_finds_the_small_squares_in_every_frame(tmp_path):
+    fisheye = ["sensor.camera.distortion=ds", "sensor.camera.hfov.mean=3.14", "sensor.backend=render"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FewViewsWarning)
+        record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, *fisheye))
+    rec = load_recording(tmp_path / "rec")
+    assert square_px(rec.truth.camera, BoardConfig()) == pytest.approx(10.4, abs=0.5)  # the 1.5 m board's squares
+    assert len(rec.frames) == 3 and rec.frames.num_detections.tolist() == [42, 42, 42]
 
 
 FEW_VIEWS = "0 of 3 frames hold board corners, fewer than the 3 views a calibration needs: "
