@@ -1,6 +1,7 @@
 """vical-record: composes from conf/record.yaml, writes a loadable recording and PNG frames, refuses bad input,
-warns about a step the arm cannot execute, and a run killed while writing (SIGKILL of a real subprocess) leaves
-nothing that blocks the next one."""
+warns about a step the arm cannot execute and about too few board views, renders a 180 deg fisheye whose small
+squares are found, and a run killed while writing (SIGKILL of a real subprocess) leaves nothing that blocks the
+next one."""
 
 import os
 
@@ -10,6 +11,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import cv2
@@ -17,9 +19,10 @@ import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
 
-from vical.apps.record import ClampedStepWarning, record
+from vical.apps.record import ClampedStepWarning, FewViewsWarning, record, square_px
 from vical.config import ConfigError
 from vical.io.recording import load_recording
+from vical.sim.config import BoardConfig
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 SHORT = ["steps=[[0.0,0.04,0.0,0.0,0.0,0.1]]", "settle_time=0.05", "progress=false"]
@@ -65,11 +68,12 @@ def test_existing_output_is_refused(tmp_path):
         ("steps=[]", r"steps must be a non-empty list"),
         ("sensor.imu.rate_hz=300.0", r"sensor\.imu\.rate_hz"),
         ("sensor.camera.hfov.mean=3.5", r"sensor\.camera\.hfov\.mean"),
+        ("sensor.camera.distortion=eucm sensor.camera.beta.mean=-1", r"sensor\.camera\.beta\.mean must be > 0"),
     ],
 )
 def test_bad_config_names_the_key(tmp_path, override, match):
     with pytest.raises(ConfigError, match=match):
-        record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, override))
+        record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, *override.split()))
     assert not (tmp_path / "rec").exists()
 
 
@@ -83,6 +87,42 @@ def test_an_unreachable_step_is_executed_as_far_as_it_goes_with_a_warning(tmp_pa
     asked, moved = (float(part.split(" m,")[0]) for part in message.split("asked for ")[1].split("the arm moved "))
     assert asked == pytest.approx(2.0) and 0.0 < moved < 1.0
     assert load_recording(tmp_path / "rec").path_length < 1.0  # the executed motion, not the requested one
+
+
+def test_a_180_deg_fisheye_render_finds_the_small_squares_in_every_frame(tmp_path):
+    fisheye = ["sensor.camera.distortion=ds", "sensor.camera.hfov.mean=3.14", "sensor.backend=render"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FewViewsWarning)
+        record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, *fisheye))
+    rec = load_recording(tmp_path / "rec")
+    assert square_px(rec.truth.camera, BoardConfig()) == pytest.approx(10.4, abs=0.5)  # the 1.5 m board's squares
+    assert len(rec.frames) == 3 and rec.frames.num_detections.tolist() == [42, 42, 42]
+
+
+FEW_VIEWS = "0 of 3 frames hold board corners, fewer than the 3 views a calibration needs: "
+
+
+@pytest.mark.parametrize(
+    ("overrides", "advice"),
+    [
+        (
+            ["sim.board.offset=[-0.75,0.0]"],
+            "keep the board in view (steps, sim.board.offset; its squares are about 27 px wide)",
+        ),
+        (
+            ["sim.board.distance=5.0", "sensor.camera.distortion=ds", "sensor.camera.hfov.mean=3.14"],
+            "the board's squares are about 3.1 px wide at the start pose, below the 8 px the detector resolves; "
+            "bring the board closer (sim.board.distance, now 5 m) or enlarge it (sim.board.square, now 0.07 m)",
+        ),
+    ],
+    ids=["out of view", "too small"],
+)
+def test_a_recording_with_too_few_board_views_warns_what_to_change(tmp_path, overrides, advice):
+    with pytest.warns(FewViewsWarning) as caught:
+        record(_cfg(f"out={tmp_path / 'rec'}", *SHORT, *overrides))
+    (warning,) = caught
+    assert str(warning.message) == FEW_VIEWS + advice
+    assert load_recording(tmp_path / "rec").frames.num_detections.max() == 0  # written all the same
 
 
 def test_a_recording_killed_while_written_leaves_nothing_that_blocks_the_next_one(tmp_path):

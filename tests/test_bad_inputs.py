@@ -253,6 +253,11 @@ CASES = [
     Case("vical-record", "sim.physics.timestep=-1", "sim.physics.timestep must be a number in (0.0, 0.01]"),
     Case("vical-record", "settle_time=-1", "settle_time must be a number in [0.0, 60.0]"),
     Case("vical-record", "sensor.backend=nope", "sensor.backend must be one of"),
+    Case(
+        "vical-record",
+        "sensor.camera.distortion=eucm sensor.camera.beta.mean=-1",
+        "sensor.camera.beta.mean must be > 0 for the eucm model, got -1",
+    ),
     Case("vical-record", "nokey=1", "Could not override 'nokey'. To append to your config use +nokey=1"),
     Case("vical-record", "sim=nope", "Could not find 'sim/nope'; the available options in 'sim' are: default"),
     Case("vical-record", "steps=[", "cannot parse the override 'steps=['"),

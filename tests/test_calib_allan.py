@@ -71,6 +71,34 @@ def test_a_recording_too_short_for_the_random_walk_is_refused_with_the_duration_
     identify_noise(static_stream(3 * needed, 0), "long enough.csv")  # no error
 
 
+def test_the_stated_duration_stays_near_the_true_need_over_seeds():
+    # A chance flat floor in the fit of a 60 s curve put the stated duration at up to 44x the need (seed 2: 109 min).
+    needed = 100 * 3 * np.sqrt(3) * NOISE.gyro_noise_density / NOISE.gyro_random_walk
+    stated = []
+    for seed in range(8):
+        with pytest.raises(NoiseIdentificationError, match="too short") as refused:
+            identify_noise(static_stream(60, seed), "short.csv")
+        stated.append(float(re.search(r"for about ([\d.]+) min or more", str(refused.value)).group(1)) * 60)
+    assert np.all((np.array(stated) > needed) & (np.array(stated) < 2 * needed)), np.array(stated) / needed
+
+
+@pytest.mark.parametrize("noise", [NOISE, ImuNoise(rate_hz=200.0)], ids=["noisy IMU", "paper IMU"])
+def test_a_short_static_recording_is_refused_as_too_short_not_as_moving(noise):
+    # 30 one-second means cannot tell a resting IMU's bias drift from motion: they read up to 35x their spread.
+    for seed in range(8):
+        with pytest.raises(NoiseIdentificationError) as refused:
+            identify_noise(static_stream(30, seed, noise), "30s.csv")
+        assert str(refused.value).startswith("30s.csv: 30 s is too short to measure the bias random walk")
+
+
+def test_a_short_recording_long_enough_for_its_imu_is_still_checked_for_motion():
+    fast_walk = ImuNoise(0.02, 0.7, 0.002, 0.07, RATE)  # the random walk dominates from 0.15 s: 15 s suffice
+    bumped = _moved(static_stream(60, 0, fast_walk), 30.0, 32.0, gyro=(2.0, 0.0, 0.0))
+    identify_noise(static_stream(60, 0, fast_walk), "still.csv")  # no error
+    with pytest.raises(NoiseIdentificationError, match=r"the IMU moves between 30\.0 s and 32\.0 s: gyro x"):
+        identify_noise(bumped, "bumped.csv")
+
+
 def test_a_recording_without_any_rise_names_the_longest_averaging_time():
     quiet = ImuNoise(0.02, 1e-6, 0.002, 1e-7, RATE)  # the random walk shows only after days
     with pytest.raises(NoiseIdentificationError, match=r"does not rise up to tau = \d+(\.\d+)? s"):

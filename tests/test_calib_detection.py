@@ -72,6 +72,18 @@ def test_board_seen_half_turned_keeps_id_zero_on_the_black_corner():
     assert np.allclose(turned[0] - centre, -(upright[0] - centre), atol=0.3)
 
 
+@pytest.mark.parametrize("distance", [3.5, 4.5])
+def test_a_far_board_with_squares_of_about_ten_pixels_is_found(distance):
+    # OpenCV's fast check erodes such squares away (it found nothing from 3 m on, squares 12 px).
+    H = _view(20.0, distance=distance)
+    truth = _project(H, TARGET)
+    square_px = np.linalg.norm(truth[1] - truth[0])
+    corners, ids = detect_checkerboard(_render(TARGET, H), TARGET)
+    assert 7.5 < square_px < 10.5 and np.array_equal(ids, np.arange(TARGET.num_points))
+    err = np.linalg.norm(corners - truth[ids], axis=1)
+    assert err.max() < 0.15, f"corner error {err.max():.3f} px"
+
+
 def test_partial_board_gives_empty_arrays():
     image = _render(TARGET, _view(0.0, distance=0.3))  # board larger than the image
     corners, ids = detect_checkerboard(image, TARGET)

@@ -11,6 +11,7 @@ from vical.calib.metrics import calibration_errors, image_differences_px
 from vical.calib.report import results_text
 from vical.calib.synthetic import Excitation, default_camera, make_recording, scattered_views, wide_angle_camera
 from vical.data import ImuNoise, Target
+from vical.geometry import COEFFICIENT_NAMES
 from vical.io.csvfiles import write_corners_csv
 from vical.io.kalibr import read_camchain, write_target_yaml
 
@@ -69,16 +70,16 @@ def test_a_rolling_shutter_is_not_taken_for_a_lens_the_model_does_not_fit():
     assert not [w for w in result.warnings if "does not fit" in w or w.startswith("lens models")]
 
 
-@pytest.fixture(scope="module")
-def fisheye_recording():
-    """12 s of camera + IMU with a 180 deg double-sphere lens, the board 0.45 m away, 4 ms time offset."""
+@pytest.fixture(scope="module", params=["ds", "eucm"])
+def fisheye_recording(request):
+    """12 s of camera + IMU with a 180 deg ds or eucm lens, the board 0.45 m away, 4 ms time offset."""
     return make_recording(
-        duration=12.0, camera=wide_angle_camera("ds", 180.0), imu_noise=ImuNoise(), pixel_sigma=0.3, seed=2,
-        time_offset=0.004, excitation=Excitation(distance=0.45),
+        duration=12.0, camera=wide_angle_camera(request.param, 180.0), imu_noise=ImuNoise(), pixel_sigma=0.3,
+        seed=2, time_offset=0.004, excitation=Excitation(distance=0.45),
     )  # fmt: skip
 
 
-def test_extrinsic_graph_with_a_known_double_sphere_camera(fisheye_recording):
+def test_extrinsic_graph_with_a_known_wide_angle_camera(fisheye_recording):
     rec = fisheye_recording
     result = calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, rec.truth.imu_noise)
     errors = calibration_errors(result, rec.truth)
@@ -86,12 +87,13 @@ def test_extrinsic_graph_with_a_known_double_sphere_camera(fisheye_recording):
     assert errors.rotation_deg < 0.1 and errors.translation_mm < 4.0 and errors.time_offset_ms < 0.3
 
 
-def test_joint_graph_estimates_the_double_sphere_camera_with_the_extrinsic(fisheye_recording):
+def test_joint_graph_estimates_the_wide_angle_camera_with_the_extrinsic(fisheye_recording):
     rec = fisheye_recording
-    result = calibrate_joint(rec.frames, rec.imu, rec.target, "ds", SIZE, rec.truth.imu_noise)
+    model = rec.truth.camera.distortion
+    result = calibrate_joint(rec.frames, rec.imu, rec.target, model, SIZE, rec.truth.imu_noise)
     errors = calibration_errors(result, rec.truth)
     print(f"joint: {errors.rotation_deg:.4f} deg, {errors.translation_mm:.2f} mm, {errors.time_offset_ms:.3f} ms")
-    assert result.camera.distortion == "ds" and result.parameter_names[4:6] == ["xi", "alpha"]
+    assert result.camera.distortion == model and result.parameter_names[4:6] == list(COEFFICIENT_NAMES[model])
     assert errors.rotation_deg < 0.1 and errors.translation_mm < 4.0 and errors.time_offset_ms < 0.3
     sigmas = np.sqrt(np.diag(result.covariance))[:6]
     assert np.all(np.abs(result.estimate[:6] - rec.truth.camera.parameters) < 3.5 * sigmas)

@@ -170,6 +170,24 @@ def test_a_wide_angle_field_of_view_for_a_pinhole_model_is_refused():
         SensorSampling.from_config({"camera": {"distortion": "omni"}})
 
 
+@pytest.mark.parametrize(
+    ("model", "mean", "message"),
+    [
+        ("eucm", {"beta": -1.0}, "sensor.camera.beta.mean must be > 0 for the eucm model, got -1.0"),
+        ("eucm", {"alpha": 1.4}, "sensor.camera.alpha.mean must be in [0, 1] for the eucm model, got 1.4"),
+        ("ds", {"xi": 1.2}, "sensor.camera.xi.mean must be in [-1, 1] for the ds model, got 1.2"),
+        ("ds", {"alpha": -0.1}, "sensor.camera.alpha.mean must be in [0, 1] for the ds model, got -0.1"),
+        ("ds", {"hfov": 6.2}, "sensor.camera.hfov.mean must be a field of view the mean lens projects (ds with"),
+    ],
+)
+def test_a_wide_angle_mean_outside_the_models_range_names_its_key(model, mean, message):
+    # Before the check, only the first draw failed, with "100 draws gave no valid camera ... reduce the spread".
+    camera = {"distortion": model, **{name: {"mean": value, "std": 0.05} for name, value in mean.items()}}
+    with pytest.raises(ConfigError) as refused:
+        SensorSampling.from_config({"camera": camera})
+    assert str(refused.value).startswith(message)
+
+
 def test_imu_intrinsics_are_drawn_only_when_configured(paper):
     rng_a, rng_b = np.random.default_rng(5), np.random.default_rng(5)
     exact = sample_sensor(paper, rng_a)

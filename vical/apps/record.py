@@ -27,13 +27,16 @@ from tqdm import tqdm
 from vical.apps.cli import check_then_run, fail
 from vical.calib.aprilgrid import detect_aprilgrid
 from vical.calib.detection import detect_checkerboard
+from vical.calib.intrinsics import MIN_VIEWS
 from vical.config import ConfigError, require, require_range
-from vical.data import Recording
-from vical.geometry import matrix_to_euler, step_pose
+from vical.data import CameraFrames, Recording
+from vical.geometry import CameraModel, matrix_to_euler, step_pose
 from vical.io.atomic import atomic_directory
 from vical.io.images import write_png
 from vical.io.recording import write_recording_files
 from vical.sim import MotionResult, PandaSim, SimConfig
+from vical.sim.camera import VisibilityRules
+from vical.sim.config import BoardConfig
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, sample_sensor
 
@@ -43,6 +46,10 @@ USER_ERRORS = (ConfigError, FileExistsError)
 
 class ClampedStepWarning(UserWarning):
     """A pose step the arm could not execute as requested; the message compares the two."""
+
+
+class FewViewsWarning(UserWarning):
+    """Fewer frames with board corners than a calibration needs; the message says what to change."""
 
 
 def parse_steps(steps) -> np.ndarray:
@@ -114,6 +121,36 @@ def clamp_warning(i: int, T_start: np.ndarray, result: MotionResult) -> str:
     )
 
 
+def few_views_warning(frames: CameraFrames, camera: CameraModel, board: BoardConfig) -> str | None:
+    """What to change when fewer than ``MIN_VIEWS`` frames hold board corners (None otherwise).
+
+    The recording is written all the same (its motion and IMU data are sound). Squares below what the
+    detector resolves (``VisibilityRules``, which the ``project`` backend applies too) point at the
+    board's distance and size; larger ones at the board out of view.
+    """
+    seen = int(np.count_nonzero(frames.num_detections))
+    if seen >= MIN_VIEWS:
+        return None
+    few = f"{seen} of {len(frames)} frames hold board corners, fewer than the {MIN_VIEWS} views a calibration needs"
+    rules = VisibilityRules()
+    smallest = rules.min_tag_px if board.kind == "aprilgrid" else rules.min_corner_spacing_px
+    size = square_px(camera, board)
+    if size < smallest:
+        return (
+            f"{few}: the board's squares are about {size:.1f} px wide at the start pose, below the {smallest:g} px "
+            f"the detector resolves; bring the board closer (sim.board.distance, now {board.distance:g} m) or "
+            f"enlarge it (sim.board.square, now {board.square:g} m)"
+        )
+    return f"{few}: keep the board in view (steps, sim.board.offset; its squares are about {size:.0f} px wide)"
+
+
+def square_px(camera: CameraModel, board: BoardConfig) -> float:
+    """[px] the width of one board square (aprilgrid: tag) in the image centre at the board's start distance."""
+    ends = np.array([[0.0, 0.0, board.distance], [board.square, 0.0, board.distance]])
+    uv, _ = camera.project(ends)
+    return float(np.linalg.norm(uv[1] - uv[0]))
+
+
 def write_images(recording: Recording, folder: Path) -> None:
     """Write every frame's image as ``<folder>/<t_ns>.png``."""
     folder.mkdir()
@@ -180,6 +217,9 @@ def record(cfg: DictConfig) -> Path:
         recording = recorder.recording(metadata)
     finally:
         recorder.close()
+    problem = few_views_warning(recording.frames, truth.camera, sim.cfg.board)
+    if problem is not None:
+        warnings.warn(problem, FewViewsWarning, stacklevel=2)
     with atomic_directory(s.out, overwrite=s.overwrite) as tmp:
         write_recording_files(recording, tmp)
         if s.images:

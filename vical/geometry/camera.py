@@ -44,8 +44,7 @@ from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
 COEFFICIENT_NAMES = {
     "radtan": ("k1", "k2", "p1", "p2"),
     "equidistant": ("k1", "k2", "k3", "k4"),
-    "ds": ("xi", "alpha"),
-    "eucm": ("alpha", "beta"),
+    **wide_angle.COEFFICIENTS,
 }
 DISTORTION_MODELS = {model: len(names) for model, names in COEFFICIENT_NAMES.items()}
 CAMERA_MODELS = tuple(COEFFICIENT_NAMES)

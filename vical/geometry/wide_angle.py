@@ -24,23 +24,33 @@ from __future__ import annotations
 
 import numpy as np
 
-WIDE_ANGLE_MODELS = ("ds", "eucm")
+COEFFICIENTS = {"ds": ("xi", "alpha"), "eucm": ("alpha", "beta")}
+WIDE_ANGLE_MODELS = tuple(COEFFICIENTS)
+_CLOSED_RANGES = {"xi": (-1.0, 1.0), "alpha": (0.0, 1.0)}  # eucm's beta has only a lower bound, open: > 0
 
 
 def check_coefficients(model: str, coeffs: np.ndarray) -> str | None:
     """Why ``coeffs`` cannot describe a ``model`` lens (one line naming the parameter), or None when they can."""
-    if model == "ds":
-        xi, alpha = coeffs
-        if not -1.0 <= xi <= 1.0:
-            return f"ds parameter xi must be in [-1, 1], got {xi}"
-        if not 0.0 <= alpha <= 1.0:
-            return f"ds parameter alpha must be in [0, 1], got {alpha}"
+    invalid = invalid_coefficient(model, coeffs)
+    if invalid is None:
         return None
-    alpha, beta = coeffs
-    if not 0.0 <= alpha <= 1.0:
-        return f"eucm parameter alpha must be in [0, 1], got {alpha}"
-    if not beta > 0.0:
-        return f"eucm parameter beta must be > 0, got {beta}"
+    name, allowed = invalid
+    return f"{model} parameter {name} must be {allowed}, got {coeffs[COEFFICIENTS[model].index(name)]}"
+
+
+def invalid_coefficient(model: str, coeffs: np.ndarray) -> tuple[str, str] | None:
+    """The first of ``coeffs`` outside its valid range, as (its name, the range in words), or None when none is.
+
+    The one place of the ranges: the camera model and the simulator's sensor config both check against it.
+    """
+    for name, value in zip(COEFFICIENTS[model], coeffs, strict=True):
+        if name == "beta":
+            valid_value, allowed = value > 0.0, "> 0"
+        else:
+            low, high = _CLOSED_RANGES[name]
+            valid_value, allowed = low <= value <= high, f"in [{low:g}, {high:g}]"
+        if not valid_value:
+            return name, allowed
     return None
 
 

@@ -29,7 +29,7 @@ from vical.geometry import (
     euler_to_matrix,
     make_transform,
 )
-from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
+from vical.geometry.wide_angle import WIDE_ANGLE_MODELS, invalid_coefficient
 
 NOISE_UNITS = ("continuous", "discrete")
 INTRINSIC_STDS = (
@@ -104,8 +104,23 @@ class CameraSampling:
         require_range(f"{key}.hfov.mean", self.hfov.mean, 0.0, max_hfov, low_open=True, high_open=True)
         for name in ("k1", "k2", "xi", "alpha", "beta"):
             getattr(self, name).check(f"{key}.{name}")
+        self._check_wide_angle_means(key)
         require_range(f"{key}.tangential_std", self.tangential_std, 0.0)
         require_range(f"{key}.center_offset_std", self.center_offset_std, 0.0)
+
+    def _check_wide_angle_means(self, key: str) -> None:
+        """Name the coefficient (or the field of view) whose mean the lens model cannot take: draws around
+        it would mostly be refused, and the redraw loop could only say that none was valid."""
+        if self.distortion not in WIDE_ANGLE_MODELS:
+            return
+        invalid = invalid_coefficient(self.distortion, mean_coefficients(self))
+        if invalid is not None:
+            name, allowed = invalid
+            require(False, f"{key}.{name}.mean", f"{allowed} for the {self.distortion} model", getattr(self, name).mean)
+        try:
+            CameraModel.from_hfov(self.hfov.mean, self.width, self.height, mean_coefficients(self), self.distortion)
+        except CameraModelError as err:
+            require(False, f"{key}.hfov.mean", f"a field of view the mean lens projects ({err})", self.hfov.mean)
 
 
 @dataclass(frozen=True)
