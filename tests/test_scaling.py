@@ -62,8 +62,9 @@ def test_a_launcher_without_its_plugin_is_one_line_saying_what_to_install(tmp_pa
 
 
 def test_bad_worker_counts_and_an_unreachable_ray_address_are_one_line_within_seconds(tmp_path):
+    num_envs_0 = "train.num_envs must be an integer from 1 to 1024 (env worker processes), got 0"
     cases = [
-        ("vical-train", ["train.num_envs=0", *SHORT], "train.num_envs must be a number in [1, inf), got 0"),
+        ("vical-train", ["train.num_envs=0", *SHORT], num_envs_0),
         ("vical-evaluate", ["parallel.workers=5000", "episodes=1"], "parallel.workers must be an integer from 1"),
         ("vical-evaluate", ["parallel=ray", "parallel.ray_address=127.0.0.1:9", "episodes=1"], "nothing answers"),
     ]

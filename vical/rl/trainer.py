@@ -65,13 +65,12 @@ class TrainConfig:
     def __post_init__(self) -> None:
         for name in ("total_steps", "updates_per_step", "buffer_size", "eval_episodes", "eval_max_episode_steps"):
             _require_int(f"train.{name}", getattr(self, name), 1)
-        _require_int("train.num_envs", self.num_envs, 1)
+        n = self.num_envs
+        ok = isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_WORKERS
+        require(ok, "train.num_envs", f"an integer from 1 to {MAX_WORKERS} (env worker processes)", n)
         _require_int("train.policy_lag", self.policy_lag, 1)
         require(
             self.policy_lag <= MAX_POLICY_LAG, "train.policy_lag", f"at most {MAX_POLICY_LAG} rounds", self.policy_lag
-        )
-        require(
-            self.num_envs <= MAX_WORKERS, "train.num_envs", f"at most {MAX_WORKERS} (worker processes)", self.num_envs
         )
         for name in ("warmup_steps", "eval_every", "log_every", "plot_every_episodes", "checkpoint_every"):
             _require_int(f"train.{name}", getattr(self, name), 0)
