@@ -13,6 +13,7 @@ from test_rl_trainer import assert_same_parameters, parameters, tiny_config
 from vical.config import ConfigError
 from vical.rl.checkpoint import load_checkpoint
 from vical.rl.trainer import CHECKPOINT, train
+from vical.rl.vector import WorkersDidNotStart
 from vical.rl.vector_trainer import WorkerDiedError
 
 KILL_AFTER = "VICAL_TEST_KILL_WORKER_AFTER"  # steps after which a worker process ends itself (as kill -9 would)
@@ -122,6 +123,71 @@ def test_ray_actors_give_the_local_processes_parameters(tmp_path):
     finally:
         ray.shutdown()
     assert_same_parameters(parameters(local.agent), parameters(on_ray.agent))
+
+
+RAY = {"parallel": {"workers": 2, "backend": "ray"}}
+
+
+@pytest.mark.timeout(180)  # a regression hangs: each env actor waits for a CPU
+def test_more_envs_than_workers_get_a_cpu_each_on_a_local_ray_instance(tmp_path):
+    """parallel.workers=2 and train.num_envs=3: the local Ray instance starts with 3 CPUs and the run finishes."""
+    import ray  # a dev dependency: `make test` installs it, so this test never skips
+
+    try:
+        result = train(vector_config(tmp_path / "run", total_steps=150, num_envs=3) | RAY)
+        assert ray.cluster_resources()["CPU"] == 3
+    finally:
+        ray.shutdown()
+    assert (result.steps, result.episodes) == (150, 3)  # 3 envs x one 50-step episode
+
+
+@pytest.fixture
+def ray_of_two_cpus():
+    """A local Ray instance of 2 CPUs, started here (a run finds it initialized and uses it as its cluster)."""
+    import ray
+
+    from vical.parallel import ParallelConfig, connect_ray
+
+    connect_ray(ParallelConfig(workers=2, backend="ray"))
+    yield ray
+    ray.shutdown()
+
+
+def test_more_envs_than_the_ray_cluster_has_cpus_are_refused_at_once(tmp_path, ray_of_two_cpus):
+    start = time.perf_counter()
+    with pytest.raises(ConfigError, match=r"^train\.num_envs=3 needs 3 CPUs of the Ray cluster .* has 2: lower"):
+        train(vector_config(tmp_path / "run", num_envs=3) | RAY)
+    assert time.perf_counter() - start < 30 and not (tmp_path / "run").exists()
+
+
+class Holder:
+    """A Ray actor that holds a CPU of the cluster while it lives."""
+
+    def ready(self) -> bool:
+        return True
+
+
+def test_env_workers_that_find_no_free_cpu_stop_the_run_after_a_timeout(tmp_path, ray_of_two_cpus, monkeypatch):
+    ray = ray_of_two_cpus
+    holder = ray.remote(num_cpus=1)(Holder).remote()
+    assert ray.get(holder.ready.remote())  # one of the 2 CPUs is busy: the second env actor cannot start
+    monkeypatch.setattr("vical.rl.vector.ACTOR_START_TIMEOUT_S", 5.0)
+    start = time.perf_counter()
+    with pytest.raises(WorkersDidNotStart, match=r"^1 of 2 env workers did not start on the Ray cluster within 5 s"):
+        train(vector_config(tmp_path / "run") | RAY)
+    assert time.perf_counter() - start < 60 and not (tmp_path / "run").exists()
+    ray.kill(holder)
+    deadline = time.monotonic() + 30
+    while ray.available_resources().get("CPU") != 2:  # the env actor that did start was killed too
+        assert time.monotonic() < deadline, ray.available_resources()
+        time.sleep(0.2)
+
+
+def test_an_unreachable_ray_address_leaves_no_run_directory(tmp_path):
+    unreachable = {"parallel": {"workers": 2, "backend": "ray", "ray_address": "127.0.0.1:9"}}
+    with pytest.raises(ConfigError, match=r"nothing answers at 127\.0\.0\.1:9"):
+        train(vector_config(tmp_path / "run") | unreachable)
+    assert not (tmp_path / "run").exists()
 
 
 @pytest.mark.parametrize("num_envs", [0, 2000, 1.5])

@@ -200,15 +200,20 @@ class Trainer:
         self.step = self.episode = self.updates = self.last_checkpoint_step = 0
         self.last_eval_return: float | None = None
         self.resumed_from: int | None = None
-        s.run_dir.mkdir(parents=True, exist_ok=True)
+        self._stats: dict[str, torch.Tensor] = {}
         if s.resume:
             self._restore(load_checkpoint(s.resume / CHECKPOINT))
+        self._open_run_dir()
+
+    def _open_run_dir(self) -> None:
+        """Create the run directory with its config.yaml and TensorBoard log (the last step before the run)."""
+        s = self.settings
+        s.run_dir.mkdir(parents=True, exist_ok=True)
         write_text_atomic(s.run_dir / "config.yaml", OmegaConf.to_yaml(self.config))
         # The checkpoint at step S is written after everything logged at step S: keep those events and
         # purge only what the interrupted run logged after its checkpoint (steps > S).
         purge = None if self.resumed_from is None else self.resumed_from + 1
         self.logger = TrainLogger(s.run_dir / "tb", s.train.info_prefixes, purge_step=purge)
-        self._stats: dict[str, torch.Tensor] = {}
 
     # ---- the loop -------------------------------------------------------------------------------
     def run(self) -> TrainResult:

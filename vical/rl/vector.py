@@ -30,15 +30,23 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from vical.config import ConfigError
 from vical.parallel import ParallelConfig, connect_ray, single_threaded_children
 
 ERROR_KEY = "worker/error"  # info key of an exception caught in an env's step
 SEED_KEY = "worker/episode_seed"  # ... and the reset seed of the episode it ended
 CLOSE_TIMEOUT_S = 30.0  # a closing worker may finish its step in flight (a terminal solve) first
+# Ray actors that have not all started by then wait for CPUs that other work holds: refused, never a hang.
+# Generous: a fresh actor process imports vical, MuJoCo and GTSAM and builds its env (seconds each).
+ACTOR_START_TIMEOUT_S = 120.0
 
 
 class WorkerDied(RuntimeError):
     """A worker process ended (killed, out of memory) while the run needed it."""
+
+
+class WorkersDidNotStart(ConfigError):
+    """Ray actors of the envs did not all start in time: the cluster has no free CPU for some of them."""
 
 
 class WorkerError(RuntimeError):
@@ -183,14 +191,39 @@ class ProcessWorkers:
 
 # ----------------------------------------------------------------------------------------------- Ray
 class RayWorkers:
-    """One Ray actor per env (``parallel.backend=ray``), the same commands as ``ProcessWorkers``."""
+    """One Ray actor per env (``parallel.backend=ray``), the same commands as ``ProcessWorkers``.
+
+    Every actor holds one CPU of the cluster while it lives: a local instance (``ray_address: null``) is
+    started with a CPU for each env, a cluster with fewer CPUs than envs is refused at once, and envs that
+    do not all start within ``ACTOR_START_TIMEOUT_S`` (the cluster's CPUs are busy) stop the run with an
+    error, never a hang.
+    """
 
     def __init__(self, factory: Callable[[], GuardedEnv], num_envs: int, parallel: ParallelConfig) -> None:
-        ray = self._ray = connect_ray(parallel)
+        ray = self._ray = connect_ray(parallel, cpus=max(parallel.workers, num_envs))
+        _check_cluster_cpus(ray, num_envs, parallel)
         actor = ray.remote(num_cpus=1, max_restarts=0)(_EnvActor)
         self.actors = [actor.remote(factory) for _ in range(num_envs)]
         self._pending: dict[Any, int] = {}
-        self.observation_space, self.action_space = self._get(0, self.actors[0].spaces.remote())
+        try:
+            spaces = self._started_spaces(parallel)
+        except BaseException:
+            self.close(kill=True)
+            raise
+        self.observation_space, self.action_space = spaces[0]
+
+    def _started_spaces(self, parallel: ParallelConfig) -> list[Any]:
+        """Every actor's env spaces, once all of them started; ``WorkersDidNotStart`` after the timeout."""
+        refs = [a.spaces.remote() for a in self.actors]
+        _, waiting = self._ray.wait(refs, num_returns=len(refs), timeout=ACTOR_START_TIMEOUT_S)
+        if waiting:
+            free = self._ray.available_resources().get("CPU", 0.0)
+            raise WorkersDidNotStart(
+                f"{len(waiting)} of {len(refs)} env workers did not start on the Ray cluster within "
+                f"{ACTOR_START_TIMEOUT_S:g} s (each holds 1 CPU; {free:g} CPUs free now): lower train.num_envs or "
+                f"free the cluster's CPUs (parallel.ray_address={parallel.ray_address})"
+            )
+        return [self._get(i, ref) for i, ref in enumerate(refs)]
 
     def send(self, i: int, command: str, *args) -> None:
         self._pending[self.actors[i].run.remote(command, args)] = i
@@ -218,6 +251,17 @@ class RayWorkers:
             self._ray.wait(list(self._pending), num_returns=len(self._pending), timeout=CLOSE_TIMEOUT_S)
         for actor in self.actors:
             self._ray.kill(actor)
+
+
+def _check_cluster_cpus(ray, num_envs: int, parallel: ParallelConfig) -> None:
+    """Refuse more envs than the Ray cluster has CPUs (its actors would wait for a CPU forever)."""
+    cpus = ray.cluster_resources().get("CPU", 0.0)
+    if num_envs > cpus:
+        where = "a local Ray instance" if parallel.ray_address is None else f"the Ray cluster at {parallel.ray_address}"
+        raise ConfigError(
+            f"train.num_envs={num_envs} needs {num_envs} CPUs of the Ray cluster (one per env worker), but "
+            f"{where} has {cpus:g}: lower train.num_envs or use a larger cluster (parallel.ray_address)"
+        )
 
 
 class _EnvActor:

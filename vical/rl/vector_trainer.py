@@ -116,13 +116,23 @@ class VectorTrainer(Trainer):
     def __init__(self, cfg) -> None:
         self._restored: dict | None = None
         self._worker_died = False
-        super().__init__(cfg)  # restores a checkpoint's counters, buffer and generators
+        super().__init__(cfg)  # restores a checkpoint's counters, buffer and generators; starts the workers
         self.env.close()  # the main process keeps its env only for the spaces: the workers step theirs
         t = self.settings.train
         self.num_envs, self.lag = t.num_envs, t.policy_lag
         self.total_rounds = -(-t.total_steps // self.num_envs)
         self.versions = PolicyVersions(self.agent.policy)
-        self.workers = make_workers(make_env, self.settings.env, self.num_envs, self.settings.parallel)
+
+    def _open_run_dir(self) -> None:
+        """The workers first: workers that cannot start (an unreachable or too small Ray cluster, an env that fails
+        to build in them) stop the run before its directory holds anything."""
+        s = self.settings
+        self.workers = make_workers(make_env, s.env, s.train.num_envs, s.parallel)
+        try:
+            super()._open_run_dir()
+        except BaseException:
+            self.workers.close(kill=True)
+            raise
 
     # ---- the loop -------------------------------------------------------------------------------
     def run(self) -> TrainResult:
