@@ -4,6 +4,7 @@ never shortened, and goes on exactly when resumed longer; user errors are one li
 overrides other than key=value changes of existing keys are refused by name."""
 
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -16,6 +17,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
+from test_rl_vector import FAIL_RESET, reset_seed
 
 from vical.apps.train import check_command_line, resumed_config
 from vical.config import ConfigError
@@ -101,6 +103,28 @@ def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_p
     assert final.keys() == expected.keys()
     for key, value in expected.items():
         assert torch.equal(final[key], value), key
+
+
+def test_an_env_that_raises_in_its_reset_is_one_error_line_naming_its_seed_and_the_checkpoint(tmp_path):
+    fragile = ["~env.id", "env._target_=test_rl_vector.FragilePendulum"]  # 50-step episodes of its own
+    tiny = [a for a in TINY if not a.startswith(("+env.", "train.checkpoint_every"))]
+    settings = [*tiny, *fragile, "train.num_envs=2", "train.checkpoint_every=50"]
+    seed = reset_seed(env=1, episode=1)  # env 1's second episode: after the checkpoint at step 50
+    path = os.pathsep.join([str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")])  # the env's module
+    environment = {**os.environ, FAIL_RESET: str(seed), "PYTHONPATH": path}
+    run = tmp_path / "run"
+    done = subprocess.run(
+        [str(Path(sys.executable).parent / "vical-train"), *settings, f"run_dir={run}"],
+        cwd=tmp_path, env=environment, capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stdout + done.stderr
+    (line,) = done.stderr.splitlines()
+    assert re.fullmatch(
+        rf"vical-train: error: env worker 1 failed to reset its episode of seed {seed} \(RuntimeError: the simulator "
+        rf"could not place its arm\) at step \d+; resume from its checkpoint at step 50: vical-train resume={run}",
+        line,
+    ), line
+    assert load_checkpoint(run / CHECKPOINT)["counters"]["step"] == 50
 
 
 def test_a_bad_value_is_one_error_line_and_exit_status_2(tmp_path):

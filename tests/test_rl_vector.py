@@ -6,6 +6,7 @@ import random
 import time
 
 import gymnasium as gym
+import numpy as np
 import pytest
 import torch
 from test_rl_trainer import assert_same_parameters, parameters, tiny_config
@@ -14,9 +15,15 @@ from vical.config import ConfigError
 from vical.rl.checkpoint import load_checkpoint
 from vical.rl.trainer import CHECKPOINT, train
 from vical.rl.vector import WorkersDidNotStart
-from vical.rl.vector_trainer import WorkerDiedError
+from vical.rl.vector_trainer import EnvWorkerError, WorkerDiedError
 
 KILL_AFTER = "VICAL_TEST_KILL_WORKER_AFTER"  # steps after which a worker process ends itself (as kill -9 would)
+FAIL_RESET = "VICAL_TEST_FAIL_RESET_SEED"  # a reset seed on which the env raises
+
+
+def reset_seed(env: int, episode: int, run_seed: int = 0) -> int:
+    """The seed that resets an env's episode: keyed by (run seed, the reset stream 3, env, episode)."""
+    return int(np.random.SeedSequence([run_seed, 3, env, episode]).generate_state(1)[0] % (2**31 - 1))
 
 
 class FragilePendulum(gym.Wrapper):
@@ -33,6 +40,8 @@ class FragilePendulum(gym.Wrapper):
 
     def reset(self, **kwargs):
         self.steps_in_episode = 0
+        if os.environ.get(FAIL_RESET) == str(kwargs.get("seed")):
+            raise RuntimeError("the simulator could not place its arm")
         return self.env.reset(**kwargs)
 
     def step(self, action):
@@ -107,8 +116,27 @@ def test_an_env_that_raises_ends_its_episode_with_a_warning_naming_the_seed_and_
     with caplog.at_level(logging.WARNING, logger="vical.rl.vector_trainer"):
         result = train(vector_config(tmp_path / "run", env=env, total_steps=200))
     assert result.steps == 200 and result.episodes == 6  # every episode cut at its 30th step
-    warnings = [r.getMessage() for r in caplog.records]
-    assert len(warnings) == 6 and all("episode seed" in w and "the simulator lost its arm" in w for w in warnings)
+    # in the order the rounds are stored: both envs' first episodes (round 29), their second (59), their third (89)
+    assert [r.getMessage() for r in caplog.records] == [
+        f"env {i}, episode seed {reset_seed(i, e)}: RuntimeError: the simulator lost its arm; the episode was cut short"
+        for e in range(3)
+        for i in range(2)
+    ]
+
+
+def test_an_env_that_raises_in_its_reset_stops_the_run_naming_the_seed_and_the_checkpoint(tmp_path, monkeypatch):
+    seed = reset_seed(env=1, episode=1)  # env 1's second episode: after the checkpoint at step 50 (round 24)
+    monkeypatch.setenv(FAIL_RESET, str(seed))
+    run = tmp_path / "run"
+    message = (
+        rf"env worker 1 failed to reset its episode of seed {seed} \(RuntimeError: the simulator could not place its "
+        rf"arm\) at step \d+; resume from its checkpoint at step 50: vical-train resume={run}$"
+    )
+    with pytest.raises(EnvWorkerError, match=message):
+        train(vector_config(run, total_steps=200, checkpoint_every=50))
+    monkeypatch.delenv(FAIL_RESET)  # the env fixed: the run goes on from its checkpoint
+    resumed = train(vector_config(tmp_path / "x", total_steps=200, checkpoint_every=50) | {"resume": str(run)})
+    assert (resumed.resumed_from, resumed.steps) == (50, 200)
 
 
 def test_ray_actors_give_the_local_processes_parameters(tmp_path):

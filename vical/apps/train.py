@@ -9,11 +9,12 @@ complete (nothing to do); with a larger ``train.total_steps`` it goes on (``vica
 with a smaller one it is refused.
 
 User-facing errors (a bad config value, Hydra's own override errors, an incompatible or unreadable
-checkpoint, a missing run directory, diverged training, a dead env worker, an unreachable Ray cluster) print
-one line ``vical-train: error: ...`` and exit with status 2, as ``vical-calibrate`` does; they are checked
-before Hydra creates the run directory where the command line allows (no ``-m`` or other Hydra flags), env
-workers start before the run directory is written, and a run directory that an error left empty is removed.
-Ctrl-C stops the run with one line saying how to resume it (exit status 130).
+checkpoint, a missing run directory, diverged training, a dead env worker or an env that raised in its
+reset, an unreachable Ray cluster) print one line ``vical-train: error: ...`` and exit with status 2, as
+``vical-calibrate`` does; they are checked before Hydra creates the run directory where the command line
+allows (no ``-m`` or other Hydra flags), env workers start before the run directory is written, and a run
+directory that an error left empty is removed. Ctrl-C stops the run with one line saying how to resume it
+(exit status 130).
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ from vical.rl.trainer import (
     resume_status,
     train,
 )
-from vical.rl.vector_trainer import WorkerDiedError
+from vical.rl.vector_trainer import EnvWorkerError, WorkerDiedError
 
 # An absolute path: a relative config_path would resolve against the installed package when the console
 # script runs from another directory.
@@ -63,6 +64,7 @@ USER_ERRORS = (
     FileNotFoundError,
     TrainingDivergedError,
     WorkerDiedError,
+    EnvWorkerError,
     InstantiationException,  # the env's _target_ could not be built (bad id, bad arguments)
 )
 APP = "vical-train"

@@ -13,8 +13,8 @@ one command at a time and answers when it is done, so a fast env never waits for
 
 Both kinds of workers offer ``send(i, command, *args)`` (``reset``, ``step`` or ``replay``),
 ``receive()`` (the answers ready, waiting for at least one), the env's spaces and ``close``. A worker
-that dies raises ``WorkerDied``; an exception outside ``step`` (building the env, a reset) raises
-``WorkerError`` with the worker's traceback.
+that dies raises ``WorkerDied``; an exception outside ``step`` (building the env, a reset, a replay)
+comes back as a ``Failure`` and raises ``WorkerError`` naming the env, the command and the episode's seed.
 """
 
 from __future__ import annotations
@@ -25,6 +25,7 @@ import multiprocessing.connection
 import signal
 import traceback
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -49,8 +50,32 @@ class WorkersDidNotStart(ConfigError):
     """Ray actors of the envs did not all start in time: the cluster has no free CPU for some of them."""
 
 
+@dataclass(frozen=True)
+class Failure:
+    """An exception in a worker, sent back as its answer: what it was doing, the episode's reset seed, the error."""
+
+    command: str  # build, reset, replay or step
+    seed: int | None  # the reset seed of the episode (None while building the env)
+    error: str  # "<exception type>: <message>"
+    traceback: str
+
+    @classmethod
+    def of(cls, command: str, seed: int | None, err: BaseException) -> Failure:
+        return cls(command, seed, f"{type(err).__name__}: {err}", traceback.format_exc())
+
+
 class WorkerError(RuntimeError):
-    """A worker raised outside an env step (building the env, resetting it); the message holds its traceback."""
+    """A worker raised outside an env step; one line naming the env, the command, the episode's seed and the error.
+
+    ``failure.traceback`` holds the worker's traceback.
+    """
+
+    def __init__(self, index: int, failure: Failure) -> None:
+        self.index, self.failure = index, failure
+        what = f"{failure.command} its episode of seed {failure.seed}"
+        if failure.command == "build":
+            what = "build its env"
+        super().__init__(f"env worker {index} failed to {what} ({failure.error})")
 
 
 class GuardedEnv(gym.Wrapper):
@@ -85,9 +110,13 @@ class GuardedEnv(gym.Wrapper):
         return obs
 
     def run(self, command: str, args: tuple) -> Any:
-        if command == "reset":
-            return self.reset(seed=args[0])
-        return getattr(self, command)(*args)
+        """The command's answer, or a ``Failure`` (the worker stays up; the trainer decides what follows)."""
+        try:
+            if command == "reset":
+                return self.reset(seed=args[0])
+            return getattr(self, command)(*args)
+        except Exception as err:
+            return Failure.of(command, self.episode_seed, err)
 
 
 def _guarded(make_env: Callable[[Mapping[str, Any]], gym.Env], env_cfg: Mapping[str, Any]) -> GuardedEnv:
@@ -116,10 +145,10 @@ def _serve(connection, factory: Callable[[], GuardedEnv]) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle (it closes us)
     try:
         env = factory()
-        connection.send(("ok", (env.observation_space, env.action_space)))
-    except Exception:
-        connection.send(("error", traceback.format_exc()))
+    except Exception as err:
+        connection.send(Failure.of("build", None, err))
         return
+    connection.send((env.observation_space, env.action_space))
     while True:
         try:
             command, args = connection.recv()
@@ -127,10 +156,7 @@ def _serve(connection, factory: Callable[[], GuardedEnv]) -> None:
             break
         if command == "close":
             break
-        try:
-            connection.send(("ok", env.run(command, args)))
-        except Exception:
-            connection.send(("error", traceback.format_exc()))
+        connection.send(env.run(command, args))
     env.close()
 
 
@@ -148,7 +174,11 @@ class ProcessWorkers:
                 child.close()
                 self.connections.append(parent)
                 self.processes.append(process)
-        spaces = [self._answer(i) for i in range(num_envs)]
+        try:
+            spaces = [self._answer(i) for i in range(num_envs)]
+        except BaseException:  # a worker that failed to build its env: the others end too
+            self.close(kill=True)
+            raise
         self.observation_space, self.action_space = spaces[0]
 
     def send(self, i: int, command: str, *args) -> None:
@@ -164,12 +194,10 @@ class ProcessWorkers:
 
     def _answer(self, i: int) -> Any:
         try:
-            status, payload = self.connections[i].recv()
+            answer = self.connections[i].recv()
         except (EOFError, ConnectionResetError, OSError) as err:
             raise WorkerDied(f"env worker {i} died (exit code {self.processes[i].exitcode})") from err
-        if status == "error":
-            raise WorkerError(f"env worker {i} raised:\n{payload}")
-        return payload
+        return _checked(i, answer)
 
     def close(self, kill: bool = False) -> None:
         """Ask every worker to close its env and end (``kill``: terminate them at once).
@@ -236,11 +264,9 @@ class RayWorkers:
 
     def _get(self, i: int, ref) -> Any:
         try:
-            return self._ray.get(ref)
+            return _checked(i, self._ray.get(ref))
         except self._ray.exceptions.RayActorError as err:
             raise WorkerDied(f"env worker {i} (a Ray actor) died") from err
-        except self._ray.exceptions.RayTaskError as err:
-            raise WorkerError(f"env worker {i} raised:\n{err}") from err
 
     def close(self, kill: bool = False) -> None:
         """Kill the actors (an actor holds nothing that needs closing beyond its process).
@@ -264,14 +290,24 @@ def _check_cluster_cpus(ray, num_envs: int, parallel: ParallelConfig) -> None:
         )
 
 
+def _checked(i: int, answer: Any) -> Any:
+    """A worker's answer; ``WorkerError`` when it is a ``Failure``."""
+    if isinstance(answer, Failure):
+        raise WorkerError(i, answer)
+    return answer
+
+
 class _EnvActor:
-    """One guarded env in a Ray actor."""
+    """One guarded env in a Ray actor (an env that fails to build is answered as a ``Failure``, as locally)."""
 
     def __init__(self, factory: Callable[[], GuardedEnv]) -> None:
-        self.env = factory()
+        try:
+            self.env, self.failure = factory(), None
+        except Exception as err:
+            self.env, self.failure = None, Failure.of("build", None, err)
 
     def spaces(self):
-        return self.env.observation_space, self.env.action_space
+        return self.failure or (self.env.observation_space, self.env.action_space)
 
     def run(self, command: str, args: tuple):
         return self.env.run(command, args)
