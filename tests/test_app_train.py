@@ -78,26 +78,29 @@ def kill_after_first_checkpoint(proc: subprocess.Popen, checkpoint: Path, timeou
     proc.wait()
 
 
-def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_path):
+@pytest.mark.parametrize("num_envs, total_steps", [(1, 600), (2, 300)])
+def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_path, num_envs, total_steps):
+    """SIGKILL of vical-train itself (with 2 envs its worker processes lose their parent mid-episode)."""
     run = tmp_path / "run"
-    proc = run_app(*TINY, f"hydra.run.dir={run}", cwd=tmp_path)
+    settings = [*TINY, f"train.num_envs={num_envs}", f"train.total_steps={total_steps}"]
+    proc = run_app(*settings, f"hydra.run.dir={run}", cwd=tmp_path)
     kill_after_first_checkpoint(proc, run / CHECKPOINT)
     assert proc.returncode == -signal.SIGKILL
     killed_at = load_checkpoint(run / CHECKPOINT)["counters"]["step"]
-    assert 100 <= killed_at < 600 and not (run / AGENT).exists()
+    assert 100 <= killed_at < total_steps and not (run / AGENT).exists()
 
-    # a resume that changes a setting which alters the numbers is refused, naming it
-    refused = run_app(f"resume={run}", "agent.gamma=0.5", cwd=tmp_path)
-    out = refused.communicate(timeout=120)[0]
-    assert refused.returncode == 2 and "agent.gamma: 0.99 (checkpoint) vs 0.5 (now)" in out
-    assert out.startswith("vical-train: error: checkpoint") and "Traceback" not in out
+    if num_envs == 1:  # a resume that changes a setting which alters the numbers is refused, naming it
+        refused = run_app(f"resume={run}", "agent.gamma=0.5", cwd=tmp_path)
+        out = refused.communicate(timeout=120)[0]
+        assert refused.returncode == 2 and "agent.gamma: 0.99 (checkpoint) vs 0.5 (now)" in out
+        assert out.startswith("vical-train: error: checkpoint") and "Traceback" not in out
 
     resumed = run_app(f"resume={run}", cwd=tmp_path)
     out = resumed.communicate(timeout=300)[0]
     assert resumed.returncode == 0, out
-    assert f"from step {killed_at}" in out and "trained 600 steps" in out
+    assert f"from step {killed_at}" in out and f"trained {total_steps} steps" in out
 
-    full = train(composed([*TINY, f"run_dir={tmp_path / 'full'}"]))
+    full = train(composed([*settings, f"run_dir={tmp_path / 'full'}"]))
     final = torch.load(run / AGENT, weights_only=True)["model"]
     expected = full.agent.state_dict()
     assert final.keys() == expected.keys()
