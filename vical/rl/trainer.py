@@ -49,7 +49,7 @@ class TrainConfig:
 
     total_steps: int = 10_000
     warmup_steps: int = 1_000  # uniform random actions and no updates before this many steps
-    updates_per_step: int = 1  # gradient updates per collected transition (num_envs of them per vector step)
+    updates_per_step: int = 1  # gradient updates per collected transition (num_envs of them per round of steps)
     num_envs: int = 1  # environments, each in a worker process when > 1 (vical.rl.vector)
     policy_lag: int = 4  # with num_envs > 1: rounds between the network that samples an action and the newest
     buffer_size: int = 1_000_000
