@@ -4,6 +4,7 @@ never shortened, and goes on exactly when resumed longer; user errors are one li
 overrides other than key=value changes of existing keys are refused by name."""
 
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -16,6 +17,7 @@ import pytest
 import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
+from test_rl_vector import FAIL_RESET, reset_seed
 
 from vical.apps.train import check_command_line, resumed_config
 from vical.config import ConfigError
@@ -76,31 +78,56 @@ def kill_after_first_checkpoint(proc: subprocess.Popen, checkpoint: Path, timeou
     proc.wait()
 
 
-def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_path):
+@pytest.mark.parametrize("num_envs, total_steps", [(1, 600), (2, 300)])
+def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_path, num_envs, total_steps):
+    """SIGKILL of vical-train itself (with 2 envs its worker processes lose their parent mid-episode)."""
     run = tmp_path / "run"
-    proc = run_app(*TINY, f"hydra.run.dir={run}", cwd=tmp_path)
+    settings = [*TINY, f"train.num_envs={num_envs}", f"train.total_steps={total_steps}"]
+    proc = run_app(*settings, f"hydra.run.dir={run}", cwd=tmp_path)
     kill_after_first_checkpoint(proc, run / CHECKPOINT)
     assert proc.returncode == -signal.SIGKILL
     killed_at = load_checkpoint(run / CHECKPOINT)["counters"]["step"]
-    assert 100 <= killed_at < 600 and not (run / AGENT).exists()
+    assert 100 <= killed_at < total_steps and not (run / AGENT).exists()
 
-    # a resume that changes a setting which alters the numbers is refused, naming it
-    refused = run_app(f"resume={run}", "agent.gamma=0.5", cwd=tmp_path)
-    out = refused.communicate(timeout=120)[0]
-    assert refused.returncode == 2 and "agent.gamma: 0.99 (checkpoint) vs 0.5 (now)" in out
-    assert out.startswith("vical-train: error: checkpoint") and "Traceback" not in out
+    if num_envs == 1:  # a resume that changes a setting which alters the numbers is refused, naming it
+        refused = run_app(f"resume={run}", "agent.gamma=0.5", cwd=tmp_path)
+        out = refused.communicate(timeout=120)[0]
+        assert refused.returncode == 2 and "agent.gamma: 0.99 (checkpoint) vs 0.5 (now)" in out
+        assert out.startswith("vical-train: error: checkpoint") and "Traceback" not in out
 
     resumed = run_app(f"resume={run}", cwd=tmp_path)
     out = resumed.communicate(timeout=300)[0]
     assert resumed.returncode == 0, out
-    assert f"from step {killed_at}" in out and "trained 600 steps" in out
+    assert f"from step {killed_at}" in out and f"trained {total_steps} steps" in out
 
-    full = train(composed([*TINY, f"run_dir={tmp_path / 'full'}"]))
+    full = train(composed([*settings, f"run_dir={tmp_path / 'full'}"]))
     final = torch.load(run / AGENT, weights_only=True)["model"]
     expected = full.agent.state_dict()
     assert final.keys() == expected.keys()
     for key, value in expected.items():
         assert torch.equal(final[key], value), key
+
+
+def test_an_env_that_raises_in_its_reset_is_one_error_line_naming_its_seed_and_the_checkpoint(tmp_path):
+    fragile = ["~env.id", "env._target_=test_rl_vector.FragilePendulum"]  # 50-step episodes of its own
+    tiny = [a for a in TINY if not a.startswith(("+env.", "train.checkpoint_every"))]
+    settings = [*tiny, *fragile, "train.num_envs=2", "train.checkpoint_every=50"]
+    seed = reset_seed(env=1, episode=1)  # env 1's second episode: after the checkpoint at step 50
+    path = os.pathsep.join([str(ROOT / "tests"), os.environ.get("PYTHONPATH", "")])  # the env's module
+    environment = {**os.environ, FAIL_RESET: str(seed), "PYTHONPATH": path}
+    run = tmp_path / "run"
+    done = subprocess.run(
+        [str(Path(sys.executable).parent / "vical-train"), *settings, f"run_dir={run}"],
+        cwd=tmp_path, env=environment, capture_output=True, text=True, timeout=300, check=False,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stdout + done.stderr
+    (line,) = done.stderr.splitlines()
+    assert re.fullmatch(
+        rf"vical-train: error: env worker 1 failed to reset its episode of seed {seed} \(RuntimeError: the simulator "
+        rf"could not place its arm\) at step \d+; resume from its checkpoint at step 50: vical-train resume={run}",
+        line,
+    ), line
+    assert load_checkpoint(run / CHECKPOINT)["counters"]["step"] == 50
 
 
 def test_a_bad_value_is_one_error_line_and_exit_status_2(tmp_path):

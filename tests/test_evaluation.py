@@ -147,6 +147,21 @@ def test_parallel_evaluation_gives_the_serial_rows():
     assert any(r.budget_m == 0.3 for r in serial[0].rows)  # budget rows too
 
 
+def test_evaluation_on_a_local_ray_instance_gives_the_serial_rows():
+    """The episodes as Ray tasks (a local instance of 2 CPUs): the serial rows and numbers, in the same order."""
+    import ray  # a dev dependency: `make test` installs it, so this test never skips
+
+    specs, env, seeds = [HANDCRAFTED_SHORT, RANDOM_SHORT], env_config("intrinsic", "paper"), [0, 1]
+    serial = evaluate_policies(specs, env, seeds, budgets=(0.3,), progress=False)
+    try:
+        on_ray = evaluate_policies(specs, env, seeds, budgets=(0.3,), parallel=ParallelConfig(2, "ray"), progress=False)
+        assert ray.cluster_resources()["CPU"] == 2  # the evaluation really ran on Ray
+    finally:
+        ray.shutdown()
+    for s, r in zip(serial, on_ray, strict=True):
+        assert len(s.rows) >= len(seeds) and _without_wall_time(s.rows) == _without_wall_time(r.rows)
+
+
 class BrokenPolicy(Policy):
     """A policy whose action has the wrong length: the env's step raises in the middle of the episode."""
 

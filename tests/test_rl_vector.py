@@ -6,6 +6,7 @@ import random
 import time
 
 import gymnasium as gym
+import numpy as np
 import pytest
 import torch
 from test_rl_trainer import assert_same_parameters, parameters, tiny_config
@@ -13,9 +14,16 @@ from test_rl_trainer import assert_same_parameters, parameters, tiny_config
 from vical.config import ConfigError
 from vical.rl.checkpoint import load_checkpoint
 from vical.rl.trainer import CHECKPOINT, train
-from vical.rl.vector_trainer import WorkerDiedError
+from vical.rl.vector import WorkersDidNotStart
+from vical.rl.vector_trainer import EnvWorkerError, WorkerDiedError
 
 KILL_AFTER = "VICAL_TEST_KILL_WORKER_AFTER"  # steps after which a worker process ends itself (as kill -9 would)
+FAIL_RESET = "VICAL_TEST_FAIL_RESET_SEED"  # a reset seed on which the env raises
+
+
+def reset_seed(env: int, episode: int, run_seed: int = 0) -> int:
+    """The seed that resets an env's episode: keyed by (run seed, the reset stream 3, env, episode)."""
+    return int(np.random.SeedSequence([run_seed, 3, env, episode]).generate_state(1)[0] % (2**31 - 1))
 
 
 class FragilePendulum(gym.Wrapper):
@@ -32,6 +40,8 @@ class FragilePendulum(gym.Wrapper):
 
     def reset(self, **kwargs):
         self.steps_in_episode = 0
+        if os.environ.get(FAIL_RESET) == str(kwargs.get("seed")):
+            raise RuntimeError("the simulator could not place its arm")
         return self.env.reset(**kwargs)
 
     def step(self, action):
@@ -106,8 +116,27 @@ def test_an_env_that_raises_ends_its_episode_with_a_warning_naming_the_seed_and_
     with caplog.at_level(logging.WARNING, logger="vical.rl.vector_trainer"):
         result = train(vector_config(tmp_path / "run", env=env, total_steps=200))
     assert result.steps == 200 and result.episodes == 6  # every episode cut at its 30th step
-    warnings = [r.getMessage() for r in caplog.records]
-    assert len(warnings) == 6 and all("episode seed" in w and "the simulator lost its arm" in w for w in warnings)
+    # in the order the rounds are stored: both envs' first episodes (round 29), their second (59), their third (89)
+    assert [r.getMessage() for r in caplog.records] == [
+        f"env {i}, episode seed {reset_seed(i, e)}: RuntimeError: the simulator lost its arm; the episode was cut short"
+        for e in range(3)
+        for i in range(2)
+    ]
+
+
+def test_an_env_that_raises_in_its_reset_stops_the_run_naming_the_seed_and_the_checkpoint(tmp_path, monkeypatch):
+    seed = reset_seed(env=1, episode=1)  # env 1's second episode: after the checkpoint at step 50 (round 24)
+    monkeypatch.setenv(FAIL_RESET, str(seed))
+    run = tmp_path / "run"
+    message = (
+        rf"env worker 1 failed to reset its episode of seed {seed} \(RuntimeError: the simulator could not place its "
+        rf"arm\) at step \d+; resume from its checkpoint at step 50: vical-train resume={run}$"
+    )
+    with pytest.raises(EnvWorkerError, match=message):
+        train(vector_config(run, total_steps=200, checkpoint_every=50))
+    monkeypatch.delenv(FAIL_RESET)  # the env fixed: the run goes on from its checkpoint
+    resumed = train(vector_config(tmp_path / "x", total_steps=200, checkpoint_every=50) | {"resume": str(run)})
+    assert (resumed.resumed_from, resumed.steps) == (50, 200)
 
 
 def test_ray_actors_give_the_local_processes_parameters(tmp_path):
@@ -124,9 +153,74 @@ def test_ray_actors_give_the_local_processes_parameters(tmp_path):
     assert_same_parameters(parameters(local.agent), parameters(on_ray.agent))
 
 
+RAY = {"parallel": {"workers": 2, "backend": "ray"}}
+
+
+@pytest.mark.timeout(180)  # a regression hangs: each env actor waits for a CPU
+def test_more_envs_than_workers_get_a_cpu_each_on_a_local_ray_instance(tmp_path):
+    """parallel.workers=2 and train.num_envs=3: the local Ray instance starts with 3 CPUs and the run finishes."""
+    import ray  # a dev dependency: `make test` installs it, so this test never skips
+
+    try:
+        result = train(vector_config(tmp_path / "run", total_steps=150, num_envs=3) | RAY)
+        assert ray.cluster_resources()["CPU"] == 3
+    finally:
+        ray.shutdown()
+    assert (result.steps, result.episodes) == (150, 3)  # 3 envs x one 50-step episode
+
+
+@pytest.fixture
+def ray_of_two_cpus():
+    """A local Ray instance of 2 CPUs, started here (a run finds it initialized and uses it as its cluster)."""
+    import ray
+
+    from vical.parallel import ParallelConfig, connect_ray
+
+    connect_ray(ParallelConfig(workers=2, backend="ray"))
+    yield ray
+    ray.shutdown()
+
+
+def test_more_envs_than_the_ray_cluster_has_cpus_are_refused_at_once(tmp_path, ray_of_two_cpus):
+    start = time.perf_counter()
+    with pytest.raises(ConfigError, match=r"^train\.num_envs=3 needs 3 CPUs of the Ray cluster .* has 2: lower"):
+        train(vector_config(tmp_path / "run", num_envs=3) | RAY)
+    assert time.perf_counter() - start < 30 and not (tmp_path / "run").exists()
+
+
+class Holder:
+    """A Ray actor that holds a CPU of the cluster while it lives."""
+
+    def ready(self) -> bool:
+        return True
+
+
+def test_env_workers_that_find_no_free_cpu_stop_the_run_after_a_timeout(tmp_path, ray_of_two_cpus, monkeypatch):
+    ray = ray_of_two_cpus
+    holder = ray.remote(num_cpus=1)(Holder).remote()
+    assert ray.get(holder.ready.remote())  # one of the 2 CPUs is busy: the second env actor cannot start
+    monkeypatch.setattr("vical.rl.vector.ACTOR_START_TIMEOUT_S", 5.0)
+    start = time.perf_counter()
+    with pytest.raises(WorkersDidNotStart, match=r"^1 of 2 env workers did not start on the Ray cluster within 5 s"):
+        train(vector_config(tmp_path / "run") | RAY)
+    assert time.perf_counter() - start < 60 and not (tmp_path / "run").exists()
+    ray.kill(holder)
+    deadline = time.monotonic() + 30
+    while ray.available_resources().get("CPU") != 2:  # the env actor that did start was killed too
+        assert time.monotonic() < deadline, ray.available_resources()
+        time.sleep(0.2)
+
+
+def test_an_unreachable_ray_address_leaves_no_run_directory(tmp_path):
+    unreachable = {"parallel": {"workers": 2, "backend": "ray", "ray_address": "127.0.0.1:9"}}
+    with pytest.raises(ConfigError, match=r"nothing answers at 127\.0\.0\.1:9"):
+        train(vector_config(tmp_path / "run") | unreachable)
+    assert not (tmp_path / "run").exists()
+
+
 @pytest.mark.parametrize("num_envs", [0, 2000, 1.5])
 def test_bad_num_envs_is_refused_by_key(tmp_path, num_envs):
-    with pytest.raises(ConfigError, match=r"train\.num_envs"):
+    with pytest.raises(ConfigError, match=rf"^train\.num_envs must be an integer from 1 to 1024 .*, got {num_envs}$"):
         train(vector_config(tmp_path / "run", num_envs=num_envs))
 
 

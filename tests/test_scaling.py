@@ -62,15 +62,19 @@ def test_a_launcher_without_its_plugin_is_one_line_saying_what_to_install(tmp_pa
 
 
 def test_bad_worker_counts_and_an_unreachable_ray_address_are_one_line_within_seconds(tmp_path):
+    unreachable = ["parallel=ray", "parallel.ray_address=127.0.0.1:9"]  # the discard port: nothing listens
+    num_envs_0 = "train.num_envs must be an integer from 1 to 1024 (env worker processes), got 0"
     cases = [
-        ("vical-train", ["train.num_envs=0", *SHORT], "train.num_envs must be a number in [1, inf), got 0"),
+        ("vical-train", ["train.num_envs=0"], num_envs_0),
+        ("vical-train", [*unreachable, "train.num_envs=2"], "nothing answers at 127.0.0.1:9"),
         ("vical-evaluate", ["parallel.workers=5000", "episodes=1"], "parallel.workers must be an integer from 1"),
-        ("vical-evaluate", ["parallel=ray", "parallel.ray_address=127.0.0.1:9", "episodes=1"], "nothing answers"),
+        ("vical-evaluate", [*unreachable, "episodes=1"], "nothing answers"),
     ]
     for name, args, message in cases:
         start = time.perf_counter()
-        out = [f"out={tmp_path / 'eval'}"] if name == "vical-evaluate" else []
+        out = [f"out={tmp_path / 'eval'}"] if name == "vical-evaluate" else [f"run_dir={tmp_path / 'run'}", *SHORT]
         done = app(name, *args, *out, cwd=tmp_path)
         lines = done.stderr.strip().splitlines()
         assert done.returncode == 2 and len(lines) == 1 and message in lines[0], done.stderr
         assert time.perf_counter() - start < 60
+        assert list(tmp_path.iterdir()) == []  # no run directory, no outputs directory of Hydra's

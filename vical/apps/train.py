@@ -9,9 +9,10 @@ complete (nothing to do); with a larger ``train.total_steps`` it goes on (``vica
 with a smaller one it is refused.
 
 User-facing errors (a bad config value, Hydra's own override errors, an incompatible or unreadable
-checkpoint, a missing run directory, diverged training, a dead env worker) print one line
-``vical-train: error: ...`` and exit with status 2, as ``vical-calibrate`` does; they are checked before
-Hydra creates the run directory where the command line allows (no ``-m`` or other Hydra flags), and a run
+checkpoint, a missing run directory, diverged training, a dead env worker or an env that raised in its
+reset, an unreachable Ray cluster) print one line ``vical-train: error: ...`` and exit with status 2, as
+``vical-calibrate`` does; they are checked before Hydra creates the run directory where the command line
+allows (no ``-m`` or other Hydra flags), env workers start before the run directory is written, and a run
 directory that an error left empty is removed. Ctrl-C stops the run with one line saying how to resume it
 (exit status 130).
 """
@@ -38,9 +39,18 @@ from vical.apps.cli import (
     quiet_library_logs,
 )
 from vical.config import ConfigError
+from vical.parallel import check_ray_address
 from vical.rl.checkpoint import IncompatibleCheckpointError, UnreadableCheckpointError
-from vical.rl.trainer import CHECKPOINT, TrainingDivergedError, checkpoint_step, parse_settings, resume_status, train
-from vical.rl.vector_trainer import WorkerDiedError
+from vical.rl.trainer import (
+    CHECKPOINT,
+    RunSettings,
+    TrainingDivergedError,
+    checkpoint_step,
+    parse_settings,
+    resume_status,
+    train,
+)
+from vical.rl.vector_trainer import EnvWorkerError, WorkerDiedError
 
 # An absolute path: a relative config_path would resolve against the installed package when the console
 # script runs from another directory.
@@ -54,6 +64,7 @@ USER_ERRORS = (
     FileNotFoundError,
     TrainingDivergedError,
     WorkerDiedError,
+    EnvWorkerError,
     InstantiationException,  # the env's _target_ could not be built (bad id, bad arguments)
 )
 APP = "vical-train"
@@ -144,10 +155,21 @@ def check_command_line(argv: list[str]) -> str | None:
     if cfg is None:
         return None  # Hydra flags (-m, --cfg, ...): Hydra and the task function check the rest
     if resume is not None:
-        return resume_status(resume, resumed_config(resume, argv).train.total_steps)
+        resumed = resumed_config(resume, argv)
+        complete = resume_status(resume, resumed.train.total_steps)
+        if complete is None:
+            _check_cluster(parse_settings(OmegaConf.to_container(resumed, resolve=True)))
+        return complete
     settings = OmegaConf.to_container(cfg, resolve=True)
-    parse_settings({**settings, "run_dir": settings["run_dir"] or "runs/<time>"})  # Hydra names it later
+    _check_cluster(parse_settings({**settings, "run_dir": settings["run_dir"] or "runs/<time>"}))  # Hydra names it
     return None
+
+
+def _check_cluster(settings: RunSettings) -> None:
+    """A Ray cluster where nothing answers is refused within seconds, before the run directory exists (only env
+    workers use it: train.num_envs > 1)."""
+    if settings.train.num_envs > 1:
+        check_ray_address(settings.parallel)
 
 
 def _remove_unused(run_dir: Path) -> None:

@@ -38,7 +38,7 @@ class ParallelConfig:
         workers: worker processes (1: in this process, no pool).
         backend: ``local`` (processes on this machine) or ``ray`` (a Ray cluster).
         ray_address: the cluster (``auto``, ``host:port`` or ``ray://host:port``); None starts a local
-            Ray instance with ``workers`` CPUs.
+            Ray instance with ``workers`` CPUs (or as many as the caller needs, ``connect_ray``).
     """
 
     workers: int = 1
@@ -167,19 +167,28 @@ def import_ray():
     return ray
 
 
-def connect_ray(config: ParallelConfig):
-    """``ray`` connected to ``config.ray_address`` (checked to answer first) or to a new local instance."""
+def check_ray_address(config: ParallelConfig) -> None:
+    """Refuse within seconds a Ray address where nothing answers (before a run writes anything); else nothing."""
+    if config.backend == "ray" and config.ray_address not in (None, "auto"):
+        _check_reachable(config.ray_address)
+
+
+def connect_ray(config: ParallelConfig, cpus: int | None = None):
+    """``ray`` connected to ``config.ray_address`` (checked to answer first) or to a new local instance.
+
+    A local instance gets ``cpus`` CPUs (default ``config.workers``): a caller whose Ray actors each hold a
+    CPU for their lifetime asks for as many as it starts.
+    """
     ray = import_ray()
     if ray.is_initialized():
         return ray
     address = config.ray_address
-    if address is not None and address != "auto":
-        _check_reachable(address)
+    check_ray_address(config)
     try:
         if address is None:  # a local instance: its workers import what this process imports
             path = {"env_vars": {"PYTHONPATH": os.pathsep.join(p for p in sys.path if p), **worker_environment()}}
             ray.init(
-                num_cpus=config.workers, include_dashboard=False, log_to_driver=False, logging_level="ERROR",
+                num_cpus=cpus or config.workers, include_dashboard=False, log_to_driver=False, logging_level="ERROR",
                 runtime_env=path,
             )  # fmt: skip
         else:

@@ -49,7 +49,7 @@ class TrainConfig:
 
     total_steps: int = 10_000
     warmup_steps: int = 1_000  # uniform random actions and no updates before this many steps
-    updates_per_step: int = 1  # gradient updates per collected transition (num_envs of them per vector step)
+    updates_per_step: int = 1  # gradient updates per collected transition (num_envs of them per round of steps)
     num_envs: int = 1  # environments, each in a worker process when > 1 (vical.rl.vector)
     policy_lag: int = 4  # with num_envs > 1: rounds between the network that samples an action and the newest
     buffer_size: int = 1_000_000
@@ -65,13 +65,12 @@ class TrainConfig:
     def __post_init__(self) -> None:
         for name in ("total_steps", "updates_per_step", "buffer_size", "eval_episodes", "eval_max_episode_steps"):
             _require_int(f"train.{name}", getattr(self, name), 1)
-        _require_int("train.num_envs", self.num_envs, 1)
+        n = self.num_envs
+        ok = isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_WORKERS
+        require(ok, "train.num_envs", f"an integer from 1 to {MAX_WORKERS} (env worker processes)", n)
         _require_int("train.policy_lag", self.policy_lag, 1)
         require(
             self.policy_lag <= MAX_POLICY_LAG, "train.policy_lag", f"at most {MAX_POLICY_LAG} rounds", self.policy_lag
-        )
-        require(
-            self.num_envs <= MAX_WORKERS, "train.num_envs", f"at most {MAX_WORKERS} (worker processes)", self.num_envs
         )
         for name in ("warmup_steps", "eval_every", "log_every", "plot_every_episodes", "checkpoint_every"):
             _require_int(f"train.{name}", getattr(self, name), 0)
@@ -201,15 +200,20 @@ class Trainer:
         self.step = self.episode = self.updates = self.last_checkpoint_step = 0
         self.last_eval_return: float | None = None
         self.resumed_from: int | None = None
-        s.run_dir.mkdir(parents=True, exist_ok=True)
+        self._stats: dict[str, torch.Tensor] = {}
         if s.resume:
             self._restore(load_checkpoint(s.resume / CHECKPOINT))
+        self._open_run_dir()
+
+    def _open_run_dir(self) -> None:
+        """Create the run directory with its config.yaml and TensorBoard log (the last step before the run)."""
+        s = self.settings
+        s.run_dir.mkdir(parents=True, exist_ok=True)
         write_text_atomic(s.run_dir / "config.yaml", OmegaConf.to_yaml(self.config))
         # The checkpoint at step S is written after everything logged at step S: keep those events and
         # purge only what the interrupted run logged after its checkpoint (steps > S).
         purge = None if self.resumed_from is None else self.resumed_from + 1
         self.logger = TrainLogger(s.run_dir / "tb", s.train.info_prefixes, purge_step=purge)
-        self._stats: dict[str, torch.Tensor] = {}
 
     # ---- the loop -------------------------------------------------------------------------------
     def run(self) -> TrainResult:

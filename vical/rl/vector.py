@@ -13,8 +13,8 @@ one command at a time and answers when it is done, so a fast env never waits for
 
 Both kinds of workers offer ``send(i, command, *args)`` (``reset``, ``step`` or ``replay``),
 ``receive()`` (the answers ready, waiting for at least one), the env's spaces and ``close``. A worker
-that dies raises ``WorkerDied``; an exception outside ``step`` (building the env, a reset) raises
-``WorkerError`` with the worker's traceback.
+that dies raises ``WorkerDied``; an exception outside ``step`` (building the env, a reset, a replay)
+comes back as a ``Failure`` and raises ``WorkerError`` naming the env, the command and the episode's seed.
 """
 
 from __future__ import annotations
@@ -25,24 +25,57 @@ import multiprocessing.connection
 import signal
 import traceback
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+from vical.config import ConfigError
 from vical.parallel import ParallelConfig, connect_ray, single_threaded_children
 
 ERROR_KEY = "worker/error"  # info key of an exception caught in an env's step
 SEED_KEY = "worker/episode_seed"  # ... and the reset seed of the episode it ended
 CLOSE_TIMEOUT_S = 30.0  # a closing worker may finish its step in flight (a terminal solve) first
+# Ray actors that have not all started by then wait for CPUs that other work holds: refused, never a hang.
+# Generous: a fresh actor process imports vical, MuJoCo and GTSAM and builds its env (seconds each).
+ACTOR_START_TIMEOUT_S = 120.0
 
 
 class WorkerDied(RuntimeError):
     """A worker process ended (killed, out of memory) while the run needed it."""
 
 
+class WorkersDidNotStart(ConfigError):
+    """Ray actors of the envs did not all start in time: the cluster has no free CPU for some of them."""
+
+
+@dataclass(frozen=True)
+class Failure:
+    """An exception in a worker, sent back as its answer: what it was doing, the episode's reset seed, the error."""
+
+    command: str  # build, reset, replay or step
+    seed: int | None  # the reset seed of the episode (None while building the env)
+    error: str  # "<exception type>: <message>"
+    traceback: str
+
+    @classmethod
+    def of(cls, command: str, seed: int | None, err: BaseException) -> Failure:
+        return cls(command, seed, f"{type(err).__name__}: {err}", traceback.format_exc())
+
+
 class WorkerError(RuntimeError):
-    """A worker raised outside an env step (building the env, resetting it); the message holds its traceback."""
+    """A worker raised outside an env step; one line naming the env, the command, the episode's seed and the error.
+
+    ``failure.traceback`` holds the worker's traceback.
+    """
+
+    def __init__(self, index: int, failure: Failure) -> None:
+        self.index, self.failure = index, failure
+        what = f"{failure.command} its episode of seed {failure.seed}"
+        if failure.command == "build":
+            what = "build its env"
+        super().__init__(f"env worker {index} failed to {what} ({failure.error})")
 
 
 class GuardedEnv(gym.Wrapper):
@@ -77,9 +110,13 @@ class GuardedEnv(gym.Wrapper):
         return obs
 
     def run(self, command: str, args: tuple) -> Any:
-        if command == "reset":
-            return self.reset(seed=args[0])
-        return getattr(self, command)(*args)
+        """The command's answer, or a ``Failure`` (the worker stays up; the trainer decides what follows)."""
+        try:
+            if command == "reset":
+                return self.reset(seed=args[0])
+            return getattr(self, command)(*args)
+        except Exception as err:
+            return Failure.of(command, self.episode_seed, err)
 
 
 def _guarded(make_env: Callable[[Mapping[str, Any]], gym.Env], env_cfg: Mapping[str, Any]) -> GuardedEnv:
@@ -108,10 +145,10 @@ def _serve(connection, factory: Callable[[], GuardedEnv]) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's to handle (it closes us)
     try:
         env = factory()
-        connection.send(("ok", (env.observation_space, env.action_space)))
-    except Exception:
-        connection.send(("error", traceback.format_exc()))
+    except Exception as err:
+        connection.send(Failure.of("build", None, err))
         return
+    connection.send((env.observation_space, env.action_space))
     while True:
         try:
             command, args = connection.recv()
@@ -119,10 +156,7 @@ def _serve(connection, factory: Callable[[], GuardedEnv]) -> None:
             break
         if command == "close":
             break
-        try:
-            connection.send(("ok", env.run(command, args)))
-        except Exception:
-            connection.send(("error", traceback.format_exc()))
+        connection.send(env.run(command, args))
     env.close()
 
 
@@ -140,7 +174,11 @@ class ProcessWorkers:
                 child.close()
                 self.connections.append(parent)
                 self.processes.append(process)
-        spaces = [self._answer(i) for i in range(num_envs)]
+        try:
+            spaces = [self._answer(i) for i in range(num_envs)]
+        except BaseException:  # a worker that failed to build its env: the others end too
+            self.close(kill=True)
+            raise
         self.observation_space, self.action_space = spaces[0]
 
     def send(self, i: int, command: str, *args) -> None:
@@ -156,12 +194,10 @@ class ProcessWorkers:
 
     def _answer(self, i: int) -> Any:
         try:
-            status, payload = self.connections[i].recv()
+            answer = self.connections[i].recv()
         except (EOFError, ConnectionResetError, OSError) as err:
             raise WorkerDied(f"env worker {i} died (exit code {self.processes[i].exitcode})") from err
-        if status == "error":
-            raise WorkerError(f"env worker {i} raised:\n{payload}")
-        return payload
+        return _checked(i, answer)
 
     def close(self, kill: bool = False) -> None:
         """Ask every worker to close its env and end (``kill``: terminate them at once).
@@ -183,14 +219,39 @@ class ProcessWorkers:
 
 # ----------------------------------------------------------------------------------------------- Ray
 class RayWorkers:
-    """One Ray actor per env (``parallel.backend=ray``), the same commands as ``ProcessWorkers``."""
+    """One Ray actor per env (``parallel.backend=ray``), the same commands as ``ProcessWorkers``.
+
+    Every actor holds one CPU of the cluster while it lives: a local instance (``ray_address: null``) is
+    started with a CPU for each env, a cluster with fewer CPUs than envs is refused at once, and envs that
+    do not all start within ``ACTOR_START_TIMEOUT_S`` (the cluster's CPUs are busy) stop the run with an
+    error, never a hang.
+    """
 
     def __init__(self, factory: Callable[[], GuardedEnv], num_envs: int, parallel: ParallelConfig) -> None:
-        ray = self._ray = connect_ray(parallel)
+        ray = self._ray = connect_ray(parallel, cpus=max(parallel.workers, num_envs))
+        _check_cluster_cpus(ray, num_envs, parallel)
         actor = ray.remote(num_cpus=1, max_restarts=0)(_EnvActor)
         self.actors = [actor.remote(factory) for _ in range(num_envs)]
         self._pending: dict[Any, int] = {}
-        self.observation_space, self.action_space = self._get(0, self.actors[0].spaces.remote())
+        try:
+            spaces = self._started_spaces(parallel)
+        except BaseException:
+            self.close(kill=True)
+            raise
+        self.observation_space, self.action_space = spaces[0]
+
+    def _started_spaces(self, parallel: ParallelConfig) -> list[Any]:
+        """Every actor's env spaces, once all of them started; ``WorkersDidNotStart`` after the timeout."""
+        refs = [a.spaces.remote() for a in self.actors]
+        _, waiting = self._ray.wait(refs, num_returns=len(refs), timeout=ACTOR_START_TIMEOUT_S)
+        if waiting:
+            free = self._ray.available_resources().get("CPU", 0.0)
+            raise WorkersDidNotStart(
+                f"{len(waiting)} of {len(refs)} env workers did not start on the Ray cluster within "
+                f"{ACTOR_START_TIMEOUT_S:g} s (each holds 1 CPU; {free:g} CPUs free now): lower train.num_envs or "
+                f"free the cluster's CPUs (parallel.ray_address={parallel.ray_address})"
+            )
+        return [self._get(i, ref) for i, ref in enumerate(refs)]
 
     def send(self, i: int, command: str, *args) -> None:
         self._pending[self.actors[i].run.remote(command, args)] = i
@@ -203,11 +264,9 @@ class RayWorkers:
 
     def _get(self, i: int, ref) -> Any:
         try:
-            return self._ray.get(ref)
+            return _checked(i, self._ray.get(ref))
         except self._ray.exceptions.RayActorError as err:
             raise WorkerDied(f"env worker {i} (a Ray actor) died") from err
-        except self._ray.exceptions.RayTaskError as err:
-            raise WorkerError(f"env worker {i} raised:\n{err}") from err
 
     def close(self, kill: bool = False) -> None:
         """Kill the actors (an actor holds nothing that needs closing beyond its process).
@@ -220,14 +279,35 @@ class RayWorkers:
             self._ray.kill(actor)
 
 
+def _check_cluster_cpus(ray, num_envs: int, parallel: ParallelConfig) -> None:
+    """Refuse more envs than the Ray cluster has CPUs (its actors would wait for a CPU forever)."""
+    cpus = ray.cluster_resources().get("CPU", 0.0)
+    if num_envs > cpus:
+        where = "a local Ray instance" if parallel.ray_address is None else f"the Ray cluster at {parallel.ray_address}"
+        raise ConfigError(
+            f"train.num_envs={num_envs} needs {num_envs} CPUs of the Ray cluster (one per env worker), but "
+            f"{where} has {cpus:g}: lower train.num_envs or use a larger cluster (parallel.ray_address)"
+        )
+
+
+def _checked(i: int, answer: Any) -> Any:
+    """A worker's answer; ``WorkerError`` when it is a ``Failure``."""
+    if isinstance(answer, Failure):
+        raise WorkerError(i, answer)
+    return answer
+
+
 class _EnvActor:
-    """One guarded env in a Ray actor."""
+    """One guarded env in a Ray actor (an env that fails to build is answered as a ``Failure``, as locally)."""
 
     def __init__(self, factory: Callable[[], GuardedEnv]) -> None:
-        self.env = factory()
+        try:
+            self.env, self.failure = factory(), None
+        except Exception as err:
+            self.env, self.failure = None, Failure.of("build", None, err)
 
     def spaces(self):
-        return self.env.observation_space, self.env.action_space
+        return self.failure or (self.env.observation_space, self.env.action_space)
 
     def run(self, command: str, args: tuple):
         return self.env.run(command, args)

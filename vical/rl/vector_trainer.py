@@ -35,7 +35,7 @@ from tqdm import tqdm
 from vical.config import ConfigError
 from vical.rl.checkpoint import flatten, save_checkpoint
 from vical.rl.trainer import CHECKPOINT, Episode, Trainer, TrainResult, make_env
-from vical.rl.vector import ERROR_KEY, SEED_KEY, WorkerDied, make_workers
+from vical.rl.vector import ERROR_KEY, SEED_KEY, WorkerDied, WorkerError, make_workers
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +46,10 @@ _INITIAL_VERSION = -1  # the network before any round (version r: after round r'
 
 class WorkerDiedError(RuntimeError):
     """An environment worker process died; the message says from which checkpoint to resume."""
+
+
+class EnvWorkerError(RuntimeError):
+    """An env raised outside a step (its reset, a replay on resume); the message names its seed and the checkpoint."""
 
 
 @dataclass
@@ -116,13 +120,33 @@ class VectorTrainer(Trainer):
     def __init__(self, cfg) -> None:
         self._restored: dict | None = None
         self._worker_died = False
-        super().__init__(cfg)  # restores a checkpoint's counters, buffer and generators
+        super().__init__(cfg)  # restores a checkpoint's counters, buffer and generators; starts the workers
         self.env.close()  # the main process keeps its env only for the spaces: the workers step theirs
         t = self.settings.train
         self.num_envs, self.lag = t.num_envs, t.policy_lag
         self.total_rounds = -(-t.total_steps // self.num_envs)
         self.versions = PolicyVersions(self.agent.policy)
-        self.workers = make_workers(make_env, self.settings.env, self.num_envs, self.settings.parallel)
+
+    def _open_run_dir(self) -> None:
+        """The workers first: workers that cannot start (an unreachable or too small Ray cluster, an env that fails
+        to build in them) stop the run before its directory holds anything."""
+        self.workers = self._start_workers()
+        try:
+            super()._open_run_dir()
+        except BaseException:
+            self.workers.close(kill=True)
+            raise
+
+    def _start_workers(self):
+        """The env workers, each with its env built; a worker that dies or raises meanwhile is one line."""
+        s = self.settings
+        try:
+            return make_workers(make_env, s.env, s.train.num_envs, s.parallel)
+        except WorkerDied as err:
+            message = f"an environment worker process died while it started ({err}): run the command again"
+            raise WorkerDiedError(message) from err
+        except WorkerError as err:
+            raise EnvWorkerError(str(err)) from err
 
     # ---- the loop -------------------------------------------------------------------------------
     def run(self) -> TrainResult:
@@ -280,20 +304,24 @@ class VectorTrainer(Trainer):
         return self._eval_env
 
     def _guarded(self, call):
-        """A step of the loop; a worker process that died becomes ``WorkerDiedError`` (never a hang)."""
+        """A step of the loop; a worker process that died becomes ``WorkerDiedError``, an env that raised outside a
+        step ``EnvWorkerError``: one line each, saying where the run can go on from (never a hang)."""
         try:
             return call()
         except WorkerDied as err:
             self._worker_died = True
-            raise WorkerDiedError(self._died_message(err)) from err
+            raise WorkerDiedError(
+                f"an environment worker process died (killed, or out of memory; {err}) at step {self.step}; "
+                f"{self._where_to_go_on()}"
+            ) from err
+        except WorkerError as err:
+            raise EnvWorkerError(f"{err} at step {self.step}; {self._where_to_go_on()}") from err
 
-    def _died_message(self, err: WorkerDied) -> str:
+    def _where_to_go_on(self) -> str:
         if not self.last_checkpoint_step:
-            at = "there is no checkpoint yet: start the run again"
-        else:
-            resume = f"vical-train resume={self.settings.run_dir}"
-            at = f"resume from its checkpoint at step {self.last_checkpoint_step}: {resume}"
-        return f"an environment worker process died (killed, or out of memory; {err}) at step {self.step}; {at}"
+            return "there is no checkpoint yet: start the run again"
+        resume = f"vical-train resume={self.settings.run_dir}"
+        return f"resume from its checkpoint at step {self.last_checkpoint_step}: {resume}"
 
     # ---- checkpoints ----------------------------------------------------------------------------
     def _checkpoint(self) -> None:
