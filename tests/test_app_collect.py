@@ -166,6 +166,10 @@ def test_collect_records_and_calibrates_with_a_random_policy(tmp_path):
     assert "steps: 12" in summary and "done: the step limit" in summary
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 KILL_ARGS = ["policy=random_moving", "limits.max_steps=40", "calibrate=false", "seed=2"]
 
 
@@ -173,7 +177,8 @@ KILL_ARGS = ["policy=random_moving", "limits.max_steps=40", "calibrate=false", "
 def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, sig):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "vical.apps.collect", f"out={out}", *KILL_ARGS]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # A shell's background job inherits SIGINT ignored; Ctrl-C reaches the app only with the default action.
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
     listed = out / "recording" / "mav0" / "cam0" / "data.csv"
     deadline = time.monotonic() + 240
     while (not listed.is_file() or listed.read_text().count("\n") < 120) and time.monotonic() < deadline:
