@@ -82,6 +82,9 @@ def test_features_and_excess():
     assert f[GROUPS.index("rotation")] == pytest.approx(0.0) and f[GROUPS.index("time_offset")] == 0.0
     assert excess(ratios) == pytest.approx(np.log(100.0))
     assert excess(ratios, cap=10.0) == pytest.approx(np.log(10.0))  # the reward's: the priors pay nothing
+    # a floor of 0.25 pays shrinking every group to a quarter of its tolerance: focal 100 -> 0.25 (ln 400),
+    # principal point 1 -> 0.25 (ln 4), rotation already below (0)
+    assert excess(ratios, floor=0.25) == pytest.approx(np.log(400.0) + np.log(4.0))
     assert quantile_factor("time_offset", 0.9) == pytest.approx(1.6449, abs=1e-4)  # one dimension: the normal's
     assert quantile_factor("rotation", 0.9) == pytest.approx(2.5003, abs=1e-4)  # three: sqrt(chi2_3(0.9))
 
@@ -113,8 +116,32 @@ def test_information_mdp_rewards_shrinking_uncertainty_and_stops_when_good_enoug
         assert total["information"] == pytest.approx(40.0 * start)  # every e-fold paid once
         assert total["path"] < 0 and total["time"] < 0
         assert "calib/error_pct" not in info  # the information MDP needs no solve
+        assert info["discount"] == 1.0  # no path discount unless asked for
         figure = env.trajectory_figure(np.stack([obs, obs]), np.zeros((1, 6)))  # TensorBoard's episode image
         assert len(figure.axes) == 2 and len(figure.axes[0].lines) == len(GROUPS) + 1  # groups and tolerance
+    finally:
+        env.close()
+
+
+def test_a_floor_pays_groups_below_tolerance_and_a_path_discount_is_reported_per_step():
+    env = information_env("joint", "env.information.excess_floor=0.5", "env.reward.path_discount=0.25")
+    try:
+        _, info = env.reset(seed=5)
+        start, ratios = info["information/excess"], {g: info[f"information/{g}_ratio"] for g in GROUPS}
+        assert start == pytest.approx(sum(np.log(min(max(r, 0.5), 10.0) / 0.5) for r in ratios.values()))
+        rng = np.random.default_rng(1)
+        paid, discounts, paths = 0.0, [], []
+        for _ in range(12):
+            _, _, terminated, truncated, info = env.step(rng.uniform(env.action_space.low, env.action_space.high))
+            paid += info["reward/information"]
+            paths.append(-info["reward/path"] / 5.0)  # the information MDP's 5 per metre
+            discounts.append(info["discount"])
+            if terminated or truncated:
+                break
+        assert paid == pytest.approx(40.0 * (start - info["information/excess"]))
+        assert info["information/excess"] >= 0.0
+        np.testing.assert_allclose(discounts, 0.25 ** np.array(paths), rtol=1e-9)
+        assert min(discounts) < 0.95  # the random steps moved
     finally:
         env.close()
 
@@ -170,6 +197,10 @@ def test_a_task_mix_that_is_not_a_mapping_of_tasks_is_refused_by_key():
         ("env.information.tolerances.time_offset_ms=-0.1", "env.information.tolerances.time_offset_ms"),
         ("env.information.confidence=1.0", "env.information.confidence"),
         ("env.information.excess_cap=1", "env.information.excess_cap"),
+        ("env.information.excess_floor=0", "env.information.excess_floor"),
+        ("env.information.excess_floor=1.5", "env.information.excess_floor"),
+        ("env.reward.path_discount=0", "env.reward.path_discount"),
+        ("env.reward.path_discount=1.2", "env.reward.path_discount"),
         ("env.state=coverage_and_more", "env.state"),
     ],
 )

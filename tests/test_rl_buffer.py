@@ -1,4 +1,4 @@
-"""Replay buffer: circular overwrite, seeded uniform sampling, termination vs truncation, save/load."""
+"""Replay buffer: circular overwrite, seeded uniform sampling, termination vs truncation, discounts, save/load."""
 
 import numpy as np
 import pytest
@@ -56,6 +56,29 @@ def test_truncation_is_stored_as_a_non_terminal_transition_with_its_true_next_ob
     buf.add(np.array([2.0]), np.array([0.0]), -1.0, np.array([3.0]), terminated=True)
     np.testing.assert_array_equal(buf.terminated[:2], [0.0, 1.0])
     np.testing.assert_array_equal(buf.next_obs[:2, 0], [2.0, 3.0])
+
+
+def test_a_transitions_own_discount_is_stored_sampled_and_checked():
+    buf = ReplayBuffer(8, obs_dim=1, act_dim=1)
+    for i in range(4):
+        buf.add(np.array([i]), np.array([0.0]), float(i), np.array([i + 1]), False, discount=0.5**i)
+    batch = buf.sample(256, np.random.default_rng(0))
+    np.testing.assert_allclose(batch.discounts.numpy(), 0.5 ** batch.rewards.numpy())
+    np.testing.assert_array_equal(buf.discounts[4:], 1.0)  # unfilled slots and the default: an ordinary step
+    for bad in (0.0, -0.1, 1.5, float("nan")):
+        with pytest.raises(ValueError, match="discount must be in"):
+            buf.add(np.array([0.0]), np.array([0.0]), 0.0, np.array([0.0]), False, discount=bad)
+    assert len(buf) == 4
+
+
+def test_a_state_saved_before_per_step_discounts_loads_with_discount_one():
+    buf = filled(capacity=6, n=4)
+    state = buf.state_dict()
+    del state["discounts"]
+    restored = ReplayBuffer(6, obs_dim=2, act_dim=1)
+    restored.load_state_dict(state)
+    np.testing.assert_array_equal(restored.rewards[:4], buf.rewards[:4])
+    np.testing.assert_array_equal(restored.discounts, 1.0)
 
 
 def test_save_load_round_trip_restores_contents_and_write_position(tmp_path):

@@ -26,6 +26,7 @@ def fixed_batch(terminated: float = 0.0) -> Batch:
         rewards=torch.randn(B, generator=g),
         next_obs=torch.randn(B, OBS, generator=g),
         terminated=torch.full((B,), terminated),
+        discounts=torch.rand(B, generator=g) * 0.5 + 0.5,
     )
 
 
@@ -38,7 +39,7 @@ def paper_losses(agent: SAC, batch: Batch, generator_state: torch.Tensor) -> dic
         new_actions, log_prob = agent.policy.sample(batch.obs, g)
         q_new = agent.q(batch.obs, new_actions).min(0).values
         v_loss = 0.5 * ((agent.v(batch.obs) - (q_new - alpha * log_prob)) ** 2).mean()
-        q_hat = batch.rewards + cfg.gamma * (1 - batch.terminated) * agent.v_target(batch.next_obs)
+        q_hat = batch.rewards + cfg.gamma * batch.discounts * (1 - batch.terminated) * agent.v_target(batch.next_obs)
         q_loss = sum(0.5 * ((q_i - q_hat) ** 2).mean() for q_i in agent.q(batch.obs, batch.actions))
         policy_loss = (alpha * log_prob - q_new).mean()
     return {"losses/v_loss": float(v_loss), "losses/q_loss": float(q_loss), "losses/policy_loss": float(policy_loss)}

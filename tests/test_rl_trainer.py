@@ -13,6 +13,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from vical.config import ConfigError
 from vical.rl.checkpoint import IncompatibleCheckpointError, load_checkpoint
 from vical.rl.trainer import AGENT, CHECKPOINT, LAST_GOOD, Trainer, TrainingDivergedError, train
+from vical.rl.vector_trainer import VectorTrainer
 
 PENDULUM_50 = {"_target_": "gymnasium.make", "id": "Pendulum-v1", "max_episode_steps": 50}
 
@@ -204,6 +205,26 @@ def test_trainer_stores_truncations_as_non_terminal_and_terminations_as_terminal
     stored = trainer.buffer.terminated[:300]
     assert (stored[truncated & ~terminated] == 0).all()  # time limit: the critic bootstraps through it
     assert (stored == terminated).all()
+
+
+class Reach1DDiscounted(Reach1D):
+    """Reach1D whose steps report their own discount (a semi-MDP's): 0.5 + 0.5 exp(-|x'|)."""
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = super().step(action)
+        return obs, reward, terminated, truncated, {**info, "discount": 0.5 + 0.5 * np.exp(-abs(self.x))}
+
+
+@pytest.mark.parametrize("num_envs", [1, 2])
+def test_trainer_stores_the_discount_each_step_reports(tmp_path, num_envs):
+    env = {"_target_": f"{__name__}.Reach1DDiscounted"}
+    config = tiny_config(tmp_path, env=env, total_steps=200, eval_every=0, plot_every_episodes=0, num_envs=num_envs)
+    trainer = Trainer(config) if num_envs == 1 else VectorTrainer(config)
+    trainer.run()
+    buffer = trainer.buffer
+    x_next = buffer.next_obs[:200, 0].astype(float)
+    np.testing.assert_allclose(buffer.discounts[:200], 0.5 + 0.5 * np.exp(-np.abs(x_next)), rtol=1e-5)
+    assert buffer.discounts[:200].min() < 0.9  # the episodes moved away from 0
 
 
 def test_tensorboard_gets_namespaced_scalars_env_terms_hyperparameters_and_trajectory_images(tmp_path):

@@ -24,6 +24,7 @@ def fixed_batch(seed: int = 7) -> Batch:
         rewards=torch.randn(B, generator=g),
         next_obs=torch.randn(B, OBS, generator=g),
         terminated=(torch.rand(B, generator=g) < 0.2).float(),
+        discounts=torch.rand(B, generator=g) * 0.5 + 0.5,
     )
 
 
@@ -66,7 +67,7 @@ def reference_gradients(agent: SAC, batch: Batch, generator_state: torch.Tensor)
     v_loss = 0.5 * ((v - (q_new - alpha * log_prob).detach()) ** 2).mean()
     with torch.no_grad():
         v_next = reference_mlp(target, "mlp", batch.next_obs, 0)[:, 0]
-        q_hat = batch.rewards + cfg.gamma * (1.0 - batch.terminated) * v_next
+        q_hat = batch.rewards + cfg.gamma * batch.discounts * (1.0 - batch.terminated) * v_next
     q_loss = sum(
         0.5 * ((reference_mlp(params, "q.mlp", torch.cat([batch.obs, batch.actions], -1), i)[:, 0] - q_hat) ** 2).mean()
         for i in range(cfg.n_q)

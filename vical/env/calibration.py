@@ -10,7 +10,8 @@ terminates and the task's calibrator runs once on the whole recording; its error
 terminal reward (``vical.env.rewards``). The step limit truncates the episode.
 
 ``info`` carries ``coverage/*`` terms every step and ``calib/*`` results when a calibration ran,
-which ``vical-train`` logs to TensorBoard; ``recording()`` returns the episode's data for
+which ``vical-train`` logs to TensorBoard, and ``discount``, the step's factor on the agent's discount
+(``reward.path_discount`` to the power of its path); ``recording()`` returns the episode's data for
 evaluation.
 """
 
@@ -151,6 +152,7 @@ class CalibrationEnv(gym.Env):
         truncated = not terminated and self._steps >= self.config.max_steps
         info = self._info()
         info["motion/clamped"] = float(motion.clamped)
+        info["discount"] = self.config.reward.path_discount ** float(motion.path_length)
         c = self.config
         if (terminated and c.calibrate_on_termination) or (truncated and c.calibrate_on_truncation):
             info.update(self.calibrate_episode())

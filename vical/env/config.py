@@ -106,6 +106,10 @@ class RewardWeights:
         terminal_bonus: c3, paid when the terminal condition is reached.
         accuracy_weight: c4, multiplies ``min(1, floor / error)`` of the terminal calibration.
         accuracy_error_floor: [%] errors at or below this earn the whole accuracy reward.
+        path_discount: [per metre] the discount of a metre of path: a step's transition is discounted by
+            ``path_discount ** path`` on top of ``agent.gamma`` (reported as ``info["discount"]``), so
+            what is gained after a long path counts less, as the comparison at equal path counts it;
+            1 (the default): steps are discounted alike.
     """
 
     coverage_weight: float = 100.0
@@ -114,11 +118,13 @@ class RewardWeights:
     terminal_bonus: float = 100.0
     accuracy_weight: float = 100.0
     accuracy_error_floor: float = 0.1
+    path_discount: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("coverage_weight", "path_weight", "rotation_weight", "terminal_bonus", "accuracy_weight"):
             require_range(f"env.reward.{name}", getattr(self, name), 0.0)
         require_range("env.reward.accuracy_error_floor", self.accuracy_error_floor, 0.0, low_open=True)
+        require_range("env.reward.path_discount", self.path_discount, 0.0, 1.0, low_open=True)
 
 
 STATES = ("coverage", "information")
@@ -178,6 +184,9 @@ class InformationSettings:
         excess_cap: a ratio above this counts as this in the reward: how far above its tolerance a
             group starts depends only on the priors' spread (uncapped, the first views paid ~200
             whatever the action).
+        excess_floor: a ratio below this counts as this in the reward: 1 pays a group's shrinking down
+            to its tolerance; below 1 a group already within tolerance is still paid for shrinking
+            while the others are not (the episode still ends when every group is within tolerance).
         time_weight: [1/s] charge per second of the step's motion (the path is charged by
             ``reward.path_weight``).
     """
@@ -187,6 +196,7 @@ class InformationSettings:
     pixel_sigma: float | None = 0.25
     information_weight: float = 10.0
     excess_cap: float = 10.0
+    excess_floor: float = 1.0
     time_weight: float = 1.0
 
     def __post_init__(self) -> None:
@@ -195,6 +205,7 @@ class InformationSettings:
             require_range("env.information.pixel_sigma", self.pixel_sigma, 0.0, low_open=True)
         require_range("env.information.information_weight", self.information_weight, 0.0)
         require_range("env.information.excess_cap", self.excess_cap, 1.0, low_open=True)
+        require_range("env.information.excess_floor", self.excess_floor, 0.0, 1.0, low_open=True)
         require_range("env.information.time_weight", self.time_weight, 0.0)
 
 

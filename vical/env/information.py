@@ -342,6 +342,7 @@ def features(ratios: dict[str, float]) -> np.ndarray:
     return out
 
 
-def excess(ratios: dict[str, float], cap: float = np.inf) -> float:
-    """Sum over groups of ``ln(clip(ratio, 1, cap))``: e-folds the predicted errors still have to shrink by."""
-    return float(sum(np.log(min(max(r, 1.0), cap)) for r in ratios.values()))
+def excess(ratios: dict[str, float], cap: float = np.inf, floor: float = 1.0) -> float:
+    """Sum over groups of ``ln(clip(ratio, floor, cap) / floor)``: e-folds the predicted errors still have to
+    shrink by to reach ``floor`` times their tolerances."""
+    return float(sum(np.log(min(max(r, floor), cap) / floor) for r in ratios.values()))

@@ -80,7 +80,8 @@ class EpisodeState:
     @property
     def excess(self) -> float:
         """E-folds the predicted errors still have to shrink by (ratios capped as the reward caps them)."""
-        return excess(self.ratios, self.config.information.excess_cap)
+        s = self.config.information
+        return excess(self.ratios, s.excess_cap, s.excess_floor)
 
     @property
     def goal_reached(self) -> bool:

@@ -1,8 +1,11 @@
-"""Preallocated circular replay buffer of transitions ``(s, a, r, s', terminated)``.
+"""Preallocated circular replay buffer of transitions ``(s, a, r, s', terminated, discount)``.
 
 Only *termination* (the MDP ended: no bootstrap from ``s'``) is stored. A time-limit *truncation* is not a
 terminal state: the transition is stored with ``terminated = 0`` and its true ``s'`` (gymnasium returns the
 final observation from ``step`` before the caller resets), so the critic bootstraps through it.
+
+``discount`` is the transition's own factor on the agent's ``gamma`` (1 for an ordinary step): an env whose
+steps last unequal amounts of what the task counts (a semi-MDP) reports it as ``info["discount"]``.
 """
 
 from __future__ import annotations
@@ -16,14 +19,21 @@ from torch import Tensor
 
 from vical.io.atomic import atomic_file
 
-_ARRAYS = ("obs", "actions", "rewards", "next_obs", "terminated")
+_ARRAYS = ("obs", "actions", "rewards", "next_obs", "terminated", "discounts")
+DISCOUNT_KEY = "discount"  # info key of a transition's own discount factor, in (0, 1]
+
+
+def transition_discount(info: dict) -> float:
+    """The discount an env's step reports in ``info["discount"]``; 1 when it reports none."""
+    return float(info.get(DISCOUNT_KEY, 1.0))
 
 
 class Batch(NamedTuple):
     """A minibatch of ``B`` transitions as float32 tensors.
 
     obs, next_obs: ``(B, obs_dim)``; actions: ``(B, act_dim)`` in the policy's ``[-1, 1]`` units;
-    rewards: ``(B,)``; terminated: ``(B,)`` with 1.0 where ``s'`` is terminal.
+    rewards: ``(B,)``; terminated: ``(B,)`` with 1.0 where ``s'`` is terminal; discounts: ``(B,)``, the
+    transitions' factors on ``gamma``.
     """
 
     obs: Tensor
@@ -31,6 +41,7 @@ class Batch(NamedTuple):
     rewards: Tensor
     next_obs: Tensor
     terminated: Tensor
+    discounts: Tensor
 
 
 class ReplayBuffer:
@@ -45,20 +56,34 @@ class ReplayBuffer:
         self.rewards = np.zeros(capacity, np.float32)
         self.next_obs = np.zeros((capacity, obs_dim), np.float32)
         self.terminated = np.zeros(capacity, np.float32)
+        self.discounts = np.ones(capacity, np.float32)
         self.position = 0  # next slot to write
         self.size = 0
 
     def __len__(self) -> int:
         return self.size
 
-    def add(self, obs: np.ndarray, action: np.ndarray, reward: float, next_obs: np.ndarray, terminated: bool) -> None:
-        """Store one transition: obs/next_obs ``(obs_dim,)``, action ``(act_dim,)``."""
+    def add(
+        self,
+        obs: np.ndarray,
+        action: np.ndarray,
+        reward: float,
+        next_obs: np.ndarray,
+        terminated: bool,
+        discount: float = 1.0,
+    ) -> None:
+        """Store one transition: obs/next_obs ``(obs_dim,)``, action ``(act_dim,)``, discount in (0, 1]."""
+        if not 0.0 < discount <= 1.0:
+            raise ValueError(
+                f"a transition's discount must be in (0, 1], got {discount}: check the env's info['discount']"
+            )
         i = self.position
         self.obs[i] = obs
         self.actions[i] = action
         self.rewards[i] = reward
         self.next_obs[i] = next_obs
         self.terminated[i] = float(terminated)
+        self.discounts[i] = discount
         self.position = (i + 1) % self.capacity
         self.size = min(self.size + 1, self.capacity)
 
@@ -80,6 +105,7 @@ class ReplayBuffer:
         if state["capacity"] != self.capacity:
             raise ValueError(f"replay buffer capacity {self.capacity} differs from the saved {state['capacity']}")
         size = int(state["size"])
+        state = {"discounts": np.ones(size, np.float32), **state}  # checkpoints from before per-step discounts
         for name in _ARRAYS:
             saved = np.asarray(state[name])
             target = getattr(self, name)

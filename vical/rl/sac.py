@@ -168,9 +168,11 @@ class SAC(nn.Module):
         v = self.v(batch.obs)
         v_loss = 0.5 * (v - (q_new - alpha * log_prob).detach()).square().mean()
 
-        # Q (eqs. 7-8): regress each Q_i(s, a) onto r + gamma (1 - terminated) V_target(s').
+        # Q (eqs. 7-8): regress each Q_i(s, a) onto r + gamma d (1 - terminated) V_target(s'), d the
+        # transition's own discount (1 for an ordinary step).
         with torch.no_grad():
-            q_target = batch.rewards + cfg.gamma * (1.0 - batch.terminated) * self.v_target(batch.next_obs)
+            continuation = cfg.gamma * batch.discounts * (1.0 - batch.terminated)
+            q_target = batch.rewards + continuation * self.v_target(batch.next_obs)
         q = self.q(batch.obs, batch.actions)
         q_loss = 0.5 * (q - q_target).square().mean(1).sum()
 

@@ -27,7 +27,7 @@ from tqdm import tqdm
 from vical.config import ConfigError, from_mapping, require, require_range
 from vical.io.atomic import write_text_atomic
 from vical.parallel import MAX_WORKERS, ParallelConfig
-from vical.rl.buffer import ReplayBuffer
+from vical.rl.buffer import ReplayBuffer, transition_discount
 from vical.rl.checkpoint import flatten, load_checkpoint, require_compatible, save_checkpoint
 from vical.rl.logger import TrainLogger
 from vical.rl.sac import SAC, NonFiniteLossError, SACConfig
@@ -264,7 +264,7 @@ class Trainer:
         next_obs = self._checked_obs(next_obs, "observation")
         if not np.isfinite(reward):
             self._diverged("reward", float(reward), self.step + 1)
-        self.buffer.add(obs, action, float(reward), next_obs, bool(terminated))
+        self.buffer.add(obs, action, float(reward), next_obs, bool(terminated), transition_discount(info))
         self.step += 1
         episode.observations.append(next_obs)
         episode.actions.append(action)

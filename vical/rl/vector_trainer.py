@@ -33,6 +33,7 @@ import torch
 from tqdm import tqdm
 
 from vical.config import ConfigError
+from vical.rl.buffer import transition_discount
 from vical.rl.checkpoint import flatten, save_checkpoint
 from vical.rl.trainer import CHECKPOINT, Episode, Trainer, TrainResult, make_env
 from vical.rl.vector import ERROR_KEY, SEED_KEY, WorkerDied, WorkerError, make_workers
@@ -261,7 +262,8 @@ class VectorTrainer(Trainer):
             step, episode = round_[i], self.episodes[i]
             if not np.isfinite(step.reward):
                 self._diverged("reward", step.reward, self.step + 1)
-            self.buffer.add(episode.observations[-1], step.action, step.reward, step.obs, step.terminated)
+            discount = transition_discount(step.info)
+            self.buffer.add(episode.observations[-1], step.action, step.reward, step.obs, step.terminated, discount)
             self.step += 1
             episode.observations.append(step.obs)
             episode.actions.append(step.action)
