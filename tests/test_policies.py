@@ -1,5 +1,6 @@
 """Policies on the real calibration env: random moving, hand-crafted trajectories, waypoints, learned SAC runs."""
 
+from functools import partial
 from pathlib import Path
 
 import hydra.utils
@@ -9,8 +10,8 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from vical.config import ConfigError
-from vical.env.config import Workspace
+from vical.config import ConfigError, from_mapping
+from vical.env.config import InformationSettings, Workspace
 from vical.policies.base import WaypointPolicy
 from vical.policies.evaluation import run_trajectory
 from vical.policies.handcrafted import LENGTHS, TASKS, handcrafted_fractions, handcrafted_policy, handcrafted_waypoints
@@ -193,8 +194,11 @@ def test_without_a_run_the_practitioners_workspace_gets_the_shipped_information_
     policy = hydra.utils.instantiate(cfg["policy"]["joint"])
     assert policy.source == INFORMATION_POLICY_DIR / "agent.pt" and policy.workspace.name == "practitioner"
     assert policy.env_settings["state"] == "information"
-    # It carries the information MDP it was trained with: the one conf/env/information.yaml configures.
-    assert policy.env_settings["information"] == composed("train", ["env=information"])["env"]["information"]
+    # It carries the information MDP it was trained with: the one its experiment configures (settings it
+    # predates read as their defaults).
+    trained = composed("train", ["+experiment=train_information_policy"])["env"]["information"]
+    parse = partial(from_mapping, InformationSettings, key="env.information")
+    assert parse(policy.env_settings["information"]) == parse(trained)
     env = hydra.utils.instantiate({**cfg["env"], **policy.env_settings})
     try:
         obs, _ = env.reset(seed=7)
