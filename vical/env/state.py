@@ -79,7 +79,7 @@ class EpisodeState:
 
     @property
     def excess(self) -> float:
-        """E-folds the predicted errors still have to shrink by (ratios capped as the reward caps them)."""
+        """E-folds the predicted errors still have to shrink by (ratios capped and floored as the reward counts)."""
         s = self.config.information
         return excess(self.ratios, s.excess_cap, s.excess_floor)
 
