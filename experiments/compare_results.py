@@ -13,34 +13,9 @@ policy can be compared with every baseline without evaluating again.
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
-import numpy as np
-
-from vical.policies.statistics import paired_difference
-
-END = "end"
-
-
-def read_scores(path: Path) -> dict[str, dict[str, dict[int, float]]]:
-    """``{policy: {budget: {seed: effective error [%]}}}`` of a results file."""
-    scores: dict[str, dict[str, dict[int, float]]] = {}
-    with open(path, newline="", encoding="utf-8") as f:
-        for row in csv.DictReader(f):
-            failed = row["failed"] == "True"
-            score = float(row["prior_score_pct"] if failed else row["score_pct"])
-            scores.setdefault(row["policy"], {}).setdefault(row["budget_m"], {})[int(row["seed"])] = score
-    return scores
-
-
-def at_budget(budgets: dict[str, dict[int, float]], budget: str) -> dict[int, float]:
-    """Per seed the error at ``budget``, or the whole episode's when the episode ended before."""
-    return {seed: budgets.get(budget, {}).get(seed, whole) for seed, whole in budgets[END].items()}
-
-
-def budget_key(label: str) -> float:
-    return np.inf if label == END else float(label)
+from vical.policies.results import END, budget_key, compare, read_results, scores_of
 
 
 def main() -> None:
@@ -49,20 +24,20 @@ def main() -> None:
     p.add_argument("--policy", required=True, help="the policy's table name")
     p.add_argument("--against", nargs="+", required=True, help="the table names it is compared with")
     args = p.parse_args()
-    scores = read_scores(args.results)
+    try:
+        scores = scores_of(read_results(args.results))
+    except ValueError as e:
+        raise SystemExit(f"compare_results: {e}") from None
     for name in [args.policy, *args.against]:
         if name not in scores:
             raise SystemExit(f"compare_results: no policy {name!r} in {args.results}; it holds {sorted(scores)}")
     budgets = sorted({b for s in scores.values() for b in s}, key=budget_key)
-    mine = scores[args.policy]
     print(f"| budget | {' | '.join(f'{args.policy} - {other} [%] (95 % CI)' for other in args.against)} |")
     print("|---" * (len(args.against) + 1) + "|")
     for budget in budgets:
         cells = []
         for other in args.against:
-            a, b = at_budget(mine, budget), at_budget(scores[other], budget)
-            seeds = sorted(set(a) & set(b))
-            d = paired_difference(np.array([a[s] for s in seeds]), np.array([b[s] for s in seeds]))
+            d = compare(scores, args.policy, other, budget)
             cells.append(f"{d.estimate:+.3f} [{d.low:+.3f}, {d.high:+.3f}]")
         label = budget if budget == END else f"{float(budget):g} m"
         print(f"| {label} | {' | '.join(cells)} |")

@@ -1,0 +1,143 @@
+"""Reading vical-evaluate's results files back, and the rule that picks the training seed to ship."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from vical.apps.evaluate import results_csv
+from vical.policies.evaluation import EpisodeRow
+from vical.policies.results import ShipRule, assess, at_budget, choose_seed, compare, read_results, scores_of
+
+ROOT = Path(__file__).resolve().parents[1]
+TOLERANCES = {"focal_px": 0.35, "principal_point_px": 0.35, "distortion_px": 0.5, "rotation_deg": 0.1,
+              "translation_mm": 2.0, "time_offset_ms": 0.1}  # fmt: skip
+EXPERT = "expert (long)"
+LEARNED = "model-free learned policy"
+
+
+def joint_end(policy: str, seed: int, score: float, *, stopped=True, rotation=0.05, failed=False, path=1.0, time=20.0):
+    return EpisodeRow(policy, seed, score_pct=None if failed else score, prior_score_pct=5.0, rotation_deg=rotation,
+                      translation_mm=1.0, time_offset_ms=0.02, path_length_m=path, recording_time_s=time,
+                      coverage_reached=stopped, failed=failed)  # fmt: skip
+
+
+def write(path: Path, rows: list[EpisodeRow]) -> Path:
+    path.write_text(results_csv([SimpleNamespace(rows=rows)]))
+    return path
+
+
+def read_back(tmp_path: Path, rows: list[EpisodeRow]) -> list[dict[str, str]]:
+    """``rows`` as vical-evaluate writes them and as the results reader gives them back."""
+    path = tmp_path / f"results_{len(list(tmp_path.iterdir()))}.csv"
+    return read_results(write(path, rows))
+
+
+def expert_rows() -> list[EpisodeRow]:
+    """The long expert on 4 sensors: 0.10 % at 0.5 m, 0.05 % at its end (100 m, 400 s)."""
+    rows = []
+    for seed in range(4):
+        rows.append(EpisodeRow(EXPERT, seed, budget_m=0.5, score_pct=0.10, path_length_m=0.5, recording_time_s=10.0))
+        rows.append(joint_end(EXPERT, seed, 0.05, stopped=False, path=100.0, time=400.0))
+    return rows
+
+
+def test_a_policy_that_ended_before_the_budget_is_scored_by_its_whole_episode(tmp_path):
+    rows = [*expert_rows()]
+    # Seeds 0-1 ended before 0.5 m (their end rows count there); seed 2's calibration failed (its
+    # nominal parameters' 5 % count); seed 3 has a row at 0.5 m.
+    rows += [joint_end(LEARNED, 0, 0.04, path=0.4), joint_end(LEARNED, 1, 0.06, path=0.45)]
+    rows += [joint_end(LEARNED, 2, 0.0, failed=True), joint_end(LEARNED, 3, 0.02)]
+    rows.append(EpisodeRow(LEARNED, 3, budget_m=0.5, score_pct=0.08))
+    scores = scores_of(read_results(write(tmp_path / "results.csv", rows)))
+    assert at_budget(scores[LEARNED], "0.5") == {0: 0.04, 1: 0.06, 2: 5.0, 3: 0.08}
+    d = compare(scores, LEARNED, EXPERT, "0.5")
+    assert d.estimate == pytest.approx(np.mean([0.04, 0.06, 5.0, 0.08]) - 0.10)
+    assert d.low <= d.estimate <= d.high
+
+
+def test_assess_counts_right_stops_only_among_the_stopped_episodes(tmp_path):
+    learned = [
+        joint_end(LEARNED, 0, 0.03, rotation=0.05),
+        joint_end(LEARNED, 1, 0.03, rotation=0.15),  # stopped, but its rotation is outside 0.1 deg
+        joint_end(LEARNED, 2, 0.03, failed=True),  # stopped, calibration failed: not right
+        joint_end(LEARNED, 3, 0.03, stopped=False, rotation=0.5),  # ran to the step limit: not a stop
+    ]
+    # The baselines' file may hold a learned policy of the same name: it must not replace the candidate's.
+    baselines = expert_rows() + [joint_end(LEARNED, s, 9.0) for s in range(4)]
+    a = assess(read_back(tmp_path, learned), read_back(tmp_path, baselines), "joint", TOLERANCES, ShipRule())
+    assert a.goal == pytest.approx(0.75)
+    assert a.right == pytest.approx(1 / 3)
+    assert (a.path_m, a.time_s, a.reference_path_m, a.reference_time_s) == (1.0, 20.0, 100.0, 400.0)
+    assert a.versus.estimate == pytest.approx(np.mean([0.03, 0.03, 5.0, 0.03]) - 0.10)
+
+
+def _assessment(tmp_path, score, *, time=20.0, rotation=0.05):
+    learned = [joint_end(LEARNED, s, score, time=time, rotation=rotation) for s in range(4)]
+    return {
+        "joint": assess(
+            read_back(tmp_path, learned), read_back(tmp_path, expert_rows()), "joint", TOLERANCES, ShipRule()
+        )
+    }
+
+
+def test_the_rule_ships_the_best_eligible_candidate(tmp_path):
+    rule = ShipRule()
+    candidates = {
+        "best but slow": _assessment(tmp_path, 0.01, time=101.0),  # over 1/4 of the expert's 400 s
+        "best but wrong stops": _assessment(tmp_path, 0.01, rotation=0.2),
+        "good": _assessment(tmp_path, 0.04),
+        "worse": _assessment(tmp_path, 0.06),
+    }
+    assert rule.failures("joint", candidates["best but slow"]["joint"]) == ["joint: time 101.0 s > 0.25 x 400.0 s"]
+    assert rule.failures("joint", candidates["best but wrong stops"]["joint"]) == ["joint: stops right 0% < 90%"]
+    assert choose_seed(candidates, rule) == "good"
+    assert choose_seed({k: candidates[k] for k in ("best but slow", "best but wrong stops")}, rule) is None
+
+
+def test_bad_results_files_and_tolerances_are_named(tmp_path):
+    with pytest.raises(ValueError, match="no such results file"):
+        read_results(tmp_path / "missing.csv")
+    (tmp_path / "other.csv").write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match=r"other.csv: not a vical-evaluate results file, it lacks the columns"):
+        read_results(tmp_path / "other.csv")
+    learned, expert = (
+        read_back(tmp_path, [joint_end(LEARNED, s, 0.03) for s in range(4)]),
+        read_back(tmp_path, expert_rows()),
+    )
+    with pytest.raises(ValueError, match=r"tolerances lack \['time_offset_ms'\] of the joint task"):
+        tolerances = {k: v for k, v in TOLERANCES.items() if k != "time_offset_ms"}
+        assess(learned, expert, "joint", tolerances, ShipRule())
+    with pytest.raises(ValueError, match="no whole-episode rows of policy 'expert \\(long\\)'"):
+        assess(learned, learned, "joint", TOLERANCES, ShipRule())
+
+
+def test_choose_seed_script_ships_from_files(tmp_path):
+    """experiments/choose_seed.py end to end: run configs, results files, the table and the choice."""
+    base = {t: write(tmp_path / f"base_{t}.csv", expert_rows()) for t in ("joint", "intrinsic")}
+    args = [sys.executable, str(ROOT / "experiments" / "choose_seed.py"), "--baselines", str(base["joint"]),
+            str(base["intrinsic"])]  # fmt: skip
+    for name, score in (("s0", 0.06), ("s1", 0.04)):
+        run = tmp_path / name
+        run.mkdir()
+        tol = "\n".join(f"      {k}: {v}" for k, v in TOLERANCES.items())
+        (run / "config.yaml").write_text(f"env:\n  information:\n    tolerances:\n{tol}\n")
+        rows = [joint_end(LEARNED, s, score) for s in range(4)]
+        # The intrinsic task is scored by the intrinsic groups: within tolerance.
+        intrinsic = [
+            EpisodeRow(LEARNED, s, score_pct=score, prior_score_pct=5.0, focal_px=0.2, principal_point_px=0.2,
+                       distortion_px=0.3, path_length_m=1.0, recording_time_s=20.0, coverage_reached=True)
+            for s in range(4)
+        ]  # fmt: skip
+        args += ["--candidate", str(run), str(write(tmp_path / f"{name}_j.csv", rows)),
+                 str(write(tmp_path / f"{name}_i.csv", intrinsic))]  # fmt: skip
+    out = subprocess.run(args, capture_output=True, text=True, check=True).stdout
+    assert out.strip().endswith(f"ship: {tmp_path / 's1'}")
+    assert "| joint | 100% | 100% | 1.00 / 100.00 | 20.0 / 400.0 | -0.060" in out
+    bad = subprocess.run([*args[:5], "--candidate", str(tmp_path), args[-2], args[-1]], capture_output=True, text=True)
+    assert bad.returncode != 0 and "config.yaml is missing: pass the run_dir of a vical-train run" in bad.stderr
