@@ -23,6 +23,7 @@ the reference's, and the paired difference at the budget; then the eligible cand
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from omegaconf import OmegaConf
@@ -48,8 +49,9 @@ def tolerances_of(run_dir: Path) -> dict[str, float]:
 def row(name: str, task: str, a: TaskAssessment, rule: ShipRule) -> str:
     v = a.versus
     failures = "; ".join(f.split(": ", 1)[1] for f in rule.failures(task, a)) or "-"
+    right = "-" if math.isnan(a.right) else f"{a.right:.0%}"
     return (
-        f"| {name} | {task} | {a.goal:.0%} | {a.right:.0%} | {a.path_m:.2f} / {a.reference_path_m:.2f} | "
+        f"| {name} | {task} | {a.goal:.0%} | {right} | {a.path_m:.2f} / {a.reference_path_m:.2f} | "
         f"{a.time_s:.1f} / {a.reference_time_s:.1f} | {v.estimate:+.3f} [{v.low:+.3f}, {v.high:+.3f}] | {failures} |"
     )
 

@@ -77,8 +77,8 @@ def test_assess_counts_right_stops_only_among_the_stopped_episodes(tmp_path):
     assert a.versus.estimate == pytest.approx(np.mean([0.03, 0.03, 5.0, 0.03]) - 0.10)
 
 
-def _assessment(tmp_path, score, *, time=20.0, rotation=0.05):
-    learned = [joint_end(LEARNED, s, score, time=time, rotation=rotation) for s in range(4)]
+def _assessment(tmp_path, score, *, time=20.0, rotation=0.05, stopped=True):
+    learned = [joint_end(LEARNED, s, score, time=time, rotation=rotation, stopped=stopped) for s in range(4)]
     return {
         "joint": assess(
             read_back(tmp_path, learned), read_back(tmp_path, expert_rows()), "joint", TOLERANCES, ShipRule()
@@ -96,6 +96,8 @@ def test_the_rule_ships_the_best_eligible_candidate(tmp_path):
     }
     assert rule.failures("joint", candidates["best but slow"]["joint"]) == ["joint: time 101.0 s > 0.25 x 400.0 s"]
     assert rule.failures("joint", candidates["best but wrong stops"]["joint"]) == ["joint: stops right 0% < 90%"]
+    never_stopped = _assessment(tmp_path, 0.01, stopped=False)["joint"]
+    assert rule.failures("joint", never_stopped) == ["joint: goal 0% < 90%", "joint: no episode stopped at the goal"]
     assert choose_seed(candidates, rule) == "good"
     assert choose_seed({k: candidates[k] for k in ("best but slow", "best but wrong stops")}, rule) is None
 

@@ -130,7 +130,9 @@ class ShipRule:
         out = []
         if a.goal < self.min_goal:
             out.append(f"{task}: goal {a.goal:.0%} < {self.min_goal:.0%}")
-        if not a.right >= self.min_right:
+        if math.isnan(a.right):
+            out.append(f"{task}: no episode stopped at the goal")
+        elif a.right < self.min_right:
             out.append(f"{task}: stops right {a.right:.0%} < {self.min_right:.0%}")
         if a.path_m > self.effort_fraction * a.reference_path_m:
             out.append(f"{task}: path {a.path_m:.2f} m > {self.effort_fraction:g} x {a.reference_path_m:.2f} m")
