@@ -59,6 +59,10 @@ def test_a_policy_that_ended_before_the_budget_is_scored_by_its_whole_episode(tm
     d = compare(scores, LEARNED, EXPERT, "0.5")
     assert d.estimate == pytest.approx(np.mean([0.04, 0.06, 5.0, 0.08]) - 0.10)
     assert d.low <= d.estimate <= d.high
+    # A budget is named as the file writes it or as a number; one the file lacks is an error.
+    assert compare(scores, LEARNED, EXPERT, ".50") == d
+    with pytest.raises(ValueError, match=r"no path budget 1 m in the results; they hold \['0.5'\] m"):
+        compare(scores, LEARNED, EXPERT, "1")
 
 
 def test_assess_counts_right_stops_only_among_the_stopped_episodes(tmp_path):

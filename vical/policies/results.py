@@ -87,11 +87,25 @@ def compare(scores: Scores, policy: str, other: str, budget: str) -> Interval:
     for name in (policy, other):
         if name not in scores:
             raise ValueError(f"no policy {name!r} in the results; they hold {sorted(scores)}")
+    budget = _budget_label(budget, [*scores[policy], *scores[other]])
     a, b = at_budget(scores[policy], budget), at_budget(scores[other], budget)
     seeds = sorted(set(a) & set(b))
     if not seeds:
         raise ValueError(f"{policy!r} and {other!r} share no sensor seed: evaluate both with the same seed=")
     return paired_difference(np.array([a[s] for s in seeds]), np.array([b[s] for s in seeds]))
+
+
+def _budget_label(budget: str, labels: Sequence[str]) -> str:
+    """The file's label of ``budget`` (``1`` is written ``1.0``); ``ValueError`` when neither policy has it."""
+    if budget == END:
+        return END
+    for label in labels:
+        if label != END and float(label) == float(budget):
+            return label
+    raise ValueError(
+        f"no path budget {budget} m in the results; they hold {sorted(set(labels) - {END}, key=float)} m "
+        "(vical-evaluate budgets=...)"
+    )
 
 
 @dataclass(frozen=True)
