@@ -61,6 +61,10 @@ def test_a_policy_that_ended_before_the_budget_is_scored_by_its_whole_episode(tm
     assert d.low <= d.estimate <= d.high
     # A budget is named as the file writes it or as a number; one the file lacks is an error.
     assert compare(scores, LEARNED, EXPERT, ".50") == d
+    # A budget another policy reached but neither of the two did: their whole episodes count.
+    scores["short a"] = {"end": {s: 0.3 for s in range(4)}}
+    scores["short b"] = {"end": {s: 0.1 * s for s in range(4)}}
+    assert compare(scores, "short a", "short b", "0.5").estimate == pytest.approx(0.3 - 0.15)
     with pytest.raises(ValueError, match=r"no path budget 1 m in the results; they hold \['0.5'\] m"):
         compare(scores, LEARNED, EXPERT, "1")
 

@@ -87,7 +87,8 @@ def compare(scores: Scores, policy: str, other: str, budget: str) -> Interval:
     for name in (policy, other):
         if name not in scores:
             raise ValueError(f"no policy {name!r} in the results; they hold {sorted(scores)}")
-    budget = _budget_label(budget, [*scores[policy], *scores[other]])
+    # Any policy's labels: a budget that neither of the two reached still counts their whole episodes.
+    budget = _budget_label(budget, [label for budgets in scores.values() for label in budgets])
     a, b = at_budget(scores[policy], budget), at_budget(scores[other], budget)
     seeds = sorted(set(a) & set(b))
     if not seeds:
@@ -96,7 +97,7 @@ def compare(scores: Scores, policy: str, other: str, budget: str) -> Interval:
 
 
 def _budget_label(budget: str, labels: Sequence[str]) -> str:
-    """The file's label of ``budget`` (``1`` is written ``1.0``); ``ValueError`` when neither policy has it."""
+    """The file's label of ``budget`` (``1`` is written ``1.0``); ``ValueError`` when no policy reached it."""
     if budget == END:
         return END
     for label in labels:
