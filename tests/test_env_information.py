@@ -85,6 +85,10 @@ def test_features_and_excess():
     # a floor of 0.25 pays shrinking every group to a quarter of its tolerance: focal 100 -> 0.25 (ln 400),
     # principal point 1 -> 0.25 (ln 4), rotation already below (0)
     assert excess(ratios, floor=0.25) == pytest.approx(np.log(400.0) + np.log(4.0))
+    # an outside weight of 3 counts focal's e-folds above its tolerance (ln 100) three times, those below
+    # it (ln 4) and the principal point's (ln 4, all below) once
+    assert excess(ratios, floor=0.25, outside_weight=3.0) == pytest.approx(3 * np.log(100.0) + 2 * np.log(4.0))
+    assert excess(ratios, cap=10.0, outside_weight=3.0) == pytest.approx(3 * np.log(10.0))
     assert quantile_factor("time_offset", 0.9) == pytest.approx(1.6449, abs=1e-4)  # one dimension: the normal's
     assert quantile_factor("rotation", 0.9) == pytest.approx(2.5003, abs=1e-4)  # three: sqrt(chi2_3(0.9))
 
@@ -124,11 +128,19 @@ def test_information_mdp_rewards_shrinking_uncertainty_and_stops_when_good_enoug
 
 
 def test_a_floor_pays_groups_below_tolerance_and_a_path_discount_is_reported_per_step():
-    env = information_env("joint", "env.information.excess_floor=0.5", "env.reward.path_discount=0.25")
+    env = information_env(
+        "joint",
+        "env.information.excess_floor=0.5",
+        "env.information.outside_weight=2",
+        "env.reward.path_discount=0.25",
+    )
     try:
         _, info = env.reset(seed=5)
         start, ratios = info["information/excess"], {g: info[f"information/{g}_ratio"] for g in GROUPS}
-        assert start == pytest.approx(sum(np.log(min(max(r, 0.5), 10.0) / 0.5) for r in ratios.values()))
+        # e-folds from a ratio of 0.5 up to 1 count once, from 1 up to the cap of 10 twice
+        inside = sum(np.log(min(max(r, 0.5), 1.0) / 0.5) for r in ratios.values())
+        outside = sum(np.log(min(max(r, 1.0), 10.0)) for r in ratios.values())
+        assert outside > 0.0 and start == pytest.approx(inside + 2.0 * outside)
         rng = np.random.default_rng(1)
         paid, discounts, paths = 0.0, [], []
         for _ in range(12):
@@ -199,6 +211,7 @@ def test_a_task_mix_that_is_not_a_mapping_of_tasks_is_refused_by_key():
         ("env.information.excess_cap=1", "env.information.excess_cap"),
         ("env.information.excess_floor=0", "env.information.excess_floor"),
         ("env.information.excess_floor=1.5", "env.information.excess_floor"),
+        ("env.information.outside_weight=0.5", "env.information.outside_weight"),
         ("env.reward.path_discount=0", "env.reward.path_discount"),
         ("env.reward.path_discount=1.2", "env.reward.path_discount"),
         ("env.state=coverage_and_more", "env.state"),

@@ -187,6 +187,9 @@ class InformationSettings:
         excess_floor: a ratio below this counts as this in the reward: 1 pays a group's shrinking down
             to its tolerance; below 1 a group already within tolerance is still paid for shrinking
             while the others are not (the episode still ends when every group is within tolerance).
+        outside_weight: an e-fold above a group's tolerance counts this many times one below it (with
+            ``excess_floor`` < 1): more than 1 makes finishing the slowest group pay more than refining
+            the groups already done.
         time_weight: [1/s] charge per second of the step's motion (the path is charged by
             ``reward.path_weight``).
     """
@@ -197,6 +200,7 @@ class InformationSettings:
     information_weight: float = 10.0
     excess_cap: float = 10.0
     excess_floor: float = 1.0
+    outside_weight: float = 1.0
     time_weight: float = 1.0
 
     def __post_init__(self) -> None:
@@ -206,6 +210,7 @@ class InformationSettings:
         require_range("env.information.information_weight", self.information_weight, 0.0)
         require_range("env.information.excess_cap", self.excess_cap, 1.0, low_open=True)
         require_range("env.information.excess_floor", self.excess_floor, 0.0, 1.0, low_open=True)
+        require_range("env.information.outside_weight", self.outside_weight, 1.0)
         require_range("env.information.time_weight", self.time_weight, 0.0)
 
 

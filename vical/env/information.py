@@ -342,7 +342,10 @@ def features(ratios: dict[str, float]) -> np.ndarray:
     return out
 
 
-def excess(ratios: dict[str, float], cap: float = np.inf, floor: float = 1.0) -> float:
+def excess(ratios: dict[str, float], cap: float = np.inf, floor: float = 1.0, outside_weight: float = 1.0) -> float:
     """Sum over groups of ``ln(clip(ratio, floor, cap) / floor)``: e-folds the predicted errors still have to
-    shrink by to reach ``floor`` times their tolerances."""
-    return float(sum(np.log(min(max(r, floor), cap) / floor) for r in ratios.values()))
+    shrink by to reach ``floor`` times their tolerances, those above the tolerance (ratio > 1) counted
+    ``outside_weight`` times."""
+    inside = sum(np.log(min(max(r, floor), 1.0) / floor) for r in ratios.values())
+    outside = sum(np.log(min(max(r, 1.0), cap)) for r in ratios.values())
+    return float(inside + outside_weight * outside)

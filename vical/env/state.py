@@ -81,7 +81,7 @@ class EpisodeState:
     def excess(self) -> float:
         """E-folds the predicted errors still have to shrink by (ratios capped and floored as the reward counts)."""
         s = self.config.information
-        return excess(self.ratios, s.excess_cap, s.excess_floor)
+        return excess(self.ratios, s.excess_cap, s.excess_floor, s.outside_weight)
 
     @property
     def goal_reached(self) -> bool:
