@@ -63,7 +63,7 @@ def main() -> None:
         "--candidate", nargs=3, action="append", required=True, metavar=("RUN_DIR", "JOINT_CSV", "INTRINSIC_CSV")
     )
     p.add_argument("--reference", default=ShipRule.reference, help="the baseline's table name")
-    p.add_argument("--budget", default=ShipRule.budget, help="the path budget [m] of the comparison")
+    p.add_argument("--budget", type=float, default=ShipRule.budget, help="the path budget [m] of the comparison")
     args = p.parse_args()
     rule = ShipRule(reference=args.reference, budget=args.budget)
     try:
@@ -79,7 +79,7 @@ def main() -> None:
         raise SystemExit(f"choose_seed: {e}") from None
     print(
         f"| run | task | goal | stops right | path [m] / {rule.reference} | time [s] / {rule.reference} | "
-        f"- {rule.reference} at {rule.budget} m [%] (95 % CI) | not eligible because |"
+        f"- {rule.reference} at {rule.budget:g} m [%] (95 % CI) | not eligible because |"
     )
     print("|---" * 8 + "|")
     for name, tasks in assessments.items():

@@ -15,7 +15,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from vical.policies.results import END, budget_key, compare, read_results, scores_of
+from vical.policies.effort import budget_label
+from vical.policies.results import budgets_of, by_policy, compare, read_results
 
 
 def main() -> None:
@@ -25,22 +26,21 @@ def main() -> None:
     p.add_argument("--against", nargs="+", required=True, help="the table names it is compared with")
     args = p.parse_args()
     try:
-        scores = scores_of(read_results(args.results))
+        results = read_results(args.results)
     except ValueError as e:
         raise SystemExit(f"compare_results: {e}") from None
+    rows = by_policy(results)
     for name in [args.policy, *args.against]:
-        if name not in scores:
-            raise SystemExit(f"compare_results: no policy {name!r} in {args.results}; it holds {sorted(scores)}")
-    budgets = sorted({b for s in scores.values() for b in s}, key=budget_key)
+        if name not in rows:
+            raise SystemExit(f"compare_results: no policy {name!r} in {args.results}; it holds {sorted(rows)}")
     print(f"| budget | {' | '.join(f'{args.policy} - {other} [%] (95 % CI)' for other in args.against)} |")
     print("|---" * (len(args.against) + 1) + "|")
-    for budget in budgets:
+    for budget in budgets_of(results):
         cells = []
         for other in args.against:
-            d = compare(scores, args.policy, other, budget)
+            d = compare(rows, args.policy, other, budget)
             cells.append(f"{d.estimate:+.3f} [{d.low:+.3f}, {d.high:+.3f}]")
-        label = budget if budget == END else f"{float(budget):g} m"
-        print(f"| {label} | {' | '.join(cells)} |")
+        print(f"| {budget_label(budget)} | {' | '.join(cells)} |")
 
 
 if __name__ == "__main__":

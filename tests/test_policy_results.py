@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from vical.apps.evaluate import results_csv
+from vical.policies.effort import rows_at_budget
 from vical.policies.evaluation import EpisodeRow
-from vical.policies.results import ShipRule, assess, at_budget, choose_seed, compare, read_results, scores_of
+from vical.policies.results import ShipRule, assess, by_policy, choose_seed, compare, read_results
 
 ROOT = Path(__file__).resolve().parents[1]
 TOLERANCES = {"focal_px": 0.35, "principal_point_px": 0.35, "distortion_px": 0.5, "rotation_deg": 0.1,
@@ -32,7 +33,7 @@ def write(path: Path, rows: list[EpisodeRow]) -> Path:
     return path
 
 
-def read_back(tmp_path: Path, rows: list[EpisodeRow]) -> list[dict[str, str]]:
+def read_back(tmp_path: Path, rows: list[EpisodeRow]) -> list[EpisodeRow]:
     """``rows`` as vical-evaluate writes them and as the results reader gives them back."""
     path = tmp_path / f"results_{len(list(tmp_path.iterdir()))}.csv"
     return read_results(write(path, rows))
@@ -54,19 +55,28 @@ def test_a_policy_that_ended_before_the_budget_is_scored_by_its_whole_episode(tm
     rows += [joint_end(LEARNED, 0, 0.04, path=0.4), joint_end(LEARNED, 1, 0.06, path=0.45)]
     rows += [joint_end(LEARNED, 2, 0.0, failed=True), joint_end(LEARNED, 3, 0.02)]
     rows.append(EpisodeRow(LEARNED, 3, budget_m=0.5, score_pct=0.08))
-    scores = scores_of(read_results(write(tmp_path / "results.csv", rows)))
-    assert at_budget(scores[LEARNED], "0.5") == {0: 0.04, 1: 0.06, 2: 5.0, 3: 0.08}
-    d = compare(scores, LEARNED, EXPERT, "0.5")
+    results = by_policy(read_results(write(tmp_path / "results.csv", rows)))
+    at_half = {seed: row.effective_score_pct for seed, row in rows_at_budget(results[LEARNED], 0.5).items()}
+    assert at_half == {0: 0.04, 1: 0.06, 2: 5.0, 3: 0.08}
+    d = compare(results, LEARNED, EXPERT, 0.5)
     assert d.estimate == pytest.approx(np.mean([0.04, 0.06, 5.0, 0.08]) - 0.10)
     assert d.low <= d.estimate <= d.high
-    # A budget is named as the file writes it or as a number; one the file lacks is an error.
-    assert compare(scores, LEARNED, EXPERT, ".50") == d
     # A budget another policy reached but neither of the two did: their whole episodes count.
-    scores["short a"] = {"end": {s: 0.3 for s in range(4)}}
-    scores["short b"] = {"end": {s: 0.1 * s for s in range(4)}}
-    assert compare(scores, "short a", "short b", "0.5").estimate == pytest.approx(0.3 - 0.15)
-    with pytest.raises(ValueError, match=r"no path budget 1 m in the results; they hold \['0.5'\] m"):
-        compare(scores, LEARNED, EXPERT, "1")
+    results["short a"] = [joint_end("short a", s, 0.3) for s in range(4)]
+    results["short b"] = [joint_end("short b", s, 0.1 * s) for s in range(4)]
+    assert compare(results, "short a", "short b", 0.5).estimate == pytest.approx(0.3 - 0.15)
+    # One that no policy of the file reached is an error naming those it holds.
+    with pytest.raises(ValueError, match=r"no path budget 1 m in the results; they hold \[0.5\] m"):
+        compare(results, LEARNED, EXPERT, 1.0)
+
+
+def test_results_read_back_as_written(tmp_path):
+    rows = [*expert_rows(), joint_end(LEARNED, 0, 0.0, failed=True), EpisodeRow(LEARNED, 0, budget_m=0.25)]
+    assert read_results(write(tmp_path / "results.csv", rows)) == rows  # empty cells back to None, end to inf
+    path = tmp_path / "bad.csv"
+    path.write_text(results_csv([SimpleNamespace(rows=rows)]).replace(",0.25,", ",a quarter,"))
+    with pytest.raises(ValueError, match=r"bad.csv, line 11: budget_m 'a quarter' is not a float"):
+        read_results(path)
 
 
 def test_assess_counts_right_stops_only_among_the_stopped_episodes(tmp_path):
@@ -151,3 +161,16 @@ def test_choose_seed_script_ships_from_files(tmp_path):
     assert "| joint | 100% | 100% | 1.00 / 100.00 | 20.0 / 400.0 | -0.060" in out
     bad = subprocess.run([*args[:5], "--candidate", str(tmp_path), args[-2], args[-1]], capture_output=True, text=True)
     assert bad.returncode != 0 and "config.yaml is missing: pass the run_dir of a vical-train run" in bad.stderr
+
+
+def test_compare_results_script_prints_every_budget(tmp_path):
+    """experiments/compare_results.py end to end: one row per budget the file holds, end last."""
+    rows = expert_rows() + [joint_end(LEARNED, s, 0.02 * s, path=0.4) for s in range(4)]
+    script = str(ROOT / "experiments" / "compare_results.py")
+    args = [sys.executable, script, str(write(tmp_path / "results.csv", rows)), "--policy", LEARNED]
+    out = subprocess.run([*args, "--against", EXPERT], capture_output=True, text=True, check=True).stdout
+    lines = [line for line in out.splitlines() if line.startswith("| 0.5 m") or line.startswith("| end")]
+    # The learned episodes end before 0.5 m (their whole episodes count there): mean 0.03 against 0.10 and 0.05.
+    assert [line.split(" | ")[1].split()[0] for line in lines] == ["-0.070", "-0.020"]
+    bad = subprocess.run([*args, "--against", "nobody"], capture_output=True, text=True)
+    assert bad.returncode != 0 and "no policy 'nobody'" in bad.stderr

@@ -16,6 +16,7 @@ lowest mean paired error difference against the reference at one path budget win
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -23,9 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from vical.policies.effort import rows_at_budget
+from vical.policies.evaluation import END, EpisodeRow
 from vical.policies.statistics import Interval, paired_difference
 
-END = "end"
 REQUIRED = (
     "policy",
     "seed",
@@ -45,11 +47,11 @@ SCORED_GROUPS = {
     "extrinsic": ("rotation_deg", "translation_mm", "time_offset_ms"),
     "joint": ("rotation_deg", "translation_mm", "time_offset_ms"),
 }
+# How a column of results.csv is read back: by the EpisodeRow field's annotation; an empty cell is None.
+_PARSERS = {"str": str, "int": int, "float": float, "bool": lambda cell: cell == "True"}
 
-Scores = dict[str, dict[str, dict[int, float]]]
 
-
-def read_results(path: Path) -> list[dict[str, str]]:
+def read_results(path: Path) -> list[EpisodeRow]:
     """The rows of a ``vical-evaluate`` results file; ``ValueError`` naming the file when it is not one."""
     path = Path(path)
     if not path.is_file():
@@ -59,54 +61,53 @@ def read_results(path: Path) -> list[dict[str, str]]:
         missing = [c for c in REQUIRED if c not in (reader.fieldnames or [])]
         if missing:
             raise ValueError(f"{path}: not a vical-evaluate results file, it lacks the columns {missing}")
-        return list(reader)
+        return [_episode_row(path, reader.line_num, cells) for cells in reader]
 
 
-def scores_of(rows: Sequence[Mapping[str, str]]) -> Scores:
-    """``{policy: {budget: {seed: effective error [%]}}}``: a failed calibration at the nominal parameters' error."""
-    scores: Scores = {}
+def _episode_row(path: Path, line: int, cells: Mapping[str, str]) -> EpisodeRow:
+    values = {}
+    for f in dataclasses.fields(EpisodeRow):
+        cell = cells.get(f.name)
+        if cell is None or (cell == "" and f.type.endswith("| None")):
+            continue  # a column an older file lacks, or n/a: the field's default
+        try:
+            values[f.name] = END if f.name == "budget_m" and cell == "end" else _PARSERS[f.type.split(" |")[0]](cell)
+        except ValueError:
+            raise ValueError(f"{path}, line {line}: {f.name} {cell!r} is not a {f.type}") from None
+    return EpisodeRow(**values)
+
+
+def by_policy(rows: Sequence[EpisodeRow]) -> dict[str, list[EpisodeRow]]:
+    """The rows grouped by their policy (the table row)."""
+    out: dict[str, list[EpisodeRow]] = {}
     for row in rows:
-        failed = row["failed"] == "True"
-        score = float(row["prior_score_pct"] if failed else row["score_pct"])
-        scores.setdefault(row["policy"], {}).setdefault(row["budget_m"], {})[int(row["seed"])] = score
-    return scores
+        out.setdefault(row.policy, []).append(row)
+    return out
 
 
-def at_budget(budgets: Mapping[str, Mapping[int, float]], budget: str) -> dict[int, float]:
-    """Per seed the error at ``budget``, or the whole episode's when the episode ended before."""
-    return {seed: budgets.get(budget, {}).get(seed, whole) for seed, whole in budgets[END].items()}
+def budgets_of(rows: Sequence[EpisodeRow]) -> list[float]:
+    """The path budgets [m] the rows hold, ascending, ``END`` (inf) last."""
+    return sorted({row.budget_m for row in rows})
 
 
-def budget_key(label: str) -> float:
-    """Sort key of a budget label: metres, ``end`` last."""
-    return math.inf if label == END else float(label)
-
-
-def compare(scores: Scores, policy: str, other: str, budget: str) -> Interval:
+def compare(rows: Mapping[str, Sequence[EpisodeRow]], policy: str, other: str, budget: float) -> Interval:
     """Mean paired difference ``policy - other`` [%] at ``budget`` over their common sensors, with its 95 % CI."""
     for name in (policy, other):
-        if name not in scores:
-            raise ValueError(f"no policy {name!r} in the results; they hold {sorted(scores)}")
-    # Any policy's labels: a budget that neither of the two reached still counts their whole episodes.
-    budget = _budget_label(budget, [label for budgets in scores.values() for label in budgets])
-    a, b = at_budget(scores[policy], budget), at_budget(scores[other], budget)
+        if name not in rows:
+            raise ValueError(f"no policy {name!r} in the results; they hold {sorted(rows)}")
+    # Any policy's budgets: one that neither of the two reached still compares their whole episodes.
+    held = budgets_of([row for policy_rows in rows.values() for row in policy_rows])
+    if budget not in held:
+        raise ValueError(
+            f"no path budget {budget:g} m in the results; they hold {[b for b in held if b != END]} m "
+            "(vical-evaluate budgets=...)"
+        )
+    a, b = rows_at_budget(rows[policy], budget), rows_at_budget(rows[other], budget)
     seeds = sorted(set(a) & set(b))
     if not seeds:
         raise ValueError(f"{policy!r} and {other!r} share no sensor seed: evaluate both with the same seed=")
-    return paired_difference(np.array([a[s] for s in seeds]), np.array([b[s] for s in seeds]))
-
-
-def _budget_label(budget: str, labels: Sequence[str]) -> str:
-    """The file's label of ``budget`` (``1`` is written ``1.0``); ``ValueError`` when no policy reached it."""
-    if budget == END:
-        return END
-    for label in labels:
-        if label != END and float(label) == float(budget):
-            return label
-    raise ValueError(
-        f"no path budget {budget} m in the results; they hold {sorted(set(labels) - {END}, key=float)} m "
-        "(vical-evaluate budgets=...)"
-    )
+    mine = np.array([a[s].effective_score_pct for s in seeds])
+    return paired_difference(mine, np.array([b[s].effective_score_pct for s in seeds]))
 
 
 @dataclass(frozen=True)
@@ -135,7 +136,7 @@ class ShipRule:
     """The rule that picks the seed to ship (see the module's docstring)."""
 
     reference: str = "expert (long)"
-    budget: str = "0.5"
+    budget: float = 0.5
     min_goal: float = 0.9
     min_right: float = 0.9
     effort_fraction: float = 0.25
@@ -156,25 +157,23 @@ class ShipRule:
         return out
 
 
-def _ends(rows: Sequence[Mapping[str, str]], policy: str) -> list[Mapping[str, str]]:
-    ends = [r for r in rows if r["policy"] == policy and r["budget_m"] == END]
+def _ends(rows: Sequence[EpisodeRow], policy: str) -> list[EpisodeRow]:
+    ends = [r for r in rows if r.policy == policy and r.budget_m == END]
     if not ends:
-        raise ValueError(
-            f"no whole-episode rows of policy {policy!r}; the results hold {sorted({r['policy'] for r in rows})}"
-        )
+        raise ValueError(f"no whole-episode rows of policy {policy!r}; the results hold {sorted(by_policy(rows))}")
     return ends
 
 
-def stopped_right(row: Mapping[str, str], task: str, tolerances: Mapping[str, float]) -> bool:
+def stopped_right(row: EpisodeRow, task: str, tolerances: Mapping[str, float]) -> bool:
     """Whether an episode's scored errors are all within ``tolerances`` (a failed calibration is not)."""
-    if row["failed"] == "True":
+    if row.failed:
         return False
-    return all(float(row[group]) <= float(tolerances[group]) for group in SCORED_GROUPS[task])
+    return all(getattr(row, group) <= float(tolerances[group]) for group in SCORED_GROUPS[task])
 
 
 def assess(
-    candidate: Sequence[Mapping[str, str]],
-    baselines: Sequence[Mapping[str, str]],
+    candidate: Sequence[EpisodeRow],
+    baselines: Sequence[EpisodeRow],
     task: str,
     tolerances: Mapping[str, float],
     rule: ShipRule,
@@ -187,20 +186,18 @@ def assess(
     if missing:
         raise ValueError(f"the tolerances lack {missing} of the {task} task: set env.information.tolerances")
     mine, theirs = _ends(candidate, policy), _ends(baselines, rule.reference)
-    stopped = [r for r in mine if r["coverage_reached"] == "True"]
+    stopped = [r for r in mine if r.coverage_reached]
     right = [stopped_right(r, task, tolerances) for r in stopped]
     # Only the reference's rows of the baselines: their file may hold a policy of the candidate's name.
-    scores = scores_of(
-        [r for r in candidate if r["policy"] == policy] + [r for r in baselines if r["policy"] == rule.reference]
-    )
+    rows = {policy: [r for r in candidate if r.policy == policy], rule.reference: by_policy(baselines)[rule.reference]}
     return TaskAssessment(
         goal=len(stopped) / len(mine),
         right=float(np.mean(right)) if right else math.nan,
-        path_m=float(np.mean([float(r["path_length_m"]) for r in mine])),
-        time_s=float(np.mean([float(r["recording_time_s"]) for r in mine])),
-        reference_path_m=float(np.mean([float(r["path_length_m"]) for r in theirs])),
-        reference_time_s=float(np.mean([float(r["recording_time_s"]) for r in theirs])),
-        versus=compare(scores, policy, rule.reference, rule.budget),
+        path_m=float(np.mean([r.path_length_m for r in mine])),
+        time_s=float(np.mean([r.recording_time_s for r in mine])),
+        reference_path_m=float(np.mean([r.path_length_m for r in theirs])),
+        reference_time_s=float(np.mean([r.recording_time_s for r in theirs])),
+        versus=compare(rows, policy, rule.reference, rule.budget),
     )
 
 
