@@ -202,6 +202,24 @@ def test_a_task_mix_that_is_not_a_mapping_of_tasks_is_refused_by_key():
     assert isinstance(raised.value.__cause__, ConfigError)
 
 
+def test_a_final_step_limit_reports_a_zero_discount_on_its_step_only():
+    env = information_env("joint", "env.max_steps=3", "env.step_limit_final=true", "env.reward.path_discount=0.25")
+    try:
+        env.reset(seed=5)
+        rng = np.random.default_rng(1)
+        steps = [env.step(rng.uniform(env.action_space.low, env.action_space.high)) for _ in range(3)]
+        assert [(terminated, truncated) for _, _, terminated, truncated, _ in steps] == [(False, False)] * 2 + [
+            (False, True)
+        ]
+        for _, _, _, _, info in steps[:2]:  # before the limit: the path's discount
+            assert info["discount"] == pytest.approx(0.25 ** (-info["reward/path"] / 5.0)) and info["discount"] > 0
+        assert steps[2][4]["discount"] == 0.0  # nothing past the limit is valued
+    finally:
+        env.close()
+    with pytest.raises(InstantiationException, match=r"env\.step_limit_final.*env\.state=information"):
+        information_env("joint", "env.state=coverage", "env.step_limit_final=true")
+
+
 @pytest.mark.parametrize(
     "override, key",
     [

@@ -11,7 +11,8 @@ terminal reward (``vical.env.rewards``). The step limit truncates the episode.
 
 ``info`` carries ``coverage/*`` terms every step and ``calib/*`` results when a calibration ran,
 which ``vical-train`` logs to TensorBoard, and ``discount``, the step's factor on the agent's discount
-(``reward.path_discount`` to the power of its path); ``recording()`` returns the episode's data for
+(``reward.path_discount`` to the power of its path; 0 at the step limit when ``step_limit_final``
+makes the limit part of the task); ``recording()`` returns the episode's data for
 evaluation.
 """
 
@@ -152,14 +153,20 @@ class CalibrationEnv(gym.Env):
         truncated = not terminated and self._steps >= self.config.max_steps
         info = self._info()
         info["motion/clamped"] = float(motion.clamped)
-        info["discount"] = self.config.reward.path_discount ** float(motion.path_length)
         c = self.config
+        info["discount"] = self._transition_discount(motion, truncated)
         if (terminated and c.calibrate_on_termination) or (truncated and c.calibrate_on_truncation):
             info.update(self.calibrate_episode())
         if terminated and c.state == "coverage":  # after truncation a calibration is reported, not paid
             terms.update(terminal_reward_terms(info.get("calib/error_pct"), self.config.reward))
         info.update({f"reward/{name}": value for name, value in terms.items()})
         return self._observation(), float(sum(terms.values())), terminated, truncated, info
+
+    def _transition_discount(self, motion: MotionResult, truncated: bool) -> float:
+        """The step's factor on the agent's discount: ``path_discount`` per metre; 0 at a final step limit."""
+        if truncated and self.config.step_limit_final:
+            return 0.0
+        return self.config.reward.path_discount ** float(motion.path_length)
 
     def _information_step(self, excess_before: float, motion: MotionResult) -> tuple[dict[str, float], bool]:
         """Reward terms and termination of the information state (the new frames already added)."""

@@ -220,6 +220,10 @@ class MdpConfig:
 
     Attributes:
         max_steps: episode step limit (truncation).
+        step_limit_final: the step limit is part of the task: its step reports a discount of 0, so an
+            agent values nothing past it (the state must carry the step count: ``state: information``).
+            False (gymnasium's convention): the limit only truncates, and an agent bootstraps through it,
+            as if rewards went on after it.
         action_scale: (6,) bounds of ``[rho, theta, phi, alpha, beta, gamma]``: each action
             component lies in ``[-scale, scale]`` ([m], [rad] x 5).
         workspace: end-effector offset bounds.
@@ -245,6 +249,7 @@ class MdpConfig:
     """
 
     max_steps: int = 20
+    step_limit_final: bool = False
     action_scale: tuple[float, ...] = (0.3, 1.57, 1.57, 0.4, 0.4, 0.4)
     workspace: Workspace = field(default_factory=Workspace)
     thresholds: Thresholds = field(default_factory=Thresholds)
@@ -265,6 +270,12 @@ class MdpConfig:
             "env.max_steps",
             "an integer in [1, 1000]",
             self.max_steps,
+        )
+        require(
+            not self.step_limit_final or self.state == "information",
+            "env.step_limit_final",
+            "false unless env.state=information (the coverage state does not carry the step count)",
+            self.step_limit_final,
         )
         object.__setattr__(self, "action_scale", _vector("env.action_scale", self.action_scale, 6))
         require_range("env.view_novelty", self.view_novelty, 0.0, 4.0)
