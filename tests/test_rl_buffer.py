@@ -65,10 +65,12 @@ def test_a_transitions_own_discount_is_stored_sampled_and_checked():
     batch = buf.sample(256, np.random.default_rng(0))
     np.testing.assert_allclose(batch.discounts.numpy(), 0.5 ** batch.rewards.numpy())
     np.testing.assert_array_equal(buf.discounts[4:], 1.0)  # unfilled slots and the default: an ordinary step
-    for bad in (0.0, -0.1, 1.5, float("nan")):
+    for bad in (-0.1, 1.5, float("nan")):
         with pytest.raises(ValueError, match="discount must be in"):
             buf.add(np.array([0.0]), np.array([0.0]), 0.0, np.array([0.0]), False, discount=bad)
     assert len(buf) == 4
+    buf.add(np.array([0.0]), np.array([0.0]), 0.0, np.array([0.0]), False, discount=0.0)  # nothing after it counts
+    assert buf.discounts[4] == 0.0 and buf.terminated[4] == 0.0
 
 
 def test_a_state_saved_before_per_step_discounts_loads_with_discount_one():

@@ -5,7 +5,8 @@ terminal state: the transition is stored with ``terminated = 0`` and its true ``
 final observation from ``step`` before the caller resets), so the critic bootstraps through it.
 
 ``discount`` is the transition's own factor on the agent's ``gamma`` (1 for an ordinary step): an env whose
-steps last unequal amounts of what the task counts (a semi-MDP) reports it as ``info["discount"]``.
+steps last unequal amounts of what the task counts (a semi-MDP) reports it as ``info["discount"]``; 0 says
+nothing after the step is valued, though ``s'`` is not terminal (a time limit that is part of the task).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from torch import Tensor
 from vical.io.atomic import atomic_file
 
 _ARRAYS = ("obs", "actions", "rewards", "next_obs", "terminated", "discounts")
-DISCOUNT_KEY = "discount"  # info key of a transition's own discount factor, in (0, 1]
+DISCOUNT_KEY = "discount"  # info key of a transition's own discount factor, in [0, 1]
 
 
 def transition_discount(info: dict) -> float:
@@ -72,10 +73,10 @@ class ReplayBuffer:
         terminated: bool,
         discount: float = 1.0,
     ) -> None:
-        """Store one transition: obs/next_obs ``(obs_dim,)``, action ``(act_dim,)``, discount in (0, 1]."""
-        if not 0.0 < discount <= 1.0:
+        """Store one transition: obs/next_obs ``(obs_dim,)``, action ``(act_dim,)``, discount in [0, 1]."""
+        if not 0.0 <= discount <= 1.0:
             raise ValueError(
-                f"a transition's discount must be in (0, 1], got {discount}: check the env's info['discount']"
+                f"a transition's discount must be in [0, 1], got {discount}: check the env's info['discount']"
             )
         i = self.position
         self.obs[i] = obs
