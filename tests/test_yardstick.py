@@ -80,6 +80,7 @@ def test_refitted_coefficients_change_the_model_based_hash(resolved_joint, compu
 def test_the_environment_hash_follows_the_episode_not_the_reward(resolved_joint, computed):
     reward = copy.deepcopy(resolved_joint)
     reward["env"]["reward"]["path_weight"] = 1.0
+    reward["env"]["step_limit_final"] = True  # the learner's discount at the limit, not the episode
     assert fingerprint(reward) == computed["joint"]
     board = copy.deepcopy(resolved_joint)
     board["env"]["sim"]["board"]["distance"] = 0.8

@@ -29,9 +29,16 @@ from vical.policies.random_policy import RandomMovingPolicy
 
 PROTOCOL_KEYS = ("episodes", "seed", "budgets", "reference", "paper_protocol", "policies")
 DRAW_SEED = 0  # the seed of the random loop and actions whose values enter the fingerprint
-# Env keys that cannot change a baseline's episode: the reward (no baseline reads it) and the env's own
-# calibration and termination switches (vical.policies.evaluation.build_env sets them per policy).
-NOT_EPISODE_KEYS = ("reward", "calibrate_on_termination", "calibrate_on_truncation", "terminate_on_coverage")
+# Env keys that cannot change a baseline's episode: the reward and the learner's discount at the step limit
+# (no baseline reads them) and the env's own calibration and termination switches
+# (vical.policies.evaluation.build_env sets them per policy).
+NOT_EPISODE_KEYS = (
+    "reward",
+    "step_limit_final",
+    "calibrate_on_termination",
+    "calibrate_on_truncation",
+    "terminate_on_coverage",
+)
 
 
 def _digest(value: Any) -> str:
