@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from vical.policies.statistics import bootstrap_mean, paired_difference
+from vical.policies.statistics import bootstrap_mean, paired_difference, proportion
 
 
 def test_binary_sample_matches_the_binomial_distribution_of_the_bootstrap_mean():
@@ -50,3 +50,34 @@ def test_paired_difference_sign_on_constructed_cases():
     assert unpaired
     with pytest.raises(ValueError, match="same shape"):
         paired_difference(better[:3], reference)
+
+
+@pytest.mark.parametrize(("successes", "trials"), [(44, 50), (1, 20), (19, 20), (132, 140)])
+def test_proportion_interval_solves_the_binomial_tail_equations(successes, trials):
+    # Clopper-Pearson: the low end is the rate at which k or more successes have probability 2.5 %,
+    # the high end the rate at which k or fewer have 2.5 %.
+    i = proportion(successes, trials)
+    assert i.estimate == pytest.approx(successes / trials)
+    assert stats.binom.sf(successes - 1, trials, i.low) == pytest.approx(0.025, abs=1e-9)
+    assert stats.binom.cdf(successes, trials, i.high) == pytest.approx(0.025, abs=1e-9)
+
+
+def test_proportion_interval_at_the_edges_has_the_closed_form():
+    none, every = proportion(0, 10), proportion(10, 10)
+    assert (none.low, every.high) == (0.0, 1.0)
+    assert none.high == pytest.approx(1.0 - 0.025 ** (1 / 10))
+    assert every.low == pytest.approx(0.025 ** (1 / 10))
+
+
+def test_proportion_interval_covers_the_true_rate_at_least_at_its_level():
+    rng = np.random.default_rng(3)
+    for rate in (0.5, 0.9, 0.97):
+        hits = rng.binomial(50, rate, size=2000)
+        covered = [proportion(int(k), 50).low <= rate <= proportion(int(k), 50).high for k in hits]
+        assert np.mean(covered) >= 0.94
+
+
+@pytest.mark.parametrize(("successes", "trials"), [(3, 0), (-1, 5), (6, 5), (2.0, 5)])
+def test_proportion_rejects_counts_that_are_not_a_rate(successes, trials):
+    with pytest.raises(ValueError, match="successes <= trials"):
+        proportion(successes, trials)

@@ -6,6 +6,9 @@ is the percentile bootstrap over sensors: resample the n differences with replac
 mean, repeat, and read the 2.5 % and 97.5 % quantiles. Pairing removes the sensor-to-sensor spread
 that both policies share (a hard sensor is hard for both), which is what lets a few dozen sensors
 separate policies whose errors overlap. The resampling is seeded, so a table is reproducible.
+
+A rate over episodes (how often a stop was right) gets the exact binomial (Clopper-Pearson)
+interval: 44 right stops of 50 read 88 %, but any rate from 76 to 95 % explains them.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.stats import beta
 
 RESAMPLES = 10_000
 LEVEL = 0.95
@@ -71,3 +75,19 @@ def paired_difference(
     if a.shape != b.shape:
         raise ValueError(f"paired samples must have the same shape, got {a.shape} and {b.shape}")
     return bootstrap_mean(a - b, level, resamples, seed)
+
+
+def proportion(successes: int, trials: int, level: float = LEVEL) -> Interval:
+    """Exact binomial (Clopper-Pearson) interval of a rate: ``successes`` of ``trials``.
+
+    It covers the true rate with at least ``level`` probability for any rate, also at 0 or ``trials``
+    successes, where a normal approximation collapses to a point.
+    """
+    if not (isinstance(trials, int) and isinstance(successes, int) and 0 <= successes <= trials and trials > 0):
+        raise ValueError(f"proportion needs 0 <= successes <= trials and trials > 0, got {successes} of {trials}")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    tail = (1.0 - level) / 2.0
+    low = 0.0 if successes == 0 else float(beta.ppf(tail, successes, trials - successes + 1))
+    high = 1.0 if successes == trials else float(beta.ppf(1.0 - tail, successes + 1, trials - successes))
+    return Interval(successes / trials, low, high, level)
