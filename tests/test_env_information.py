@@ -1,5 +1,10 @@
 """The information state: the calibrator's covariance predicted while data arrive, its MDP, its bad inputs."""
 
+import re
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from configs import composed
@@ -255,3 +260,19 @@ def test_predicted_sigmas_of_a_double_sphere_camera_are_the_calibrators():
     assert len(tracker.covariance()[0]) == 6
     assert predicted["focal"] == pytest.approx(np.sqrt(0.5 * (sig["fx"] ** 2 + sig["fy"] ** 2)), rel=0.15)
     assert predicted["principal_point"] == pytest.approx(np.sqrt(0.5 * (sig["cx"] ** 2 + sig["cy"] ** 2)), rel=0.15)
+
+
+def test_honesty_script_runs_the_shipped_policy_to_its_stop_and_judges_it(tmp_path):
+    """experiments/information_honesty.py with a learned policy: its own stop, the final errors within a few
+    predicted sigma, and the stop judged by the evaluation's scored groups."""
+    script = Path(__file__).resolve().parents[1] / "experiments" / "information_honesty.py"
+    args = [sys.executable, str(script), "--sensors", "1", "--task", "intrinsic", "--policy", "learned"]
+    out = subprocess.run(args, capture_output=True, text=True, check=True, cwd=tmp_path).stdout
+    assert re.search(r"sensor 30000: stopped after \d+ steps", out)
+    worst = [float(m) for m in re.findall(r"median \|z\| [\d.]+  max ([\d.]+)", out)]
+    assert len(worst) == 4 and max(worst) < 4.0  # fx, fy, cx, cy
+    assert re.search(r"tolerances met when stopped: [01] of 1 \(", out)
+    # The paper's workspace ships a policy of the coverage state: refused in one line.
+    coverage = subprocess.run([*args, "workspace=paper"], capture_output=True, text=True, cwd=tmp_path)
+    assert coverage.returncode != 0 and "Traceback" not in coverage.stderr
+    assert "was trained on the env's coverage state" in coverage.stderr
