@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 from hydra import compose, initialize_config_dir
+from hydra.errors import MissingConfigException
 from omegaconf import OmegaConf
 
 from vical.calib.metrics import calibration_errors, group_errors_px
@@ -128,8 +129,12 @@ def main() -> None:
         "overrides", nargs="*", help="vical-evaluate overrides (policy.run_dir=runs/..., workspace=...)"
     )
     args = parser.parse_args()
+    if args.sensors < 1:
+        parser.error(f"--sensors must be at least 1, got {args.sensors}")
     try:
         run(args.sensors, args.task, args.policy, args.seed, args.overrides)
+    except MissingConfigException as err:  # --policy or an override names no file of its conf/ group
+        raise SystemExit(f"error: {str(err).splitlines()[0]}: the choices are the files of conf/<group>/") from None
     except ConfigError as err:  # a policy trained on another state, workspace or action scale
         raise SystemExit(f"error: {err}") from None
 

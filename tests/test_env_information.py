@@ -276,3 +276,6 @@ def test_honesty_script_runs_the_shipped_policy_to_its_stop_and_judges_it(tmp_pa
     coverage = subprocess.run([*args, "workspace=paper"], capture_output=True, text=True, cwd=tmp_path)
     assert coverage.returncode != 0 and "Traceback" not in coverage.stderr
     assert "was trained on the env's coverage state" in coverage.stderr
+    unknown = subprocess.run([*args[:-1], "nonsense"], capture_output=True, text=True, cwd=tmp_path)
+    assert unknown.returncode != 0 and unknown.stderr.strip().endswith("the choices are the files of conf/<group>/")
+    assert "Could not find 'policy/nonsense'" in unknown.stderr and "Traceback" not in unknown.stderr
