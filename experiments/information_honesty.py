@@ -20,6 +20,7 @@ the evaluation judges it) with the rate's exact 95 % interval.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 from pathlib import Path
 
@@ -28,13 +29,12 @@ from hydra import compose, initialize_config_dir
 from hydra.errors import MissingConfigException
 from omegaconf import OmegaConf
 
-from vical.calib.metrics import calibration_errors, group_errors_px
 from vical.calib.tasks import run_task
 from vical.config import ConfigError
 from vical.env.information import TASK_GROUPS
 from vical.geometry import skew, so3_log
-from vical.policies.evaluation import build_env, instantiate_policy, run_trajectory
-from vical.policies.results import SCORED_GROUPS
+from vical.policies.evaluation import EpisodeRow, build_env, fill_outcome, instantiate_policy, run_trajectory
+from vical.policies.results import stopped_right
 from vical.policies.statistics import Interval, proportion
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -79,7 +79,7 @@ def run(sensors: int, task: str, policy_name: str, first_seed: int, overrides: l
         cfg = compose(config_name="evaluate", overrides=[*base, *overrides])
     policy = instantiate_policy(OmegaConf.to_container(cfg.policy, resolve=True)[task], "policy")
     env = build_env(OmegaConf.to_container(cfg.env, resolve=True), policy)
-    tolerances = env.config.information.tolerances
+    tolerances = dataclasses.asdict(env.config.information.tolerances)
     z_all, step_times, stopped, right = [], [], 0, 0
     for seed in range(first_seed, first_seed + sensors):
         start = time.perf_counter()
@@ -89,8 +89,10 @@ def run(sensors: int, task: str, policy_name: str, first_seed: int, overrides: l
         outcome = run_task(env.task, trajectory.recording)
         z_all.append(true_errors(outcome.result, trajectory.recording.truth, names) / sigma)
         if trajectory.coverage_reached:
+            row = EpisodeRow(policy.name, seed)
+            fill_outcome(row, outcome, trajectory.recording.truth.camera)
             stopped += 1
-            right += met_tolerances(outcome, trajectory.recording.truth, tolerances, task)
+            right += stopped_right(row, task, tolerances)
         print(f"sensor {seed}: {'stopped' if trajectory.coverage_reached else 'step limit'} after {trajectory.steps} "
               f"steps, max |z| {np.abs(z_all[-1]).max():.2f}", flush=True)  # fmt: skip
     z = np.abs(np.array(z_all))
@@ -108,15 +110,6 @@ def run(sensors: int, task: str, policy_name: str, first_seed: int, overrides: l
 
 def rate_text(rate: Interval) -> str:
     return f"{rate.estimate:.0%}, 95 % interval {rate.low:.0%} to {rate.high:.0%}"
-
-
-def met_tolerances(outcome, truth, tolerances, task: str) -> bool:
-    """Every error the task is scored by within its tolerance (``vical.policies.results.SCORED_GROUPS``: the
-    joint task leaves the intrinsics out, see docs/evaluation.md), as the evaluation judges a stop."""
-    e = calibration_errors(outcome.result, truth)
-    errors = {f"{g}_px": v for g, v in group_errors_px(outcome.result.camera, truth.camera).items()}
-    errors |= {"rotation_deg": e.rotation_deg, "translation_mm": e.translation_mm, "time_offset_ms": e.time_offset_ms}
-    return all(errors[name] is not None and errors[name] <= getattr(tolerances, name) for name in SCORED_GROUPS[task])
 
 
 def main() -> None:

@@ -268,7 +268,8 @@ def _optional(value: float | None) -> float | None:
     return None if value is None else float(value)
 
 
-def _fill_outcome(row: EpisodeRow, outcome: TaskOutcome, truth_camera: CameraModel) -> None:
+def fill_outcome(row: EpisodeRow, outcome: TaskOutcome, truth_camera: CameraModel) -> None:
+    """Fill ``row``'s errors from a task's calibration ``outcome`` against the sensor's true camera."""
     e = outcome.errors
     row.score_pct = float(outcome.score)
     row.intrinsic_pct = float(e.intrinsic_pct)
@@ -294,7 +295,7 @@ def calibrate_row(
     except CalibrationError as err:
         row.failed, row.error, row.calib_time_s = True, str(err), time.perf_counter() - start
         return row
-    _fill_outcome(row, outcome, recording.truth.camera)
+    fill_outcome(row, outcome, recording.truth.camera)
     return row
 
 
