@@ -73,11 +73,16 @@ def test_proportion_interval_covers_the_true_rate_at_least_at_its_level():
     rng = np.random.default_rng(3)
     for rate in (0.5, 0.9, 0.97):
         hits = rng.binomial(50, rate, size=2000)
-        covered = [proportion(int(k), 50).low <= rate <= proportion(int(k), 50).high for k in hits]
+        covered = [proportion(k, 50).low <= rate <= proportion(k, 50).high for k in hits]
         assert np.mean(covered) >= 0.94
 
 
-@pytest.mark.parametrize(("successes", "trials"), [(3, 0), (-1, 5), (6, 5), (2.0, 5)])
+@pytest.mark.parametrize(("successes", "trials"), [(3, 0), (-1, 5), (6, 5), (2.0, 5), (True, 5), (np.float64(2), 5)])
 def test_proportion_rejects_counts_that_are_not_a_rate(successes, trials):
     with pytest.raises(ValueError, match="successes <= trials"):
         proportion(successes, trials)
+
+
+def test_proportion_takes_numpy_counts_as_python_ones():
+    stopped_right = np.array([True] * 44 + [False] * 6)
+    assert proportion(stopped_right.sum(), np.int64(stopped_right.size)) == proportion(44, 50)

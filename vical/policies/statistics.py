@@ -13,6 +13,7 @@ interval: 44 right stops of 50 read 88 %, but any rate from 76 to 95 % explains 
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
 
 import numpy as np
@@ -77,14 +78,22 @@ def paired_difference(
     return bootstrap_mean(a - b, level, resamples, seed)
 
 
+def _is_count(n) -> bool:
+    """A whole number of episodes: a Python or NumPy integer (a count summed with numpy is one), not a bool."""
+    return isinstance(n, numbers.Integral) and not isinstance(n, bool)
+
+
 def proportion(successes: int, trials: int, level: float = LEVEL) -> Interval:
     """Exact binomial (Clopper-Pearson) interval of a rate: ``successes`` of ``trials``.
 
     It covers the true rate with at least ``level`` probability for any rate, also at 0 or ``trials``
     successes, where a normal approximation collapses to a point.
     """
-    if not (isinstance(trials, int) and isinstance(successes, int) and 0 <= successes <= trials and trials > 0):
-        raise ValueError(f"proportion needs 0 <= successes <= trials and trials > 0, got {successes} of {trials}")
+    if not (_is_count(trials) and _is_count(successes) and 0 <= successes <= trials and trials > 0):
+        raise ValueError(
+            f"proportion needs whole counts 0 <= successes <= trials and trials > 0, got {successes} of {trials}"
+        )
+    successes, trials = int(successes), int(trials)
     if not 0.0 < level < 1.0:
         raise ValueError(f"level must be in (0, 1), got {level}")
     tail = (1.0 - level) / 2.0
