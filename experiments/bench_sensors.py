@@ -155,15 +155,8 @@ def imu_sampling_table(sim: PandaSim) -> list[tuple[str, str]]:
     sim.reset()
     reader = ImuSiteReader(sim.model)
     reader.reset(sim.time_ns)
-    readings = []
-
-    def read(s: PandaSim, t: int) -> None:
-        site = reader.read(s.data, t, s.timestep_ns)
-        if site is not None:
-            readings.append(site.reading)
-
-    sim.move_to(sim.ee_pose() @ GOAL, on_step=read)
-    x = np.asarray(readings)  # (K, 6) gyro, accel at 1 kHz
+    sim.move_to(sim.ee_pose() @ GOAL, on_step=lambda s, t: reader.record(s.data, t, s.timestep_ns))
+    x = reader.readings().reading  # (K, 6) gyro, accel at 1 kHz
     rate = 1e9 / sim.timestep_ns
     high = _above(x, rate, 100.0)
     n = round(rate / 200.0)

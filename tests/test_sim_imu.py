@@ -88,10 +88,15 @@ def test_noise_does_not_depend_on_chunking():
     np.testing.assert_array_equal(np.vstack([p[1] for p in pieces]), a_whole)
 
 
-def _feed(sim, steps, signal):
-    for k in steps:
-        t = k * STEP_NS
-        sim.add_reading(t, np.concatenate([signal(t), 2.0 * signal(t)]))
+def _readings(steps, signal):
+    return np.array([np.concatenate([signal(k * STEP_NS), 2.0 * signal(k * STEP_NS)]) for k in steps])
+
+
+def _feed(sim, steps, signal, chunk=1):
+    """Feed the readings of ``steps`` (consecutive) ``chunk`` at a time."""
+    readings = _readings(steps, signal)
+    for i in range(0, len(steps), chunk):
+        sim.add_readings(steps[i] * STEP_NS, readings[i : i + chunk])
 
 
 def test_streaming_average_of_a_known_signal():
@@ -125,23 +130,26 @@ def test_streaming_equals_one_batch_and_noise_is_seeded():
     def make():
         return ImuSimulator(STEP_NS, 5, "average", ImuNoise(), np.random.default_rng(2), np.ones(3), np.zeros(3))
 
-    a, b = make(), make()
+    a, b, c = make(), make(), make()
     signal = lambda t: np.sin(np.arange(3) + t * 1e-8)  # noqa: E731
-    _feed(a, range(100), signal)
+    _feed(a, range(100), signal, chunk=100)
     _feed(b, range(50), signal)
     b.samples()  # a query in the middle changes nothing
     _feed(b, range(50, 100), signal)
-    np.testing.assert_array_equal(a.samples().gyro, b.samples().gyro)
-    np.testing.assert_array_equal(a.samples().accel, b.samples().accel)
+    _feed(c, range(100), signal, chunk=7)  # chunks that end inside sample windows
+    assert len(a.samples()) == 19
+    for other in (b, c):
+        np.testing.assert_array_equal(a.samples().gyro, other.samples().gyro)
+        np.testing.assert_array_equal(a.samples().accel, other.samples().accel)
 
 
 def test_missing_physics_step_is_an_error():
     sim = ImuSimulator(STEP_NS, 5, "average")
-    sim.add_reading(0, np.zeros(6))
-    with pytest.raises(ImuSimulationError, match="every physics step: expected t = 1000000 ns, got 2000000 ns"):
-        sim.add_reading(2 * STEP_NS, np.zeros(6))
+    sim.add_readings(0, np.zeros((2, 6)))
+    with pytest.raises(ImuSimulationError, match="every physics step: expected t = 2000000 ns, got 3000000 ns"):
+        sim.add_readings(3 * STEP_NS, np.zeros((1, 6)))
     with pytest.raises(ImuSimulationError, match="not on the physics grid"):
-        sim.add_reading(STEP_NS + 7, np.zeros(6))
+        sim.add_readings(STEP_NS + 7, np.zeros((1, 6)))
 
 
 def test_noise_needs_a_generator():
@@ -288,11 +296,11 @@ def test_kinematic_gyro_agrees_with_mujocos_gyro_sensor_at_the_midpoint_velocity
         sensor[t_ns] = s.data.sensor("gyro").data.copy()
         midpoint[t_ns] = sensor[t_ns] + R.T @ jac_r @ (s.data.qvel - velocity["before"]) / 2.0
         velocity["before"] = s.data.qvel.copy()
-        site = reader.read(s.data, t_ns, s.timestep_ns)
-        if site is not None:
-            readings[site.t_ns] = site.reading[:3]
+        reader.record(s.data, t_ns, s.timestep_ns)
 
     sim.move_to(sim.ee_pose() @ make_transform(euler_to_matrix([0.3, -0.2, 0.25]), [0.05, 0.05, -0.05]), on_step)
+    site = reader.readings()
+    readings = dict(zip(site.t_ns.tolist(), site.reading[:, :3], strict=True))
     ours = np.array(list(readings.values()))
     assert np.abs(ours).max() > 0.3  # it rotates
     np.testing.assert_allclose(ours, [midpoint[t] for t in readings], atol=1e-5)
@@ -322,24 +330,61 @@ def test_reader_matches_a_site_spinning_on_a_circle():
     reader = ImuSiteReader(model)
     reader.reset(0)
     r, w0, alpha, h = 0.3, 2.0, 3.0, 1e-3
-    readings = []
     for k in range(400):
         t = k * h
         data.qpos[0] = w0 * t + 0.5 * alpha * t * t
         mujoco.mj_kinematics(model, data)
-        site = reader.read(data, k * STEP_NS, STEP_NS)
-        if site is not None:
-            readings.append(site)
-    for site in readings[::37]:
-        t = site.t_ns * 1e-9
+        reader.record(data, k * STEP_NS, STEP_NS)
+    site = reader.readings()
+    assert site.t_ns.tolist() == [k * STEP_NS for k in range(1, 399)]  # the first and last lack a neighbour
+    for k in range(0, len(site.t_ns), 37):
+        t = site.t_ns[k] * 1e-9
         angle, omega = w0 * t + 0.5 * alpha * t * t, w0 + alpha * t
         radial, tangential = np.array([np.cos(angle), np.sin(angle), 0]), np.array([-np.sin(angle), np.cos(angle), 0])
         accel_world = -(omega**2) * r * radial + alpha * r * tangential
-        R = site.R_world_site
-        np.testing.assert_allclose(site.reading[:3], R.T @ [0.0, 0.0, omega], atol=1e-6)
-        np.testing.assert_allclose(site.reading[3:], R.T @ (accel_world - model.opt.gravity), atol=1e-5)
+        R = site.R_world_site[k]
+        np.testing.assert_allclose(site.reading[k, :3], R.T @ [0.0, 0.0, omega], atol=1e-6)
+        np.testing.assert_allclose(site.reading[k, 3:], R.T @ (accel_world - model.opt.gravity), atol=1e-5)
         # The position differences see chords of the circle: (omega h)^2 / 6 ~ 1e-6 relative below the arc.
-        np.testing.assert_allclose(site.v_world, omega * r * tangential, atol=1e-5)
+        np.testing.assert_allclose(site.v_world[k], omega * r * tangential, atol=1e-5)
+
+
+def _spin(reader, model, data, steps):
+    for k in steps:
+        data.qpos[0] = 0.5 * np.sin(0.02 * k) + 1e-3 * k * k
+        mujoco.mj_kinematics(model, data)
+        reader.record(data, k * STEP_NS, STEP_NS)
+
+
+def test_reader_gives_the_same_floats_however_often_it_is_read():
+    """Read after every step, in uneven chunks or once: the same readings to the last bit."""
+    model = mujoco.MjModel.from_xml_string(SPINNER)
+    data = mujoco.MjData(model)
+    batches = {}
+    for chunk in (1, 13, 300):
+        reader = ImuSiteReader(model)
+        reader.reset(0)
+        parts = []
+        for start in range(0, 300, chunk):
+            _spin(reader, model, data, range(start, min(start + chunk, 300)))
+            parts.append(reader.readings())
+        batches[chunk] = [np.concatenate([getattr(p, field) for p in parts]) for field in parts[0]._fields]
+    assert len(batches[300][0]) == 298
+    for chunk in (1, 13):
+        for ours, whole in zip(batches[chunk], batches[300], strict=True):
+            np.testing.assert_array_equal(ours, whole)
+
+
+def test_reader_refuses_a_skipped_step():
+    model = mujoco.MjModel.from_xml_string(SPINNER)
+    data = mujoco.MjData(model)
+    reader = ImuSiteReader(model)
+    with pytest.raises(ImuSimulationError, match="before reset"):
+        reader.record(data, 0, STEP_NS)
+    reader.reset(0)
+    reader.record(data, 0, STEP_NS)
+    with pytest.raises(ImuSimulationError, match="expected the physics step starting at 1000000 ns, got 2000000 ns"):
+        reader.record(data, 2 * STEP_NS, STEP_NS)
 
 
 def test_intrinsics_scale_and_misalign_the_ideal_readings_before_the_noise():

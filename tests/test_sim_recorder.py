@@ -34,7 +34,8 @@ def sim():
     return PandaSim()
 
 
-def _record(sim, truth, sampling=None, detector=None, keep_images=False, steps=None):
+def _record(sim, truth, sampling=None, detector=None, keep_images=False, steps=None, follow=False):
+    """Record the motion ``steps``; ``follow`` reads the IMU samples after every motion, as the env does."""
     sampling = sampling or SensorSampling()
     sim.reset()
     recorder = SensorRecorder(sim, sim.cfg.board.target, sampling, detector, keep_images)
@@ -44,6 +45,8 @@ def _record(sim, truth, sampling=None, detector=None, keep_images=False, steps=N
         for rpy, xyz in steps or [([0.25, 0.0, 0.25], [0.0, 0.08, 0.0]), ([-0.2, 0.15, -0.25], [0.05, -0.1, 0.05])]:
             T = T @ make_transform(euler_to_matrix(rpy), xyz)
             recorder.add_motion(sim.move_to(T, on_step=recorder.on_step))
+            if follow:
+                recorder.imu_samples()
         return recorder.recording({"seed": 5, "note": "test"})
     finally:
         recorder.close()
@@ -54,6 +57,25 @@ def offset_recording(sim):
     sampling = replace(SensorSampling(), pixel_noise_px=0.0)
     truth = replace(sample_sensor(sampling, np.random.default_rng(2)), time_offset=OFFSET)
     return _record(sim, truth, sampling)
+
+
+def test_the_recording_does_not_depend_on_when_the_imu_samples_are_read(sim, offset_recording):
+    """The poses of every physics step become readings, truth and path when asked for: asking after every
+    motion gives the recording of asking once, to the last bit."""
+    followed = _record(sim, offset_recording.truth, replace(SensorSampling(), pixel_noise_px=0.0), follow=True)
+    once = offset_recording
+    assert len(once.imu) > 100 and once.path_profile.length[-1] > 0.1
+    for ours, theirs in [
+        (followed.imu.t, once.imu.t),
+        (followed.imu.gyro, once.imu.gyro),
+        (followed.imu.accel, once.imu.accel),
+        (followed.trajectory.T_world_imu, once.trajectory.T_world_imu),
+        (followed.trajectory.v_world, once.trajectory.v_world),
+        (followed.trajectory.omega_imu, once.trajectory.omega_imu),
+        (followed.path_profile.t, once.path_profile.t),
+        (followed.path_profile.length, once.path_profile.length),
+    ]:
+        np.testing.assert_array_equal(ours, theirs)
 
 
 def test_frames_are_stamped_on_the_camera_grid_and_exposed_inside_the_motion(offset_recording):

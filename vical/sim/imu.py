@@ -34,18 +34,18 @@ class ImuSimulationError(RuntimeError):
     """IMU readings that do not arrive at every physics step."""
 
 
-class SiteReading(NamedTuple):
-    """Ideal IMU reading and ground-truth state of a site at one physics step.
+class SiteReadings(NamedTuple):
+    """Ideal IMU readings and ground-truth states of a site at consecutive physics steps.
 
     Attributes:
-        t_ns: time of the physics state [ns].
-        reading: (6,) ``[gyro (3) rad/s, specific force (3) m/s^2]`` in the site frame.
-        p_world: (3,) [m] site position; R_world_site: (3, 3) site orientation.
-        v_world: (3,) [m/s] site velocity, world axes.
-        omega_site: (3,) [rad/s] site angular velocity, site axes (= the gyro reading).
+        t_ns: (N,) int64 times of the physics states [ns].
+        reading: (N, 6) ``[gyro (3) rad/s, specific force (3) m/s^2]`` in the site frame.
+        p_world: (N, 3) [m] site positions; R_world_site: (N, 3, 3) site orientations.
+        v_world: (N, 3) [m/s] site velocities, world axes.
+        omega_site: (N, 3) [rad/s] site angular velocities, site axes (= the gyro readings).
     """
 
-    t_ns: int
+    t_ns: np.ndarray
     reading: np.ndarray
     p_world: np.ndarray
     R_world_site: np.ndarray
@@ -74,27 +74,34 @@ class ImuSiteReader:
     sensors stay in the scene as a cross-check (``tests/test_sim_imu.py``) and read the same
     values at rest.
 
-    Readings lag one physics step: ``read`` after the step of ``t_{k+1}`` returns step ``k``.
+    ``record`` keeps the site pose of every physics step (cheap: it runs in the step callback);
+    ``readings`` differences the poses kept since its last call in one vectorised pass. The per-row
+    products go through the same BLAS kernels as a step-by-step evaluation, so the readings are the
+    same floats however often ``readings`` is called.
     """
 
     def __init__(self, model: mujoco.MjModel, site: str = "imu"):
         self.model = model
         self._site = model.site(site).id
         self._gravity = np.array(model.opt.gravity, dtype=float)
-        self._poses: list[tuple[np.ndarray, np.ndarray]] = []  # (p, R) of the last up to 3 steps
-        self._t_ns: int | None = None
+        self._p: list[np.ndarray] = []  # site positions (3,) of consecutive steps, the first at _t0_ns
+        self._R: list[np.ndarray] = []  # site orientations, row-major (9,)
+        self._t0_ns = 0
+        self._step_ns = 0
+        self._t_ns: int | None = None  # time of the next physics step to record
 
     def reset(self, t_ns: int) -> None:
-        """Start over: the next ``read`` (which brings the pose of ``t_ns`` itself) must be that of the
+        """Start over: the next ``record`` (which brings the pose of ``t_ns`` itself) must be that of the
         physics step starting at ``t_ns``."""
-        self._poses = []
+        self._p, self._R = [], []
+        self._t0_ns = int(t_ns)
         self._t_ns = int(t_ns)
 
-    def read(self, data: mujoco.MjData, t_ns: int, step_ns: int) -> SiteReading | None:
-        """The reading of the step before ``t_ns``, or None while fewer than three poses are known.
+    def record(self, data: mujoco.MjData, t_ns: int, step_ns: int) -> None:
+        """Keep the site pose of the physics step starting at ``t_ns``.
 
         Call right after the ``mj_step`` that started at ``t_ns`` (``data``'s kinematics are those
-        of ``t_ns``).
+        of ``t_ns``); every physics step must be recorded.
         """
         if self._t_ns != t_ns:
             if self._t_ns is None:
@@ -104,23 +111,46 @@ class ImuSiteReader:
                 "every physics step must be reported (reset the reader after moving without it)"
             )
         self._t_ns = t_ns + step_ns
-        poses = self._poses
-        poses.append((data.site_xpos[self._site].copy(), data.site_xmat[self._site].reshape(3, 3).copy()))
-        if len(poses) < 3:
-            return None
-        if len(poses) > 3:
-            del poses[0]
-        return self._central_difference(t_ns - step_ns, step_ns * 1e-9)
+        self._step_ns = step_ns
+        self._p.append(data.site_xpos[self._site].copy())
+        self._R.append(data.site_xmat[self._site].copy())
 
-    def _central_difference(self, t_ns: int, h: float) -> SiteReading:
-        (p_m, R_m), (p_0, R_0), (p_p, R_p) = self._poses
-        M = R_0.T @ (R_p - R_m)
-        omega = np.array([M[2, 1] - M[1, 2], M[0, 2] - M[2, 0], M[1, 0] - M[0, 1]]) * (0.25 / h)
+    def readings(self) -> SiteReadings:
+        """The readings of every recorded step whose next step is recorded too, since the last call.
+
+        A reading needs the steps before and after it: the first recorded step never has one, and
+        the last one waits for the next ``record``.
+        """
+        n = len(self._p)
+        if n < 3:
+            empty = np.zeros((0, 3))
+            return SiteReadings(np.zeros(0, dtype=np.int64), np.zeros((0, 6)), empty, np.zeros((0, 3, 3)), empty, empty)
+        h_ns = self._step_ns
+        t_ns = self._t0_ns + h_ns * np.arange(1, n - 1, dtype=np.int64)
+        p = np.asarray(self._p)
+        R = np.asarray(self._R).reshape(-1, 3, 3)
+        self._p, self._R = self._p[-2:], self._R[-2:]  # the next reading's previous and own pose
+        self._t0_ns += (n - 2) * h_ns
+        return self._central_difference(t_ns, p, R, h_ns * 1e-9)
+
+    def _central_difference(self, t_ns: np.ndarray, p: np.ndarray, R: np.ndarray, h: float) -> SiteReadings:
+        """Readings at the inner rows of the poses ``p`` (M, 3), ``R`` (M, 3, 3) (M - 2 of them)."""
+        p_m, p_0, p_p = p[:-2], p[1:-1], p[2:]
+        R_m, R_0, R_p = R[:-2], R[1:-1], R[2:]
+        M = np.swapaxes(R_0, 1, 2) @ (R_p - R_m)
+        omega = np.stack([M[:, 2, 1] - M[:, 1, 2], M[:, 0, 2] - M[:, 2, 0], M[:, 1, 0] - M[:, 0, 1]], axis=1)
+        omega *= 0.25 / h
         # The antisymmetric part holds sin(angle) per step: angle / sin(angle) ~ 1 + angle^2 / 6.
-        omega *= 1.0 + (omega @ omega) * (h * h) / 6.0
+        omega *= (1.0 + row_dot(omega, omega) * (h * h) / 6.0)[:, None]
         accel_world = (p_p - 2.0 * p_0 + p_m) * (1.0 / (h * h))
-        reading = np.concatenate([omega, (accel_world - self._gravity) @ R_0])
-        return SiteReading(t_ns, reading, p_0, R_0, (p_p - p_m) * (0.5 / h), omega)
+        specific_force = ((accel_world - self._gravity)[:, None, :] @ R_0)[:, 0, :]
+        reading = np.concatenate([omega, specific_force], axis=1)
+        return SiteReadings(t_ns, reading, p_0, R_0, (p_p - p_m) * (0.5 / h), omega)
+
+
+def row_dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(N,) dot products of the rows of ``a`` and ``b`` (N, 3), as ``a[i] @ b[i]`` computes each."""
+    return (a[:, None, :] @ b[:, :, None])[:, 0, 0]
 
 
 def window_weights(steps_per_sample: int, sampling: str) -> tuple[np.ndarray, np.ndarray]:
@@ -246,8 +276,10 @@ class ImuSimulator:
         self._gyro = np.zeros((0, 3))
         self._accel = np.zeros((0, 3))
 
-    def add_reading(self, t_ns: int, reading: np.ndarray) -> None:
-        """Record the ideal ``[gyro (3) rad/s, accel (3) m/s^2]`` (6,) of the physics state at ``t_ns``."""
+    def add_readings(self, t_ns: int, readings: np.ndarray) -> None:
+        """Record the ideal ``[gyro (3) rad/s, accel (3) m/s^2]`` (N, 6) of N consecutive physics states,
+        the first at ``t_ns``."""
+        readings = np.asarray(readings, dtype=float).reshape(-1, 6)
         step, rem = divmod(int(t_ns), self.step_ns)
         if rem:
             raise ImuSimulationError(f"IMU reading at t = {t_ns} ns is not on the physics grid ({self.step_ns} ns)")
@@ -260,19 +292,25 @@ class ImuSimulator:
             raise ImuSimulationError(
                 f"IMU readings must arrive at every physics step: expected t = {expected} ns, got {t_ns} ns"
             )
-        if self._count == len(self._buffer):
-            self._buffer = np.vstack([self._buffer, np.zeros_like(self._buffer)])
-        self._buffer[self._count] = reading
-        self._count += 1
-        if step == self._next_step + self._last_offset:
-            self._emit()
+        end = self._count + len(readings)
+        if end > len(self._buffer):
+            self._buffer = np.vstack([self._buffer[: self._count], np.zeros((end, 6))])
+        self._buffer[self._count : end] = readings
+        self._count = end
+        self._emit_complete()
 
-    def _emit(self) -> None:
-        start = self._next_step + self._first_offset - self._base_step
-        window = self._buffer[start : start + len(self._weights)]
-        self._ideal.append(self._weights @ window)
-        self._ideal_t.append(self._next_step * self.step_ns)
-        self._next_step += self.period_steps
+    def _emit_complete(self) -> None:
+        """Turn every sample whose window has fully arrived into an ideal sample; drop the rows no later
+        sample needs."""
+        last_step = self._base_step + self._count - 1
+        centres = np.arange(self._next_step, last_step - self._last_offset + 1, self.period_steps)
+        if len(centres):
+            rows = (centres + self._first_offset - self._base_step)[:, None] + np.arange(len(self._weights))
+            # (1, L) @ (L, 6) per sample: the same BLAS product as one sample at a time.
+            ideal = (self._weights[None, None, :] @ self._buffer[rows])[:, 0, :]
+            self._ideal.extend(ideal)
+            self._ideal_t.extend((centres * self.step_ns).tolist())
+            self._next_step = int(centres[-1]) + self.period_steps
         drop = min(self._next_step + self._first_offset - self._base_step, self._count)
         keep = self._count - drop
         self._buffer[:keep] = self._buffer[drop : self._count]

@@ -1,10 +1,12 @@
 """Record a simulated sensor while the Panda moves: IMU, camera frames, ground truth -> ``Recording``.
 
 ``SensorRecorder.on_step`` is the ``PandaSim.move_to`` step callback. At every physics step it
-passes the IMU site's ideal rate and specific force (``ImuSiteReader``, one step late) to the IMU
-model (``vical.sim.imu``), keeps
-the ground-truth IMU state at the IMU sample instants and, at each camera exposure, observes the
-target from the camera pose interpolated between the two physics steps around the exposure.
+keeps the IMU site's and the end effector's positions and, at each camera exposure, observes the
+target from the camera pose interpolated between the two physics steps around the exposure. The
+kept poses become the IMU site's ideal rate and specific force (``ImuSiteReader``), the IMU
+model's samples (``vical.sim.imu``), the ground-truth IMU state at the IMU sample instants and the
+end effector's path in one vectorised pass whenever the IMU samples or the recording are asked
+for: a physics step costs the callback little, and the result does not depend on when it is asked.
 
 Clocks. The IMU clock is the simulation clock (``t_ns`` of ``on_step``). Camera frames are
 stamped on a grid of the camera period in the camera clock; the frame stamped ``t_cam`` is
@@ -23,9 +25,8 @@ import mujoco
 import numpy as np
 
 from vical.data import CameraFrames, ImuSamples, PathProfile, Recording, SensorTruth, Target, Trajectory
-from vical.geometry import make_transform
 from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
-from vical.sim.imu import ImuSimulator, ImuSiteReader, SiteReading
+from vical.sim.imu import ImuSimulator, ImuSiteReader, SiteReadings, row_dot
 from vical.sim.motion import MotionResult
 from vical.sim.robot import PandaSim
 from vical.sim.sampling import SensorSampling, sensor_imu_pose
@@ -34,9 +35,9 @@ from vical.sim.scene import camera_pose_cv, set_imu_pose
 
 @dataclass
 class _TruthLog:
-    """Ground-truth IMU states at the IMU sample instants."""
+    """Ground-truth IMU states at the IMU sample instants, in chunks of consecutive instants."""
 
-    t: list[int]
+    t: list[np.ndarray]
     T_world_imu: list[np.ndarray]
     v_world: list[np.ndarray]
     omega_imu: list[np.ndarray]
@@ -123,19 +124,19 @@ class SensorRecorder:
         self._log = _TruthLog([], [], [], [])
         self._path_length = 0.0
         self._duration = 0.0
+        self._ee_steps: list[np.ndarray] = []  # end-effector positions of the steps not yet on the path
+        self._ee_t0_ns = 0  # time of the first of them
         self._ee_last: np.ndarray | None = None
         self._ee_path = 0.0
-        self._path_log: tuple[list[int], list[float]] = ([], [])
+        self._path_log: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
 
     def on_step(self, sim: PandaSim, t_ns: int) -> None:
         """``PandaSim`` step callback: ``data``'s derived quantities belong to time ``t_ns``."""
         data = sim.data
-        site = self._reader.read(data, t_ns, self._step_ns)  # refuses steps before start()
-        if site is not None:  # the reading of the previous step (central differences need this one)
-            self._imu.add_reading(site.t_ns, site.reading)
-            if site.t_ns % (self._imu_steps * self._step_ns) == 0:
-                self._log_truth(site)
-        self._follow_path(sim, t_ns)
+        self._reader.record(data, t_ns, self._step_ns)  # refuses steps before start() and skipped steps
+        if not self._ee_steps:
+            self._ee_t0_ns = t_ns
+        self._ee_steps.append(sim.ee_position())
         if self._next_stamp is None:
             self._next_stamp = self._first_stamp(t_ns)
         exposure = self._next_stamp + self._offset_ns
@@ -172,13 +173,14 @@ class SensorRecorder:
 
     def imu_samples(self) -> ImuSamples:
         """The IMU samples recorded so far (for consumers that follow the data while it is recorded)."""
+        self._catch_up()
         return self._imu.samples()
 
     def recording(self, metadata: dict[str, Any] | None = None) -> Recording:
         """Everything recorded since ``start``; the trajectory holds the truth at the IMU sample times."""
         if self.truth is None:
             raise RuntimeError("SensorRecorder.start(truth, rng) must be called before recording()")
-        imu = self._imu.samples()
+        imu = self.imu_samples()
         return Recording(
             imu=imu,
             frames=self._camera_frames(imu),
@@ -189,7 +191,7 @@ class SensorRecorder:
             path_length=self._path_length,
             duration=self._duration,
             metadata=dict(metadata or {}),
-            path_profile=PathProfile(np.asarray(self._path_log[0], dtype=np.int64), np.asarray(self._path_log[1])),
+            path_profile=PathProfile(_joined(self._path_log[0], np.int64), _joined(self._path_log[1], float)),
         )
 
     # ------------------------------------------------------------------ internals
@@ -214,32 +216,53 @@ class SensorRecorder:
         if self.keep_images:
             frames["images"].append(image)
 
-    def _follow_path(self, sim: PandaSim, t_ns: int) -> None:
-        """Add the end effector's step to its path; log the path at the IMU sample instants."""
-        p = sim.ee_position()
-        if self._ee_last is not None:
-            self._ee_path += float(np.linalg.norm(p - self._ee_last))
-        self._ee_last = p
-        if t_ns % (self._imu_steps * self._step_ns) == 0:
-            self._path_log[0].append(t_ns)
-            self._path_log[1].append(self._ee_path)
+    def _catch_up(self) -> None:
+        """Turn the poses kept since the last call into IMU readings, truth and path."""
+        site = self._reader.readings()
+        if len(site.t_ns):
+            self._imu.add_readings(int(site.t_ns[0]), site.reading)
+            self._log_truth(site)
+        if self._ee_steps:
+            self._follow_path()
 
-    def _log_truth(self, site: SiteReading) -> None:
+    def _at_imu_instants(self, t_ns: np.ndarray) -> np.ndarray:
+        return np.flatnonzero(t_ns % (self._imu_steps * self._step_ns) == 0)
+
+    def _follow_path(self) -> None:
+        """Add the end effector's kept steps to its path; log the path at the IMU sample instants."""
+        p = np.asarray(self._ee_steps)
+        before = p[:1] if self._ee_last is None else self._ee_last[None]  # the first step moves nowhere
+        d = p - np.vstack([before, p[:-1]])
+        # sqrt(d_i @ d_i) per row: the floats np.linalg.norm gives one step at a time.
+        steps = np.sqrt(row_dot(d, d))
+        path = np.cumsum(np.concatenate([[self._ee_path], steps]))[1:]  # sequential, as step-by-step sums
+        t_ns = self._ee_t0_ns + self._step_ns * np.arange(len(p), dtype=np.int64)
+        logged = self._at_imu_instants(t_ns)
+        self._path_log[0].append(t_ns[logged])
+        self._path_log[1].append(path[logged])
+        self._ee_last, self._ee_path, self._ee_steps = p[-1], float(path[-1]), []
+
+    def _log_truth(self, site: SiteReadings) -> None:
+        logged = self._at_imu_instants(site.t_ns)
+        T = np.zeros((len(logged), 4, 4))
+        T[:, :3, :3] = site.R_world_site[logged]
+        T[:, :3, 3] = site.p_world[logged]
+        T[:, 3, 3] = 1.0
         log = self._log
-        log.t.append(site.t_ns)
-        log.T_world_imu.append(make_transform(site.R_world_site, site.p_world))
-        log.v_world.append(site.v_world)
-        log.omega_imu.append(site.omega_site)
+        log.t.append(site.t_ns[logged])
+        log.T_world_imu.append(T)
+        log.v_world.append(site.v_world[logged])
+        log.omega_imu.append(site.omega_site[logged])
 
     def _trajectory(self, imu: ImuSamples) -> Trajectory:
         log = self._log
-        keep = np.isin(np.asarray(log.t, dtype=np.int64), imu.t)
-        take = np.flatnonzero(keep)
+        t = _joined(log.t, np.int64)
+        take = np.flatnonzero(np.isin(t, imu.t))
         return Trajectory(
-            t=np.asarray(log.t, dtype=np.int64)[take],
-            T_world_imu=np.asarray(log.T_world_imu).reshape(-1, 4, 4)[take],
-            v_world=np.asarray(log.v_world).reshape(-1, 3)[take],
-            omega_imu=np.asarray(log.omega_imu).reshape(-1, 3)[take],
+            t=t[take],
+            T_world_imu=_joined(log.T_world_imu, float, (4, 4))[take],
+            v_world=_joined(log.v_world, float, (3,))[take],
+            omega_imu=_joined(log.omega_imu, float, (3,))[take],
         )
 
     def _camera_frames(self, imu: ImuSamples) -> CameraFrames:
@@ -255,3 +278,8 @@ class SensorRecorder:
         """Free the renderer's GL context."""
         if self.render is not None:
             self.render.close()
+
+
+def _joined(chunks: list[np.ndarray], dtype: type, row: tuple[int, ...] = ()) -> np.ndarray:
+    """The chunks (K_i, *row) stacked into one (sum K_i, *row) array of ``dtype`` (empty when none)."""
+    return np.concatenate(chunks).astype(dtype, copy=False) if chunks else np.zeros((0, *row), dtype=dtype)
