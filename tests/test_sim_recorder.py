@@ -196,8 +196,10 @@ def test_bad_setups_are_refused(sim):
     small = replace(mean_sensor(SensorSampling()), camera=CameraModel.from_hfov(1.0, 320, 240))
     with pytest.raises(ValueError, match=r"320 x 240 px .*sensor\.camera\.width/height"):
         recorder.start(small, np.random.default_rng(0))
-    with pytest.raises(RuntimeError, match="start"):
+    with pytest.raises(RuntimeError, match=r"start\(truth, rng\) must be called before recording\(\)"):
         recorder.recording()
+    with pytest.raises(RuntimeError, match=r"start\(truth, rng\) must be called before imu_samples\(\)"):
+        recorder.imu_samples()
     with pytest.raises(ImuSimulationError, match="before reset"):
         sim.hold(0.01, on_step=recorder.on_step)
     sim.reset()

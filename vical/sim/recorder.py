@@ -1,7 +1,7 @@
 """Record a simulated sensor while the Panda moves: IMU, camera frames, ground truth -> ``Recording``.
 
 ``SensorRecorder.on_step`` is the ``PandaSim.move_to`` step callback. At every physics step it
-keeps the IMU site's and the end effector's positions and, at each camera exposure, observes the
+keeps the IMU site's pose and the end effector's position and, at each camera exposure, observes the
 target from the camera pose interpolated between the two physics steps around the exposure. The
 kept poses become the IMU site's ideal rate and specific force (``ImuSiteReader``), the IMU
 model's samples (``vical.sim.imu``), the ground-truth IMU state at the IMU sample instants and the
@@ -173,13 +173,13 @@ class SensorRecorder:
 
     def imu_samples(self) -> ImuSamples:
         """The IMU samples recorded so far (for consumers that follow the data while it is recorded)."""
+        self._require_started("imu_samples()")
         self._catch_up()
         return self._imu.samples()
 
     def recording(self, metadata: dict[str, Any] | None = None) -> Recording:
         """Everything recorded since ``start``; the trajectory holds the truth at the IMU sample times."""
-        if self.truth is None:
-            raise RuntimeError("SensorRecorder.start(truth, rng) must be called before recording()")
+        self._require_started("recording()")
         imu = self.imu_samples()
         return Recording(
             imu=imu,
@@ -195,6 +195,10 @@ class SensorRecorder:
         )
 
     # ------------------------------------------------------------------ internals
+    def _require_started(self, call: str) -> None:
+        if self.truth is None:
+            raise RuntimeError(f"SensorRecorder.start(truth, rng) must be called before {call}")
+
     def _first_stamp(self, t_ns: int) -> int:
         """First camera stamp on the camera-period grid whose exposure is at or after ``t_ns``."""
         period = self._cam_period_ns
