@@ -29,6 +29,7 @@ from hydra import compose, initialize_config_dir
 from hydra.errors import MissingConfigException
 from omegaconf import OmegaConf
 
+from vical.calib import CalibrationError
 from vical.calib.tasks import run_task
 from vical.config import ConfigError
 from vical.env.information import TASK_GROUPS
@@ -80,21 +81,31 @@ def run(sensors: int, task: str, policy_name: str, first_seed: int, overrides: l
     policy = instantiate_policy(OmegaConf.to_container(cfg.policy, resolve=True)[task], "policy")
     env = build_env(OmegaConf.to_container(cfg.env, resolve=True), policy)
     tolerances = dataclasses.asdict(env.config.information.tolerances)
-    z_all, step_times, stopped, right = [], [], 0, 0
+    z_all, step_times, stopped, right, failed = [], [], 0, 0, []
     for seed in range(first_seed, first_seed + sensors):
         start = time.perf_counter()
         trajectory = run_trajectory(env, policy, seed)
         step_times.append((time.perf_counter() - start) / max(trajectory.steps, 1))
         names, sigma = predicted(env)
-        outcome = run_task(env.task, trajectory.recording)
+        ending = "stopped" if trajectory.coverage_reached else "step limit"
+        stopped += trajectory.coverage_reached
+        try:
+            outcome = run_task(env.task, trajectory.recording)
+        except CalibrationError as err:  # counted as evaluation.calibrate_row does: no errors, not a right stop
+            failed.append(seed)
+            print(f"sensor {seed}: {ending} after {trajectory.steps} steps, calibration failed: {err}", flush=True)
+            continue
         z_all.append(true_errors(outcome.result, trajectory.recording.truth, names) / sigma)
         if trajectory.coverage_reached:
             row = EpisodeRow(policy.name, seed)
             fill_outcome(row, outcome, trajectory.recording.truth.camera)
-            stopped += 1
             right += stopped_right(row, task, tolerances)
-        print(f"sensor {seed}: {'stopped' if trajectory.coverage_reached else 'step limit'} after {trajectory.steps} "
-              f"steps, max |z| {np.abs(z_all[-1]).max():.2f}", flush=True)  # fmt: skip
+        print(f"sensor {seed}: {ending} after {trajectory.steps} steps, max |z| {np.abs(z_all[-1]).max():.2f}",
+              flush=True)  # fmt: skip
+    if not z_all:
+        raise SystemExit(f"error: every calibration failed (sensors {failed}); nothing to compare the predictions with")
+    if failed:
+        print(f"\ncalibration failed on {len(failed)} of {sensors} sensors ({failed}): left out of the sigma counts")
     z = np.abs(np.array(z_all))
     within = " / ".join(f"{np.mean(z <= k):.1%}" for k in (1, 2, 3))
     print(f"\n{policy.name}, {task} task, sensors {first_seed}-{first_seed + sensors - 1}, {z.size} parameters: "
