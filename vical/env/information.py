@@ -25,6 +25,7 @@ image corner], extrinsic rotation [deg] and translation [mm] (largest axis), tim
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import gtsam
@@ -316,6 +317,7 @@ CHI_DIMS = {"focal": 2, "principal_point": 2, "distortion": 2, "rotation": 3, "t
 FEATURE_DECADES = 4.0  # a state feature spans 1e-2 .. 1e2 times the tolerance (0.5: at the tolerance)
 
 
+@functools.cache  # a handful of (group, confidence) pairs, asked for at every env step
 def quantile_factor(group: str, confidence: float) -> float:
     """The error norm's ``confidence`` quantile over its 1-sigma: the chi quantile of the group's dimension."""
     return float(np.sqrt(chi2.ppf(confidence, CHI_DIMS[group])))
