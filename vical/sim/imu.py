@@ -280,6 +280,8 @@ class ImuSimulator:
         """Record the ideal ``[gyro (3) rad/s, accel (3) m/s^2]`` (N, 6) of N consecutive physics states,
         the first at ``t_ns``."""
         readings = np.asarray(readings, dtype=float).reshape(-1, 6)
+        if not len(readings):
+            return
         step, rem = divmod(int(t_ns), self.step_ns)
         if rem:
             raise ImuSimulationError(f"IMU reading at t = {t_ns} ns is not on the physics grid ({self.step_ns} ns)")
