@@ -136,6 +136,7 @@ def test_streaming_equals_one_batch_and_noise_is_seeded():
     _feed(b, range(50), signal)
     b.samples()  # a query in the middle changes nothing
     _feed(b, range(50, 100), signal)
+    c.add_readings(123 * STEP_NS, np.zeros((0, 6)))  # an empty block, at any time, changes nothing
     _feed(c, range(100), signal, chunk=7)  # chunks that end inside sample windows
     assert len(a.samples()) == 19
     for other in (b, c):
