@@ -112,25 +112,21 @@ class Coverage:
         self.area = np.zeros(2)  # [min, max]; zeros until the first view
         self.skew = np.full(2, 0.5)
         self.motion = np.zeros(6)
-        self._views = np.zeros((64, 4))  # the stored views' [x, y, area, skew], the first num_views rows
-        self._count = 0
+        self._views: list[np.ndarray] = []
 
     @property
     def num_views(self) -> int:
         """Views stored in the coverage set."""
-        return self._count
+        return len(self._views)
 
     def add_view(self, view: ViewFeatures) -> bool:
         """Store ``view`` if it is novel and widen the ranges; True when it was stored."""
         vec = view.vector
-        stored = self._views[: self.num_views]
-        if len(stored) and np.abs(stored - vec).sum(axis=1).min() <= self.novelty:
+        # One array operation over the stored views: the per-view L1 sums of a loop, without its cost.
+        if self._views and np.abs(np.asarray(self._views) - vec).sum(axis=1).min() <= self.novelty:
             return False
-        first = not len(stored)
-        if len(stored) == len(self._views):
-            self._views = np.vstack([self._views, np.zeros_like(self._views)])
-        self._views[len(stored)] = vec
-        self._count += 1
+        first = not self._views
+        self._views.append(vec)
         self._widen_polygon(view.center)
         self.area = np.array([view.area, view.area]) if first else _widen(self.area, view.area)
         self.skew = np.array([view.skew, view.skew]) if first else _widen(self.skew, view.skew)
