@@ -125,7 +125,7 @@ class SensorRecorder:
         self._path_length = 0.0
         self._duration = 0.0
         self._ee_steps: list[np.ndarray] = []  # end-effector positions of the steps not yet on the path
-        self._ee_t0_ns = 0  # time of the first of them
+        self._ee_t0_ns = self.sim.time_ns  # time of the first of them (the reader refuses a skipped step)
         self._ee_last: np.ndarray | None = None
         self._ee_path = 0.0
         self._path_log: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
@@ -134,8 +134,6 @@ class SensorRecorder:
         """``PandaSim`` step callback: ``data``'s derived quantities belong to time ``t_ns``."""
         data = sim.data
         self._reader.record(data, t_ns, self._step_ns)  # refuses steps before start() and skipped steps
-        if not self._ee_steps:
-            self._ee_t0_ns = t_ns
         self._ee_steps.append(sim.ee_position())
         if self._next_stamp is None:
             self._next_stamp = self._first_stamp(t_ns)
@@ -245,6 +243,7 @@ class SensorRecorder:
         self._path_log[0].append(t_ns[logged])
         self._path_log[1].append(path[logged])
         self._ee_last, self._ee_path, self._ee_steps = p[-1], float(path[-1]), []
+        self._ee_t0_ns = int(t_ns[-1]) + self._step_ns
 
     def _log_truth(self, site: SiteReadings) -> None:
         logged = self._at_imu_instants(site.t_ns)
