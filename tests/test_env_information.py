@@ -1,10 +1,12 @@
 """The information state: the calibrator's covariance predicted while data arrive, its MDP, its bad inputs."""
 
+import dataclasses
 import re
 import subprocess
 import sys
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 from configs import composed
@@ -17,7 +19,19 @@ from vical.calib.synthetic import make_recording, scattered_views, wide_angle_ca
 from vical.config import ConfigError
 from vical.data import ImuNoise, ImuSamples, Target
 from vical.env.calibration import INFO_OBS_SIZE, CalibrationEnv
-from vical.env.information import GROUPS, Guess, InformationTracker, excess, features, quantile_factor
+from vical.env.information import (
+    GROUPS,
+    OFFSET_NODES,
+    OFFSET_WEIGHTS,
+    Guess,
+    InformationTracker,
+    LensSpread,
+    excess,
+    features,
+    lens_misfits,
+    quantile_factor,
+)
+from vical.geometry import CameraModel
 from vical.rl.trainer import make_env
 
 BIASES = {"gyro_bias": [0.01, -0.02, 0.005], "accel_bias": [0.05, -0.1, 0.08]}  # [rad/s], [m/s^2]
@@ -175,6 +189,59 @@ def test_the_intrinsic_task_tracks_the_camera_only():
         env.close()
 
 
+def test_a_declared_decentring_joins_the_joint_state_and_is_refused_where_no_intrinsics_are_estimated():
+    """env.information.center_offset_std: the joint task's lens spread (the offset's, the sensor distribution's
+    coefficients) keeps the intrinsic groups' prediction above the plain one after the same steps; the extrinsic
+    task, which estimates no intrinsics, refuses it by key."""
+    ratios = []
+    for std in (0.0, 0.05):
+        env = information_env("joint", f"env.information.center_offset_std={std}")
+        try:
+            env.reset(seed=2)
+            for _ in range(6):
+                *_, info = env.step(np.full(env.action_space.shape, 0.5, dtype=np.float32))
+            spread = env.unwrapped.state.information.guess.lens_spread
+            ratios.append({g: info[f"information/{g}_ratio"] for g in GROUPS})
+        finally:
+            env.close()
+    assert spread is not None and spread.center_offset_px == pytest.approx([0.05 * 640, 0.05 * 480])
+    assert spread.coefficient_std == pytest.approx([0.02, 0.02, 0.001, 0.001])  # conf/sensor/paper.yaml
+    for group in ("focal", "principal_point"):
+        assert ratios[1][group] > ratios[0][group]
+    env = information_env("extrinsic", "env.information.center_offset_std=0.05")
+    try:
+        with pytest.raises(ConfigError, match=r"env\.information\.center_offset_std is 0\.05.*set it to 0"):
+            env.reset(seed=2)
+    finally:
+        env.close()
+
+
+def test_the_goal_can_be_the_scored_groups_and_the_declared_decentring_the_sensor_distributions():
+    """goal_groups=scored: the joint task ends and is paid on rotation, translation and time offset only (its
+    intrinsics stay in the state); center_offset_std=null: the task's own draw of decentred lenses, none in the
+    intrinsic task, which draws none."""
+    overrides = ("env.information.goal_groups=scored", "env.information.center_offset_std=null")
+    env = information_env("joint", *overrides)
+    try:
+        obs, _ = env.reset(seed=2)
+        state = env.unwrapped.state
+        assert set(state.goal_ratios) == {"rotation", "translation", "time_offset"}
+        assert np.all(obs[:6] > 0.0)  # every group is observed
+        assert state.excess == pytest.approx(excess(state.goal_ratios, 10.0, 1.0, 1.0))
+        assert state.goal_reached == all(state.ratios[g] <= 1.0 for g in state.goal_ratios)
+        assert state.information.guess.lens_spread.center_offset_px == pytest.approx([32.0, 24.0])
+    finally:
+        env.close()
+    env = information_env("intrinsic", *overrides)
+    try:
+        env.reset(seed=2)
+        state = env.unwrapped.state
+        assert state.information.guess.lens_spread is None
+        assert set(state.goal_ratios) == set(GROUPS[:3])
+    finally:
+        env.close()
+
+
 def test_a_task_mix_draws_each_episodes_task_by_its_seed():
     """``+experiment=train_information_policy``: joint and intrinsic episodes, the same task for the same seed."""
     env = make_env(composed("train", ["+experiment=train_information_policy"])["env"])
@@ -235,6 +302,8 @@ def test_a_final_step_limit_reports_a_zero_discount_on_its_step_only():
         ("env.information.excess_floor=0", "env.information.excess_floor"),
         ("env.information.excess_floor=1.5", "env.information.excess_floor"),
         ("env.information.outside_weight=0.5", "env.information.outside_weight"),
+        ("env.information.center_offset_std=-0.01", "env.information.center_offset_std"),
+        ("env.information.goal_groups=some", "env.information.goal_groups"),
         ("env.reward.path_discount=0", "env.reward.path_discount"),
         ("env.reward.path_discount=1.2", "env.reward.path_discount"),
         ("env.state=coverage_and_more", "env.state"),
@@ -279,3 +348,67 @@ def test_honesty_script_runs_the_shipped_policy_to_its_stop_and_judges_it(tmp_pa
     unknown = subprocess.run([*args[:-1], "nonsense"], capture_output=True, text=True, cwd=tmp_path)
     assert unknown.returncode != 0 and unknown.stderr.strip().endswith("the choices are the files of conf/<group>/")
     assert "Could not find 'policy/nonsense'" in unknown.stderr and "Traceback" not in unknown.stderr
+
+
+def test_lens_misfit_columns_rebuild_any_decentred_lens_of_the_spread():
+    """At each offset node, the columns combine linearly into the misfit of any lens of the spread: its projection
+    with the distortion centre offset minus the centred projection (CameraModel's own), to 1e-9 px."""
+    camera = CameraModel.from_hfov(1.0, 640, 480, np.array([-0.05, 0.01, 0.0, 0.0]), "radtan")
+    spread = LensSpread(np.array([30.0, 20.0]), np.array([0.02, 0.02, 0.001, 0.0]))
+    rng = np.random.default_rng(4)
+    points = np.c_[rng.uniform(-0.3, 0.3, (25, 2)), rng.uniform(0.4, 1.0, 25)]
+    columns = lens_misfits(camera, points, spread)  # the guess's lens, then k1, k2, p1 (p2 has no spread)
+    assert columns.shape == (50, spread.columns(camera)) == (50, len(OFFSET_NODES) * 4)
+    z = rng.standard_normal(3)
+    coefficients = camera.dist + np.r_[0.02 * z[0], 0.02 * z[1], 0.001 * z[2], 0.0]
+    lens = camera.with_intrinsics(camera.fx, camera.fy, camera.cx, camera.cy, coefficients)
+    nodes = len(OFFSET_NODES)
+    for node, (offset, weight) in enumerate(zip(OFFSET_NODES * spread.center_offset_px, OFFSET_WEIGHTS, strict=True)):
+        decentred = dataclasses.replace(lens, distortion_center_offset=offset)
+        expected = (decentred.project(points)[0] - lens.project(points)[0]).reshape(-1)
+        fields = columns[:, node::nodes] / np.sqrt(weight)  # field-major: the guess's lens, then each coefficient
+        assert fields[:, 0] + fields[:, 1:] @ z == pytest.approx(expected, abs=1e-9)
+    assert np.abs(expected).max() > 0.1  # [px] a misfit that matters
+
+
+def test_a_declared_lens_spread_predicts_the_bias_that_solves_of_decentred_lenses_show():
+    """The considered part of the prediction (with the spread minus without) equals the second moment of the biases
+    OpenCV's calibration leaves when the lens is decentred to each offset node (noise-free views), within 10 %."""
+    target = Target.checkerboard()
+    lens = CameraModel.from_hfov(1.0, 640, 480, np.array([0.03, -0.02, 0.002, 0.001]), "radtan")
+    spread = LensSpread(np.array([30.0, 20.0]), np.zeros(4))
+    frames, poses = scattered_views(lens, target, 20, seed=2)
+    observations = collect_observations(frames, target)
+    no_imu = ImuSamples(np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+    predicted = []
+    for lens_spread in (spread, None):
+        tracker = InformationTracker("intrinsic", target, Guess(lens, np.eye(4), 0.0, ImuNoise(), 0.3, lens_spread))
+        tracker.add_frames(observations, no_imu)
+        predicted.append(tracker.covariance()[1][:4, :4])
+    second_moment = np.zeros((4, 4))
+    for offset, weight in zip(OFFSET_NODES * spread.center_offset_px, OFFSET_WEIGHTS, strict=True):
+        bias = (
+            opencv_intrinsics(dataclasses.replace(lens, distortion_center_offset=offset), target, poses)
+            - lens.intrinsics
+        )
+        second_moment += weight * np.outer(bias, bias)
+    considered = np.sqrt(np.diag(predicted[0] - predicted[1]))
+    assert considered == pytest.approx(np.sqrt(np.diag(second_moment)), rel=0.1)
+    assert considered.min() > 0.1  # [px] a bias as large as the noise's 1-sigma: it matters
+    with pytest.raises(ValueError, match="one per radtan coefficient"):
+        InformationTracker(
+            "intrinsic", target, Guess(lens, np.eye(4), 0.0, ImuNoise(), 0.3, LensSpread([30, 20], [0.1]))
+        )
+    with pytest.raises(ValueError, match="extrinsic task takes the intrinsics as given"):
+        InformationTracker("extrinsic", target, Guess(lens, np.eye(4), 0.0, ImuNoise(), 0.3, spread))
+
+
+def opencv_intrinsics(camera: CameraModel, target: Target, poses: list[np.ndarray]) -> np.ndarray:
+    """``[fx, fy, cx, cy]`` OpenCV's radtan calibration finds from ``camera``'s noise-free views at ``poses``."""
+    images = [camera.project(target.points @ T[:3, :3].T + T[:3, 3])[0].astype(np.float32) for T in poses]
+    start = np.array([[camera.fx, 0, camera.cx], [0, camera.fy, camera.cy], [0, 0, 1.0]])
+    flags = cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_K3
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 100, 1e-12)
+    _, K, *_ = cv2.calibrateCamera([target.points.astype(np.float32)] * len(poses), images, (640, 480), start,
+                                   np.r_[camera.dist, 0.0], flags=flags, criteria=criteria)  # fmt: skip
+    return np.array([K[0, 0], K[1, 1], K[0, 2], K[1, 2]])

@@ -34,7 +34,7 @@ from vical.config import ConfigError
 from vical.data import Recording, SensorTruth
 from vical.env.actions import action_to_step
 from vical.env.config import MdpConfig
-from vical.env.information import GROUPS, TASK_GROUPS, Guess
+from vical.env.information import GROUPS, TASK_GROUPS, Guess, LensSpread
 from vical.env.plots import episode_figure, information_figure
 from vical.env.rewards import step_reward_terms, terminal_reward_terms
 from vical.env.state import EpisodeState
@@ -254,8 +254,28 @@ class CalibrationEnv(gym.Env):
         """
         guess = mean_sensor(self.sampling)
         camera = self.truth.camera if self.task.calibrate == "extrinsic" else guess.camera
-        pixel_sigma = self.config.information.pixel_sigma
-        return Guess(camera, guess.T_cam_imu, guess.time_offset, guess.imu_noise, pixel_sigma)
+        settings = self.config.information
+        return Guess(camera, guess.T_cam_imu, guess.time_offset, guess.imu_noise, settings.pixel_sigma,
+                     self._lens_spread(camera))  # fmt: skip
+
+    def _lens_spread(self, camera) -> LensSpread | None:
+        """The declared decentring (``env.information.center_offset_std``) with the sensor distribution's spread of
+        the distortion coefficients; None when no offset is declared."""
+        std = self.config.information.center_offset_std
+        if std is None:  # the sensor distribution's, where the task draws decentred lenses
+            std = self.sampling.camera.center_offset_std if self.task.asymmetric_distortion else 0.0
+        if std == 0:
+            return None
+        if self.task.calibrate == "extrinsic" or camera.is_wide_angle:
+            raise ConfigError(
+                f"env.information.center_offset_std is {std}, but a decentred lens is only considered where a "
+                f"pinhole camera's intrinsics are estimated (task {self.task.name!r}, camera {camera.distortion}); "
+                "set it to 0"
+            )
+        c = self.sampling.camera
+        tangential = c.tangential_std if camera.distortion == "radtan" and self.task.asymmetric_distortion else 0.0
+        coefficient_std = np.array([c.k1.std, c.k2.std, tangential, tangential])  # radtan p1, p2; equidistant k3, k4
+        return LensSpread(std * np.array([camera.width, camera.height], dtype=float), coefficient_std)
 
     def _observation(self) -> np.ndarray:
         return self.state.observation(self._offset, self._steps)

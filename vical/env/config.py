@@ -128,6 +128,7 @@ class RewardWeights:
 
 
 STATES = ("coverage", "information")
+GOAL_GROUPS = ("all", "scored")
 
 
 @dataclass(frozen=True)
@@ -192,6 +193,15 @@ class InformationSettings:
             the groups already done.
         time_weight: [1/s] charge per second of the step's motion (the path is charged by
             ``reward.path_weight``).
+        center_offset_std: declared 1-sigma of the lens's distortion-centre offset from the principal
+            point, in units of the image width (x) and height (y) as ``sensor.camera.center_offset_std``:
+            the bias such an offset causes (the pinhole models cannot fit it) is added to the prediction
+            (``vical.env.information``); 0 takes the lens model as exact; null declares the sensor
+            distribution's where the task draws decentred lenses (``task.asymmetric_distortion``), else 0.
+        goal_groups: which groups must be within tolerance to end an episode, and whose shrinking the
+            reward pays: ``all`` the task's, or ``scored`` those its evaluation scores (the joint task:
+            rotation, translation, time offset; its intrinsics stay in the state). With a decentred
+            lens declared, the joint task's intrinsics cannot reach their tolerances.
     """
 
     tolerances: Tolerances = field(default_factory=Tolerances)
@@ -202,6 +212,8 @@ class InformationSettings:
     excess_floor: float = 1.0
     outside_weight: float = 1.0
     time_weight: float = 1.0
+    center_offset_std: float | None = 0.0
+    goal_groups: str = "all"
 
     def __post_init__(self) -> None:
         require_range("env.information.confidence", self.confidence, 0.5, 1.0, high_open=True)
@@ -212,6 +224,10 @@ class InformationSettings:
         require_range("env.information.excess_floor", self.excess_floor, 0.0, 1.0, low_open=True)
         require_range("env.information.outside_weight", self.outside_weight, 1.0)
         require_range("env.information.time_weight", self.time_weight, 0.0)
+        if self.center_offset_std is not None:
+            require_range("env.information.center_offset_std", self.center_offset_std, 0.0)
+        key = "env.information.goal_groups"
+        require(self.goal_groups in GOAL_GROUPS, key, f"one of {GOAL_GROUPS}", self.goal_groups)
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,24 @@ Per frame with a target pose (PnP with the guessed camera), as an information fi
 
 In the intrinsic task each frame's camera pose is marginalised at once. Weak priors (a guess's
 usual spread) keep early, unobservable directions finite. The parameters' covariance is the
-inverse of their marginal information; ``sigmas()`` reduces it to one 1-sigma per group in the
-units users read: focal length and principal point [px], distortion [px of displacement at the
-image corner], extrinsic rotation [deg] and translation [mm] (largest axis), time offset [ms].
+inverse of their marginal information.
+
+A lens whose distortion is not centred on the principal point (a decentred lens; the joint
+task draws one on purpose) is an error the pinhole models cannot fit: it biases the estimate
+whatever the amount of data. Its first-order effect on a radial lens is exactly radtan's
+tangential terms (absorbed); what remains is of higher order in the offset and grows with the
+distortion coefficients, so it vanishes at a guess without distortion. With a declared spread
+(``Guess.lens_spread``: the offset's and the coefficients') the misfit field of every corner
+(decentred minus centred projection) is carried as *considered* columns, never estimated: the
+columns' cross-information ``L_pc`` with the estimated parameters ``p`` gives the bias each
+leaves, ``S = inv(L_pp) L_pc`` (the least-squares fit of the misfit), and the prediction adds
+their second moment ``S S^T`` to ``inv(L_pp)``. The misfit is linear in the coefficients, so
+their spread enters exactly; the offset's by Gauss-Hermite nodes (3 per axis: exact for the
+misfit's terms up to second order in the offset, which carry the bias).
+
+``sigmas()`` reduces the covariance to one 1-sigma per group in the units users read: focal
+length and principal point [px], distortion [px of displacement at the image corner], extrinsic
+rotation [deg] and translation [mm] (largest axis), time offset [ms].
 """
 
 from __future__ import annotations
@@ -49,6 +64,9 @@ TASK_GROUPS = {
     "extrinsic": GROUPS[3:],
     "joint": GROUPS,
 }
+# The groups each task's evaluation scores (vical.policies.results.SCORED_GROUPS): the joint task's intrinsics
+# are estimated, but a decentred lens biases them beyond any tolerance.
+SCORED_GROUPS = {"intrinsic": GROUPS[:3], "extrinsic": GROUPS[3:], "joint": GROUPS[3:]}
 GRAVITY = 9.81  # [m/s^2]
 # Prior 1-sigma of the shared parameters: the spread of a guess before any data (tangent units).
 PRIOR_SIGMA = {
@@ -62,6 +80,12 @@ BIAS_PRIOR_SIGMA = np.r_[np.full(3, 1.0), np.full(3, 0.1)]  # [m/s^2], [rad/s] f
 MIN_PIXEL_SIGMA = 0.05  # [px] floor of the corner noise measured from the PnP residuals
 RECENT_FRAMES = 200  # frames whose PnP residuals measure the corner noise
 IMU_DIM = 15  # pose 6, velocity 3, bias 6 per state
+# Gauss-Hermite nodes and weights of a standard normal, 3 per axis of the distortion centre's offset
+# (the centre node leaves no misfit and is left out).
+_NODES_1D, _WEIGHTS_1D = np.array([-np.sqrt(3.0), 0.0, np.sqrt(3.0)]), np.array([1 / 6, 2 / 3, 1 / 6])
+OFFSET_NODES = np.array([(a, b) for a in _NODES_1D for b in _NODES_1D if a or b])
+OFFSET_WEIGHTS = np.array([wa * wb for a, wa in zip(_NODES_1D, _WEIGHTS_1D, strict=True)
+                           for b, wb in zip(_NODES_1D, _WEIGHTS_1D, strict=True) if a or b])  # fmt: skip
 
 E_KEY, D_KEY, K_KEY, G_KEY = (gtsam.symbol(c, 0) for c in "edkg")
 X_KEY, V_KEY, B_KEY = (gtsam.symbol(c, 0) for c in "xvb")  # the current state (one at a time)
@@ -75,7 +99,8 @@ class Guess:
     Attributes:
         camera: camera model and parameters; T_cam_imu: (4, 4); time_offset: [s];
         imu_noise: the IMU's declared noise densities; pixel_sigma: [px] corner noise, None to
-            measure it from the PnP residuals.
+            measure it from the PnP residuals; lens_spread: how far the real lens may be from the
+            camera model's (``LensSpread``), considered in the prediction; None: the model is exact.
     """
 
     camera: CameraModel
@@ -83,6 +108,38 @@ class Guess:
     time_offset: float
     imu_noise: ImuNoise
     pixel_sigma: float | None = None
+    lens_spread: LensSpread | None = None
+
+
+@dataclass(frozen=True)
+class LensSpread:
+    """The declared spread of a decentred lens around the guess (1-sigma of independent Gaussians).
+
+    Attributes:
+        center_offset_px: (2,) [px] the distortion centre's offset from the principal point (x, y).
+        coefficient_std: (D,) the distortion coefficients' spread around the guess's (the misfit of a
+            decentred lens grows with its distortion, which a guess only knows to this spread).
+    """
+
+    center_offset_px: np.ndarray
+    coefficient_std: np.ndarray
+
+    def checked(self, camera: CameraModel) -> LensSpread:
+        """This spread as arrays, ``ValueError`` naming what is wrong for ``camera``'s model."""
+        offset = np.asarray(self.center_offset_px, dtype=float)
+        coefficient_std = np.asarray(self.coefficient_std, dtype=float)
+        if offset.shape != (2,) or not np.all(np.isfinite(offset)) or np.any(offset < 0):
+            raise ValueError(f"LensSpread.center_offset_px must be two numbers >= 0 [px], got {offset.tolist()}")
+        if coefficient_std.shape != camera.dist.shape or np.any(~np.isfinite(coefficient_std) | (coefficient_std < 0)):
+            raise ValueError(
+                f"LensSpread.coefficient_std must be {len(camera.dist)} numbers >= 0 (one per {camera.distortion} "
+                f"coefficient), got {coefficient_std.tolist()}"
+            )
+        return LensSpread(offset, coefficient_std)
+
+    def columns(self, camera: CameraModel) -> int:
+        """How many considered columns ``lens_misfits`` gives for ``camera``."""
+        return len(OFFSET_NODES) * (int(_has_mean_misfit(camera)) + int(np.count_nonzero(self.coefficient_std)))
 
 
 class InformationTracker:
@@ -101,6 +158,12 @@ class InformationTracker:
         self.uses_imu = task != "intrinsic"
         self.shared = {"intrinsic": ["K"], "extrinsic": ["G", "E", "D"], "joint": ["G", "E", "D", "K"]}[task]
         self.shared_dims = {"K": len(guess.camera.parameters), "E": 6, "D": 1, "G": 2}
+        self._lens: LensSpread | None = None
+        if guess.lens_spread is not None:
+            _check_lens_spread(task, guess.camera)
+            self._lens = guess.lens_spread.checked(guess.camera)
+            self.shared_dims["C"] = self._lens.columns(guess.camera)
+            self.shared.append("C")  # last: the estimated parameters keep their columns
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -109,16 +172,21 @@ class InformationTracker:
         n = self._shared_size
         self.information = np.zeros((n, n))
         offset = 0
-        for name in self.shared:
+        for name in self.estimated:
             dim = self.shared_dims[name]
             sigma = PRIOR_SIGMA["K_wide_angle" if name == "K" and self.guess.camera.is_wide_angle else name]
             self.information[offset : offset + dim, offset : offset + dim] = np.diag(1.0 / sigma**2)
-            offset += dim
+            offset += dim  # the considered offset has no prior: it is never solved for
         self._state: tuple[float, np.ndarray] | None = None  # (IMU time [s], T_target_imu) of the last state
         self._residual_norms: list[np.ndarray] = []
         self._sigma_px = self._measured_pixel_sigma()
         self._t0: int | None = None
         self.frames_used = 0
+
+    @property
+    def estimated(self) -> list[str]:
+        """The shared parameters the calibration estimates (all but the considered offset)."""
+        return [name for name in self.shared if name != "C"]
 
     @property
     def _shared_size(self) -> int:
@@ -159,16 +227,30 @@ class InformationTracker:
     def _corner_factor(self, obs: FrameObservation, keys: CornerKeys):
         return CornerFactors([obs], self.guess.camera, keys, self.pixel_sigma).factors()[0]
 
+    def _add_corners(self, block, obs, keys, values, layout, T_target_cam: np.ndarray) -> None:
+        """The frame's corner factor's information, with the considered offset's columns when declared."""
+        linear = self._corner_factor(obs, keys).linearize(values)
+        if "C" not in self.shared:
+            _accumulate(block, linear, layout)
+            return
+        q = (obs.points - T_target_cam[:3, 3]) @ T_target_cam[:3, :3]  # the corners in the camera frame
+        misfit = lens_misfits(self.guess.camera, q, self._lens) / self.pixel_sigma
+        _accumulate(block, linear, layout, extra=(misfit, self._lens_columns))
+
+    @property
+    def _lens_columns(self) -> slice:
+        start = sum(self.shared_dims[n] for n in self.estimated)
+        return slice(start, start + self.shared_dims["C"])
+
     def _add_camera_frame(self, obs: FrameObservation, T_target_cam: np.ndarray) -> None:
         """Intrinsic task: the frame's pose joins, its corners add information, the pose is marginalised."""
         values = gtsam.Values()
         values.insert(X_KEY, gtsam.Pose3(T_target_cam))
         values.insert(K_KEY, self.guess.camera.parameters)
-        factor = self._corner_factor(obs, CornerKeys(poses=[X_KEY], camera=K_KEY))
-        k = self.shared_dims["K"]
-        layout = {K_KEY: slice(0, k), X_KEY: slice(k, k + 6)}
+        k = self._shared_size  # K, then the considered offset when declared
+        layout = {K_KEY: slice(0, self.shared_dims["K"]), X_KEY: slice(k, k + 6)}
         block = np.zeros((k + 6, k + 6))
-        _accumulate(block, factor.linearize(values), layout)
+        self._add_corners(block, obs, CornerKeys(poses=[X_KEY], camera=K_KEY), values, layout, T_target_cam)
         self.information += _schur(block, k)
 
     def _add_inertial_frame(self, obs: FrameObservation, T_target_cam: np.ndarray, imu: ImuSamples) -> None:
@@ -187,10 +269,11 @@ class InformationTracker:
     def _layout(self, with_next: bool) -> dict[int, slice]:
         """Columns of the shared parameters, then the current state (x, v, b), then the next one's."""
         layout, offset = {}, 0
-        for name in self.shared:
+        for name in self.estimated:
             dim = self.shared_dims[name]
             layout[{"K": K_KEY, "E": E_KEY, "D": D_KEY, "G": G_KEY}[name]] = slice(offset, offset + dim)
             offset += dim
+        offset = self._shared_size  # past the considered offset's columns
         for keys in ((X_KEY, V_KEY, B_KEY), (X1_KEY, V1_KEY, B1_KEY))[: 2 if with_next else 1]:
             for key, dim in zip(keys, (6, 3, 6), strict=True):
                 layout[key] = slice(offset, offset + dim)
@@ -225,7 +308,8 @@ class InformationTracker:
         n = self._shared_size + IMU_DIM
         block = np.zeros((n, n))
         block[: self._shared_size, : self._shared_size] = self.information
-        _accumulate(block, self._corner_factor(obs, self._frame_keys(X_KEY, V_KEY, omega)).linearize(values), layout)
+        T_target_cam = T_imu @ invert_transform(self.guess.T_cam_imu)
+        self._add_corners(block, obs, self._frame_keys(X_KEY, V_KEY, omega), values, layout, T_target_cam)
         bias = layout[B_KEY]
         block[bias, bias] += np.diag(1.0 / BIAS_PRIOR_SIGMA**2)
         self._joint = block  # shared parameters + the current state
@@ -252,19 +336,31 @@ class InformationTracker:
         block = np.zeros((n, n))
         block[: self._joint.shape[0], : self._joint.shape[0]] = self._joint
         _accumulate(block, factor.linearize(values), layout)
-        _accumulate(block, self._corner_factor(obs, self._frame_keys(X1_KEY, V1_KEY, omega)).linearize(values), layout)
+        T_target_cam = T_imu @ invert_transform(self.guess.T_cam_imu)
+        self._add_corners(block, obs, self._frame_keys(X1_KEY, V1_KEY, omega), values, layout, T_target_cam)
         self._joint = _marginalise(block, layout[X_KEY].start, layout[B_KEY].stop)  # the next state is now current
         self._state = (t, T_imu)
 
     # ------------------------------------------------------------------ the prediction
-    def covariance(self) -> tuple[list[str], np.ndarray]:
-        """The shared parameters' names and their predicted covariance (the current state marginalised)."""
+    def _marginal(self) -> np.ndarray:
+        """The shared parameters' information, the current state marginalised (symmetrised)."""
         if self.uses_imu and self._state is not None:
             marginal = _schur(self._joint, self._shared_size)
         else:
             marginal = self.information
-        names = [name for name in self.shared for _ in range(self.shared_dims[name])]
-        return names, np.linalg.inv(0.5 * (marginal + marginal.T))
+        return 0.5 * (marginal + marginal.T)
+
+    def covariance(self) -> tuple[list[str], np.ndarray]:
+        """The estimated parameters' names and their predicted covariance (the current state marginalised;
+        the declared distortion-centre spread's bias added when declared)."""
+        marginal = self._marginal()
+        names = [name for name in self.estimated for _ in range(self.shared_dims[name])]
+        if "C" not in self.shared:
+            return names, np.linalg.inv(marginal)
+        p = len(names)
+        cov = np.linalg.inv(marginal[:p, :p])
+        bias = cov @ marginal[:p, p:]  # (P, columns): each column's bias, weighted so that bias @ bias.T sums them
+        return names, cov + bias @ bias.T
 
     def sigmas(self) -> dict[str, float]:
         """Predicted 1-sigma of each parameter group of the task, in the units of ``UNITS``."""
@@ -291,11 +387,71 @@ class InformationTracker:
         return float(np.sqrt(0.5 * np.trace(J @ cov @ J.T)))
 
 
-def _accumulate(block: np.ndarray, linear: gtsam.GaussianFactor, layout: dict[int, slice]) -> None:
-    """Add a whitened linear factor's ``A^T A`` into ``block`` at its keys' columns."""
+def _accumulate(block: np.ndarray, linear: gtsam.GaussianFactor, layout: dict[int, slice], extra=None) -> None:
+    """Add a whitened linear factor's ``A^T A`` into ``block`` at its keys' columns; ``extra``: more columns
+    of the same rows ``(A_extra, their slice)``."""
     A, _ = gtsam.JacobianFactor(linear).jacobian()
     columns = np.concatenate([np.arange(layout[k].start, layout[k].stop) for k in linear.keys()])  # noqa: SIM118
+    if extra is not None:
+        A = np.hstack([A, extra[0]])
+        columns = np.r_[columns, np.arange(extra[1].start, extra[1].stop)]
     block[np.ix_(columns, columns)] += A.T @ A
+
+
+def lens_misfits(camera: CameraModel, p_cam: np.ndarray, spread: LensSpread) -> np.ndarray:
+    """(2N, columns) [px] misfit fields of a decentred lens at camera-frame points (N, 3), rows u, v per point, weighted
+    so that their second moment over ``spread`` is ``columns @ columns.T``.
+
+    A decentred lens projects ``d_k(x - s) + s`` where its model projects ``d_k(x)`` (``s`` the offset over the
+    focal lengths). The pinhole models' distortion is linear in its coefficients, ``d_k = d_0 + sum_i k_i b_i``,
+    so with ``k`` the guess's plus ``std_i z_i`` the misfit is ``h(s) + sum_i std_i z_i g_i(s)``; per offset node
+    the columns are ``h`` (absent where it vanishes: radtan without coefficients) and each ``std_i g_i``.
+    """
+    x = p_cam[:, :2] / p_cam[:, 2:3]
+    focal = np.array([camera.fx, camera.fy])
+    shift = OFFSET_NODES * spread.center_offset_px / focal  # (Q, 2) normalised
+    shifted = (x[None, :, :] - shift[:, None, :]).reshape(-1, 2)
+    cameras = _basis_cameras(camera.distortion, len(camera.dist))
+    at_shifted = _distortion_basis(cameras, shifted).reshape(len(cameras), len(shift), -1, 2)
+    differences = at_shifted - _distortion_basis(cameras, x)[:, None]  # (1 + D, Q, N, 2)
+    differences[0] += shift[:, None, :]
+    fields = [differences[0] + np.tensordot(camera.dist, differences[1:], axes=1)] if _has_mean_misfit(camera) else []
+    fields += [std * differences[1 + i] for i, std in enumerate(spread.coefficient_std) if std > 0]
+    weighted = np.stack(fields) * np.sqrt(OFFSET_WEIGHTS)[None, :, None, None] * focal  # (F, Q, N, 2) [px]
+    return weighted.reshape(-1, len(x) * 2).T
+
+
+def _has_mean_misfit(camera: CameraModel) -> bool:
+    """Whether the guess's own lens, decentred, misfits (all but radtan without coefficients)."""
+    return camera.distortion != "radtan" or bool(np.any(camera.dist))
+
+
+@functools.cache  # one set per camera model, asked for at every frame
+def _basis_cameras(distortion: str, coefficients: int) -> tuple[CameraModel, ...]:
+    """Cameras of the model without distortion coefficients, then with each unit coefficient (only ``distort`` used)."""
+    return tuple(
+        CameraModel(distortion=distortion, width=2, height=2, fx=1.0, fy=1.0, cx=0.5, cy=0.5, dist=dist)
+        for dist in np.vstack([np.zeros(coefficients), np.eye(coefficients)])
+    )
+
+
+def _distortion_basis(cameras: tuple[CameraModel, ...], y: np.ndarray) -> np.ndarray:
+    """(1 + D, N, 2): the distortion without coefficients ``d_0(y)``, then each unit coefficient's ``b_i(y)``."""
+    d0 = cameras[0].distort(y)
+    return np.stack([d0, *(camera.distort(y) - d0 for camera in cameras[1:])])
+
+
+def _check_lens_spread(task: str, camera: CameraModel) -> None:
+    if task == "extrinsic":
+        raise ValueError(
+            "a lens spread needs the camera's parameters in the problem: the extrinsic task takes the intrinsics as "
+            "given; declare it for the intrinsic or joint task only"
+        )
+    if camera.is_wide_angle or camera.distortion_center_offset.any():
+        raise ValueError(
+            f"a lens spread applies to a centred pinhole camera model (radtan, equidistant), not to {camera.distortion}"
+            " or a guess with its own offset; leave it out"
+        )
 
 
 def _schur(block: np.ndarray, keep: int) -> np.ndarray:

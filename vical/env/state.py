@@ -15,7 +15,7 @@ from vical.calib.observations import FrameObservation
 from vical.data import ImuSamples, Target
 from vical.env.config import MdpConfig
 from vical.env.coverage import Coverage, view_features
-from vical.env.information import Guess, InformationTracker, excess, features, tolerance_ratios
+from vical.env.information import SCORED_GROUPS, Guess, InformationTracker, excess, features, tolerance_ratios
 
 
 class EpisodeState:
@@ -78,16 +78,25 @@ class EpisodeState:
         self.ratios = tolerance_ratios(self.information.sigmas(), s.tolerances, s.confidence)
 
     @property
+    def goal_ratios(self) -> dict[str, float]:
+        """The ratios of the groups the goal needs (``env.information.goal_groups``)."""
+        if self.config.information.goal_groups == "all":
+            return self.ratios
+        scored = SCORED_GROUPS[self.information.task]
+        return {g: r for g, r in self.ratios.items() if g in scored}
+
+    @property
     def excess(self) -> float:
-        """E-folds the predicted errors still have to shrink by (ratios capped and floored as the reward counts)."""
+        """E-folds the goal's predicted errors still have to shrink by (ratios capped and floored as the reward
+        counts)."""
         s = self.config.information
-        return excess(self.ratios, s.excess_cap, s.excess_floor, s.outside_weight)
+        return excess(self.goal_ratios, s.excess_cap, s.excess_floor, s.outside_weight)
 
     @property
     def goal_reached(self) -> bool:
-        """The coverage is complete, or (information state) every group is within its tolerance."""
+        """The coverage is complete, or (information state) every group of the goal is within its tolerance."""
         if self.config.state == "information":
-            return all(r <= 1.0 for r in self.ratios.values())
+            return all(r <= 1.0 for r in self.goal_ratios.values())
         return self.coverage.complete()
 
     def observation(self, offset: np.ndarray, steps: int) -> np.ndarray:

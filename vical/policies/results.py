@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from vical.env.config import GROUP_TOLERANCE
+from vical.env.information import SCORED_GROUPS as TASK_SCORED_GROUPS
 from vical.policies.effort import rows_at_budget
 from vical.policies.evaluation import END, EpisodeRow
 from vical.policies.statistics import Interval, paired_difference
@@ -39,14 +41,10 @@ REQUIRED = (
     "path_length_m",
     "recording_time_s",
 )
-# The errors each task is scored by, named as results.csv's columns and as the information
-# tolerances (conf/env/information.yaml). The joint task's intrinsics are left out: its asymmetric
-# distortion, which the radtan model cannot fit, biases them by design (docs/evaluation.md).
-SCORED_GROUPS = {
-    "intrinsic": ("focal_px", "principal_point_px", "distortion_px"),
-    "extrinsic": ("rotation_deg", "translation_mm", "time_offset_ms"),
-    "joint": ("rotation_deg", "translation_mm", "time_offset_ms"),
-}
+# The errors each task is scored by (vical.env.information.SCORED_GROUPS), named as results.csv's columns and as
+# the information tolerances (conf/env/information.yaml). The joint task's intrinsics are left out: its
+# asymmetric distortion, which the radtan model cannot fit, biases them by design (docs/evaluation.md).
+SCORED_GROUPS = {task: tuple(GROUP_TOLERANCE[g] for g in groups) for task, groups in TASK_SCORED_GROUPS.items()}
 # How a column of results.csv is read back: by the EpisodeRow field's annotation; an empty cell is None.
 _PARSERS = {"str": str, "int": int, "float": float, "bool": lambda cell: cell == "True"}
 
