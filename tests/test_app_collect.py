@@ -85,6 +85,25 @@ def test_alignment_brings_the_board_centre_ahead_at_the_start_distance(tmp_path)
         rig.close()
 
 
+def test_a_policy_whose_state_considers_a_decentred_lens_gets_it_on_the_arm_as_in_its_env(tmp_path):
+    """A policy trained with env.information.center_offset_std=null: the runner's information state declares the
+    sensor group's decentring and coefficient spreads in the joint task, as the env did, and none in the intrinsic
+    task."""
+    policy = Scripted()
+    policy.env_settings = {"state": "information", "information": {"center_offset_std": None}}
+    for task, expected in (("joint", ([32.0, 24.0], [0.02, 0.02, 0.001, 0.001])), ("intrinsic", None)):
+        c, rig = collector(tmp_path / task, policy, f"task={task}")
+        try:
+            spread = c.guess.lens_spread
+            if expected is None:
+                assert spread is None
+            else:
+                assert spread.center_offset_px == pytest.approx(expected[0])
+                assert spread.coefficient_std == pytest.approx(expected[1])
+        finally:
+            rig.close()
+
+
 def test_a_turned_away_camera_stops_the_run_with_the_board_lost(tmp_path):
     turn = Scripted(euler=(0.0, 0.0, 0.3))
     c, rig = collector(tmp_path, turn, "limits.lost_frames=15", "workspace.orientation=[1.5,1.2,1.2]")

@@ -28,10 +28,12 @@ from omegaconf import DictConfig, OmegaConf
 from vical.apps import calibrate
 from vical.apps.cli import check_then_run, fail, report_error
 from vical.calib.errors import CalibrationError
+from vical.calib.tasks import CalibrationTask
 from vical.config import ConfigError, from_mapping, require
 from vical.data import SensorTruth
+from vical.env.calibration import declared_lens_spread
 from vical.env.config import MdpConfig
-from vical.env.information import Guess
+from vical.env.information import Guess, LensSpread
 from vical.io.bag import write_bag
 from vical.io.errors import FormatError
 from vical.io.euroc import EurocStreamWriter, read_euroc
@@ -42,6 +44,7 @@ from vical.policies.collect import Alignment, CollectionStopped, Collector, Coll
 from vical.policies.evaluation import instantiate_policy, policy_mdp
 from vical.robot import MotionRefused, SensorStreamError
 from vical.sim.config import SimConfig
+from vical.sim.sampling import SensorSampling
 
 APP = "vical-collect"
 USER_ERRORS = (ConfigError, FileExistsError, FileNotFoundError)
@@ -162,10 +165,17 @@ def build_collector(
     writer = None if recording is None else EurocStreamWriter(
         recording, sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz, nominal.imu_noise)  # fmt: skip
     guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise,
-                  mdp.information.pixel_sigma)  # fmt: skip
+                  mdp.information.pixel_sigma, lens_spread(cfg, mdp, nominal))  # fmt: skip
     if progress is None:
         progress = print if cfg.get("progress") else (lambda line: None)
     return Collector(rig.arm, sensor, policy, mdp, s.task, board(cfg), guess, writer, s.align, s.limits, progress)
+
+
+def lens_spread(cfg: DictConfig, mdp: MdpConfig, nominal: SensorTruth) -> LensSpread | None:
+    """The decentred lens the policy's state considers, as in its training env (the ``sensor`` group's spreads)."""
+    sampling = SensorSampling.from_config(_plain(cfg.sensor)).camera
+    task = CalibrationTask.from_config(_plain(cfg.task))
+    return declared_lens_spread(mdp.information, nominal.camera, sampling, task)
 
 
 def board(cfg: DictConfig):

@@ -33,16 +33,17 @@ from vical.calib.tasks import CalibrationTask, run_task
 from vical.config import ConfigError
 from vical.data import Recording, SensorTruth
 from vical.env.actions import action_to_step
-from vical.env.config import MdpConfig
+from vical.env.config import InformationSettings, MdpConfig
 from vical.env.information import GROUPS, TASK_GROUPS, Guess, LensSpread
 from vical.env.plots import episode_figure, information_figure
 from vical.env.rewards import step_reward_terms, terminal_reward_terms
 from vical.env.state import EpisodeState
 from vical.env.workspace import check_workspace, pose_frame
+from vical.geometry import CameraModel
 from vical.sim import PandaSim, SimConfig
 from vical.sim.motion import MotionResult
 from vical.sim.recorder import SensorRecorder
-from vical.sim.sampling import SensorSampling, mean_sensor, sample_sensor
+from vical.sim.sampling import CameraSampling, SensorSampling, mean_sensor, sample_sensor
 
 OBS_SIZE = 24  # the coverage state: 18 coverage terms and the pose offset
 INFO_OBS_SIZE = len(GROUPS) + 7  # the information state: a value per group, the pose offset, the step fraction
@@ -58,6 +59,27 @@ def mixed_tasks(task_mix: Mapping[str, Mapping[str, Any]] | None) -> list[Calibr
             f"in the defaults), got {task_mix!r}"
         )
     return [CalibrationTask.from_config(task) for task in task_mix.values()]
+
+
+def declared_lens_spread(
+    settings: InformationSettings, camera: CameraModel, sampling: CameraSampling, task: CalibrationTask
+) -> LensSpread | None:
+    """The decentred lens the information state considers (``env.information.center_offset_std``; null: the
+    sensor distribution's where ``task`` draws decentred lenses) with the distribution's spread of the distortion
+    coefficients; None when no offset is declared. ``ConfigError`` where no intrinsics are estimated."""
+    std = settings.center_offset_std
+    if std is None:
+        std = sampling.center_offset_std if task.asymmetric_distortion else 0.0
+    if std == 0:
+        return None
+    if task.calibrate == "extrinsic" or camera.is_wide_angle:
+        raise ConfigError(
+            f"env.information.center_offset_std is {std}, but a decentred lens is only considered where a "
+            f"pinhole camera's intrinsics are estimated (task {task.name!r}, camera {camera.distortion}); set it to 0"
+        )
+    tangential = sampling.tangential_std if camera.distortion == "radtan" and task.asymmetric_distortion else 0.0
+    coefficient_std = np.array([sampling.k1.std, sampling.k2.std, tangential, tangential])  # equidistant: k3, k4 0
+    return LensSpread(std * np.array([camera.width, camera.height], dtype=float), coefficient_std)
 
 
 class CalibrationEnv(gym.Env):
@@ -256,26 +278,7 @@ class CalibrationEnv(gym.Env):
         camera = self.truth.camera if self.task.calibrate == "extrinsic" else guess.camera
         settings = self.config.information
         return Guess(camera, guess.T_cam_imu, guess.time_offset, guess.imu_noise, settings.pixel_sigma,
-                     self._lens_spread(camera))  # fmt: skip
-
-    def _lens_spread(self, camera) -> LensSpread | None:
-        """The declared decentring (``env.information.center_offset_std``) with the sensor distribution's spread of
-        the distortion coefficients; None when no offset is declared."""
-        std = self.config.information.center_offset_std
-        if std is None:  # the sensor distribution's, where the task draws decentred lenses
-            std = self.sampling.camera.center_offset_std if self.task.asymmetric_distortion else 0.0
-        if std == 0:
-            return None
-        if self.task.calibrate == "extrinsic" or camera.is_wide_angle:
-            raise ConfigError(
-                f"env.information.center_offset_std is {std}, but a decentred lens is only considered where a "
-                f"pinhole camera's intrinsics are estimated (task {self.task.name!r}, camera {camera.distortion}); "
-                "set it to 0"
-            )
-        c = self.sampling.camera
-        tangential = c.tangential_std if camera.distortion == "radtan" and self.task.asymmetric_distortion else 0.0
-        coefficient_std = np.array([c.k1.std, c.k2.std, tangential, tangential])  # radtan p1, p2; equidistant k3, k4
-        return LensSpread(std * np.array([camera.width, camera.height], dtype=float), coefficient_std)
+                     declared_lens_spread(settings, camera, self.sampling.camera, self.task))  # fmt: skip
 
     def _observation(self) -> np.ndarray:
         return self.state.observation(self._offset, self._steps)
