@@ -437,8 +437,26 @@ def _basis_cameras(distortion: str, coefficients: int) -> tuple[CameraModel, ...
 
 def _distortion_basis(cameras: tuple[CameraModel, ...], y: np.ndarray) -> np.ndarray:
     """(1 + D, N, 2): the distortion without coefficients ``d_0(y)``, then each unit coefficient's ``b_i(y)``."""
+    if cameras[0].distortion == "radtan":
+        return _radtan_basis(y)
     d0 = cameras[0].distort(y)
     return np.stack([d0, *(camera.distort(y) - d0 for camera in cameras[1:])])
+
+
+def _radtan_basis(y: np.ndarray) -> np.ndarray:
+    """``_distortion_basis`` of radtan in one pass: the same floats as ``CameraModel.distort`` with unit coefficients
+    (its expression with the zero terms dropped, which add exact zeros)."""
+    u, v = y[:, 0], y[:, 1]
+    uu, vv, uv = u * u, v * v, u * v
+    r2 = uu + vv
+    out = np.zeros((5, len(y), 2))
+    out[0, :, 0], out[0, :, 1] = u, v
+    out[1, :, 0], out[1, :, 1] = u * (1.0 + r2) - u, v * (1.0 + r2) - v  # k1
+    r4 = 1.0 + r2 * r2
+    out[2, :, 0], out[2, :, 1] = u * r4 - u, v * r4 - v  # k2
+    out[3, :, 0], out[3, :, 1] = (u + 2.0 * uv) - u, (v + (r2 + 2.0 * vv)) - v  # p1
+    out[4, :, 0], out[4, :, 1] = (u + (r2 + 2.0 * uu)) - u, (v + 2.0 * uv) - v  # p2
+    return out
 
 
 def _check_lens_spread(task: str, camera: CameraModel) -> None:
