@@ -15,6 +15,10 @@ the evaluation judges it) with the rate's exact 95 % interval.
 
     .venv/bin/python experiments/information_honesty.py [--sensors 50] [--task joint] [--policy learned]
     .venv/bin/python experiments/information_honesty.py --policy learned policy.run_dir=runs/<a vical-train run>
+    .venv/bin/python experiments/information_honesty.py env.information.center_offset_std=null  # a decentred lens
+
+A learned policy runs in the MDP it was trained in: its ``env.information`` replaces the command
+line's, so measure another information setting with a baseline or with a policy trained with it.
 """
 
 from __future__ import annotations
