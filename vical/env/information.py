@@ -176,7 +176,7 @@ class InformationTracker:
             dim = self.shared_dims[name]
             sigma = PRIOR_SIGMA["K_wide_angle" if name == "K" and self.guess.camera.is_wide_angle else name]
             self.information[offset : offset + dim, offset : offset + dim] = np.diag(1.0 / sigma**2)
-            offset += dim  # the considered offset has no prior: it is never solved for
+            offset += dim  # the considered lens columns have no prior: they are never solved for
         self._state: tuple[float, np.ndarray] | None = None  # (IMU time [s], T_target_imu) of the last state
         self._residual_norms: list[np.ndarray] = []
         self._sigma_px = self._measured_pixel_sigma()
@@ -228,7 +228,7 @@ class InformationTracker:
         return CornerFactors([obs], self.guess.camera, keys, self.pixel_sigma).factors()[0]
 
     def _add_corners(self, block, obs, keys, values, layout, T_target_cam: np.ndarray) -> None:
-        """The frame's corner factor's information, with the considered offset's columns when declared."""
+        """The frame's corner factor's information, with the considered lens misfit's columns when declared."""
         linear = self._corner_factor(obs, keys).linearize(values)
         if "C" not in self.shared:
             _accumulate(block, linear, layout)
@@ -352,7 +352,7 @@ class InformationTracker:
 
     def covariance(self) -> tuple[list[str], np.ndarray]:
         """The estimated parameters' names and their predicted covariance (the current state marginalised;
-        the declared distortion-centre spread's bias added when declared)."""
+        a declared lens spread's bias added)."""
         marginal = self._marginal()
         names = [name for name in self.estimated for _ in range(self.shared_dims[name])]
         if "C" not in self.shared:
