@@ -411,9 +411,9 @@ def lens_misfits(camera: CameraModel, p_cam: np.ndarray, spread: LensSpread) -> 
     focal = np.array([camera.fx, camera.fy])
     shift = OFFSET_NODES * spread.center_offset_px / focal  # (Q, 2) normalised
     shifted = (x[None, :, :] - shift[:, None, :]).reshape(-1, 2)
-    cameras = _basis_cameras(camera.distortion, len(camera.dist))
-    at_shifted = _distortion_basis(cameras, shifted).reshape(len(cameras), len(shift), -1, 2)
-    differences = at_shifted - _distortion_basis(cameras, x)[:, None]  # (1 + D, Q, N, 2)
+    model, coefficients = camera.distortion, len(camera.dist)
+    at_shifted = _distortion_basis(model, coefficients, shifted).reshape(1 + coefficients, len(shift), -1, 2)
+    differences = at_shifted - _distortion_basis(model, coefficients, x)[:, None]  # (1 + D, Q, N, 2)
     differences[0] += shift[:, None, :]
     fields = [differences[0] + np.tensordot(camera.dist, differences[1:], axes=1)] if _has_mean_misfit(camera) else []
     fields += [std * differences[1 + i] for i, std in enumerate(spread.coefficient_std) if std > 0]
@@ -426,6 +426,15 @@ def _has_mean_misfit(camera: CameraModel) -> bool:
     return camera.distortion != "radtan" or bool(np.any(camera.dist))
 
 
+def _distortion_basis(distortion: str, coefficients: int, y: np.ndarray) -> np.ndarray:
+    """(1 + D, N, 2): the distortion without coefficients ``d_0(y)``, then each unit coefficient's ``b_i(y)``."""
+    if distortion == "radtan":
+        return _radtan_basis(y)
+    cameras = _basis_cameras(distortion, coefficients)
+    d0 = cameras[0].distort(y)
+    return np.stack([d0, *(camera.distort(y) - d0 for camera in cameras[1:])])
+
+
 @functools.cache  # one set per camera model, asked for at every frame
 def _basis_cameras(distortion: str, coefficients: int) -> tuple[CameraModel, ...]:
     """Cameras of the model without distortion coefficients, then with each unit coefficient (only ``distort`` used)."""
@@ -433,14 +442,6 @@ def _basis_cameras(distortion: str, coefficients: int) -> tuple[CameraModel, ...
         CameraModel(distortion=distortion, width=2, height=2, fx=1.0, fy=1.0, cx=0.5, cy=0.5, dist=dist)
         for dist in np.vstack([np.zeros(coefficients), np.eye(coefficients)])
     )
-
-
-def _distortion_basis(cameras: tuple[CameraModel, ...], y: np.ndarray) -> np.ndarray:
-    """(1 + D, N, 2): the distortion without coefficients ``d_0(y)``, then each unit coefficient's ``b_i(y)``."""
-    if cameras[0].distortion == "radtan":
-        return _radtan_basis(y)
-    d0 = cameras[0].distort(y)
-    return np.stack([d0, *(camera.distort(y) - d0 for camera in cameras[1:])])
 
 
 def _radtan_basis(y: np.ndarray) -> np.ndarray:
