@@ -1,7 +1,12 @@
 """Worker pools: task order kept, errors and crashed workers reported (never a hang), bad settings refused."""
 
 import os
+import signal
+import subprocess
+import sys
+import textwrap
 import time
+from pathlib import Path
 
 import pytest
 
@@ -54,6 +59,49 @@ def test_a_killed_worker_is_a_clear_error_not_a_hang():
     with pytest.raises(WorkerCrashed, match="a worker process died"):
         list(imap_ordered(die_on_two, range(6), TWO))
     assert time.perf_counter() - start < 60
+
+
+HOLDING_CALLER = """
+    import os, sys, time
+    from pathlib import Path
+    from vical.parallel import ParallelConfig, imap_ordered
+
+    def hold(path):
+        Path(path).write_text(str(os.getpid()))
+        time.sleep(120)
+
+    if __name__ == "__main__":
+        list(imap_ordered(hold, [os.path.join(sys.argv[1], f"task{k}") for k in range(6)], ParallelConfig(workers=2)))
+"""
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` is a live process (a zombie left unreaped by its adopter is not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads process states from /proc")
+def test_workers_end_soon_after_their_caller_is_killed(tmp_path):
+    script = tmp_path / "caller.py"
+    script.write_text(textwrap.dedent(HOLDING_CALLER))
+    caller = subprocess.Popen([sys.executable, str(script), str(tmp_path)])
+    deadline = time.monotonic() + 60
+    while len(started := sorted(tmp_path.glob("task*"))) < 2 and time.monotonic() < deadline:
+        assert caller.poll() is None
+        time.sleep(0.1)
+    time.sleep(0.2)  # both pids written whole
+    workers = [int(path.read_text()) for path in started]
+    assert len(workers) == 2 and all(_running(pid) for pid in workers)
+    caller.send_signal(signal.SIGKILL)  # no cleanup runs: as a scheduler's or a user's kill -9
+    caller.wait()
+    deadline = time.monotonic() + 10
+    while any(_running(pid) for pid in workers) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not any(_running(pid) for pid in workers), "workers went on with their queued tasks"
+    assert len(list(tmp_path.glob("task*"))) == 2  # and started none of the tasks queued after
 
 
 @pytest.mark.parametrize(

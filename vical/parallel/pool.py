@@ -9,6 +9,8 @@ import multiprocessing
 import os
 import socket
 import sys
+import threading
+import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -24,6 +26,7 @@ RAY_CONNECT_TIMEOUT_S = 3.0  # an address that does not answer within this is re
 RAY_DEFAULT_PORTS = {"ray": 10001, "": 6379}  # Ray client (ray://) and GCS ports
 # Tasks submitted ahead per worker: a slow task holds back the yield of later ones, not their running.
 RAY_WINDOW_PER_WORKER = 4
+PARENT_POLL_S = 0.5  # how soon a local worker notices that the process that started it is gone
 
 
 class WorkerCrashed(RuntimeError):
@@ -82,7 +85,10 @@ def imap_ordered(fn: Callable[[Any], Any], tasks: Sequence[Any], config: Paralle
 
 def _process_imap(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int) -> Iterator[Any]:
     # spawn, not fork: a forked MuJoCo renderer or GTSAM/TBB state is not safe in the child.
-    executor = ProcessPoolExecutor(max_workers=min(workers, max(len(tasks), 1)), mp_context=_spawn())
+    executor = ProcessPoolExecutor(
+        max_workers=min(workers, max(len(tasks), 1)), mp_context=_spawn(),
+        initializer=_end_with_parent, initargs=(os.getpid(),),
+    )  # fmt: skip
     try:
         with single_threaded_children():  # the workers start with the first submissions
             futures = [executor.submit(fn, task) for task in tasks]
@@ -100,6 +106,21 @@ def _process_imap(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int) 
 
 def _spawn():
     return multiprocessing.get_context("spawn")
+
+
+def _end_with_parent(parent_pid: int) -> None:
+    """Pool initializer: end this worker as soon as the process that started it is gone.
+
+    A caller killed by a signal (``kill``, a job scheduler) runs no cleanup; its workers would go on
+    with the tasks already queued to them, for minutes, holding cores nobody reads results from.
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:  # an orphan is adopted by another process
+            time.sleep(PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="vical-parent-watch", daemon=True).start()
 
 
 # One thread per worker for the numerical libraries: their default (a thread per core in every worker)
