@@ -73,3 +73,17 @@ def test_an_unknown_policy_exits_2_with_one_line(tmp_path):
         assert len(lines) == 1 and lines[0].startswith("vical-evaluate: error: unknown policy 'nope'")
         assert "random_moving" in lines[0]
     assert not (tmp_path / "x").exists()
+
+
+def test_an_env_override_a_learned_policy_replaces_is_named_in_a_warning(tmp_path):
+    """The shipped information policy runs with its training's env.information: the override reaches the others."""
+    done = evaluate(
+        "task=joint", "env=information", "policies=[learned,random_moving]", "episodes=1", "seed=3", "budgets=[]",
+        "progress=false", "env.information.confidence=0.95", "env.reward.path_weight=1", f"out={tmp_path / 'eval'}",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    warnings = [line for line in done.stderr.splitlines() if line.startswith("warning:")]
+    assert warnings == [
+        "warning: env.information.confidence does not apply to 'model-free learned policy': it runs with the "
+        "settings it was trained with (its run's env.information, env.max_steps, env.state); the other policies get it"
+    ]

@@ -34,6 +34,7 @@ from vical.apps.cli import (
     override_value,
     quiet_library_logs,
 )
+from vical.calib.tasks import CalibrationTask
 from vical.config import ConfigError, require
 from vical.io.atomic import write_text_atomic
 from vical.parallel import ParallelConfig, WorkerCrashed
@@ -46,6 +47,7 @@ from vical.policies.evaluation import (
     Summary,
     check_budgets,
     evaluate_policies,
+    instantiate_policy,
 )
 from vical.policies.yardstick import PROTOCOL_KEYS, fingerprint
 
@@ -241,7 +243,37 @@ def summary_markdown(
     return text
 
 
-def evaluate(cfg: DictConfig, chosen: str | None) -> tuple[Path, list[Summary], list[BudgetSummary]]:
+def overridden_env_keys(overrides: Sequence[str]) -> list[str]:
+    """The ``env.*`` keys a Hydra command line sets (``env.max_steps=30``: ``env.max_steps``)."""
+    keys = (o.split("=", 1)[0].lstrip("+~") for o in overrides if "=" in o)
+    return [k for k in keys if k.startswith("env.")]
+
+
+def unapplied_override_warnings(specs: Sequence[PolicySpec], env_cfg: dict, overrides: Sequence[str]) -> list[str]:
+    """One line per policy whose own MDP settings (``Policy.env_settings``) replace ``env.*`` keys the user set.
+
+    A learned policy of the information state runs in the MDP it was trained in: an
+    ``env.information.*`` override changes the other policies' episodes, never its own.
+    """
+    keys = overridden_env_keys(overrides)
+    if not keys:
+        return []
+    task = CalibrationTask.from_config(env_cfg["task"])
+    lines = []
+    for spec in specs:
+        carried = {key for s in spec.for_task(task) for key in instantiate_policy(s, spec.name).env_settings}
+        replaced = [k for k in keys if k.split(".")[1] in carried]
+        if replaced:
+            lines.append(
+                f"warning: {', '.join(replaced)} does not apply to {spec.name!r}: it runs with the settings it was "
+                f"trained with (its run's env.{', env.'.join(sorted(carried))}); the other policies get it"
+            )
+    return lines
+
+
+def evaluate(
+    cfg: DictConfig, chosen: str | None, overrides: Sequence[str] = ()
+) -> tuple[Path, list[Summary], list[BudgetSummary]]:
     """Evaluate every configured policy and write the results; the output directory and the summaries."""
     seeds = seeds_of(cfg)
     out = output_dir(cfg)
@@ -252,6 +284,8 @@ def evaluate(cfg: DictConfig, chosen: str | None) -> tuple[Path, list[Summary], 
     reference = reference_policy(cfg, specs, configs)
     paper = bool(cfg.get("paper_protocol", False))
     parallel = ParallelConfig.from_config(cfg.get("parallel"))
+    for line in unapplied_override_warnings(specs, env_cfg, overrides):
+        print(line, file=sys.stderr)
     evaluations = evaluate_policies(specs, env_cfg, seeds, budgets, paper, parallel, bool(cfg.progress))
     for evaluation in evaluations:
         for row in evaluation.rows:
@@ -290,7 +324,8 @@ def yardstick_fingerprint(task: str) -> dict[str, str]:
 @hydra.main(config_path=str(CONF_DIR), config_name="evaluate", version_base="1.3")
 def hydra_main(cfg: DictConfig) -> None:
     try:
-        out, summaries, effort = evaluate(cfg, HydraConfig.get().runtime.choices.get("policy"))
+        hydra_cfg = HydraConfig.get()
+        out, summaries, effort = evaluate(cfg, hydra_cfg.runtime.choices.get("policy"), hydra_cfg.overrides.task)
     except USER_ERRORS as err:
         fail(APP, err)
     print(summary_table(summaries))
