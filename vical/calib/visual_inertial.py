@@ -65,7 +65,7 @@ REWEIGHT_TOLERANCE = 1.15
 MAX_REWEIGHTS = 3
 REWEIGHT_EXPONENT_DOWN, REWEIGHT_EXPONENT_UP = 2.0, 1.5
 IMU_NOISE_WARNING = 2.0  # tell the user when the IMU's noise is off by more than this factor
-CLUSTER_SECONDS = 0.5  # [s] time windows of the cluster-robust covariance
+CLUSTER_NS = 500_000_000  # [ns] time windows of the cluster-robust covariance
 WIDENING_WARNING = 2.0  # tell the user when a 1-sigma was widened by more than this factor
 IMU_RESIDUAL_DIM = 15  # per CombinedImuFactor: rotation, velocity, position, accel and gyro bias changes
 MIN_GAP_WARNING = 0.5  # [s] a stretch without target views this long (and ...
@@ -273,6 +273,7 @@ class _Graph:
     # per other camera: (camera, its corner factors, their states, their recording frame indices)
     others: list[tuple[OtherCamera, CornerFactors, np.ndarray, np.ndarray]] = field(default_factory=list)
     factor_states: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # state of each factor, -1: none
+    state_windows: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (S,) ``_time_windows``
 
 
 def _states_inside_imu(problem: _Problem, tau0: float) -> list[int]:
@@ -388,8 +389,20 @@ def _build(problem: _Problem, est: _Estimate, joint: bool) -> _Graph:
             factor_states.append(-1)
         others.append((other, factors, paired, np.array([other.observations[j].index for j in frames], np.int64)))
     return _Graph(
-        graph, values, states, imu_factors, times, corners, first_corner_factor, others, np.array(factor_states)
-    )
+        graph, values, states, imu_factors, times, corners, first_corner_factor, others, np.array(factor_states),
+        _time_windows(problem, states),
+    )  # fmt: skip
+
+
+def _time_windows(problem: _Problem, states: list[int]) -> np.ndarray:
+    """The time window (``CLUSTER_NS``) of each state, counted from the first state's frame on the camera's own clock.
+
+    Integer timestamps: frames at a steady rate fall exactly on window edges, where float seconds
+    shifted by the time offset land on either side depending on the last bit (and with them the
+    robust 1-sigma, by 10 % and more).
+    """
+    t_ns = np.array([problem.observations[problem.frame_ids[k]].t_ns for k in states], dtype=np.int64)
+    return (t_ns - t_ns[0]) // CLUSTER_NS
 
 
 def _other_corner_factors(
@@ -553,13 +566,12 @@ def _extrinsic_jacobian(T_cam_imu: np.ndarray) -> np.ndarray:
 
 
 def _clusters(g: _Graph, num_factors: int) -> np.ndarray:
-    """The time window (``CLUSTER_SECONDS``) of every factor of the graph; -1 for the priors.
+    """The time window of every factor of the graph; -1 for the priors.
 
     IMU factor n joins states n and n + 1 (window of state n); a corner factor, its frame's state's.
     """
-    window = np.floor((g.state_times - g.state_times[0]) / CLUSTER_SECONDS).astype(np.int64)
     states = g.factor_states[:num_factors]
-    return np.where(states >= 0, window[np.maximum(states, 0)], -1)
+    return np.where(states >= 0, g.state_windows[np.maximum(states, 0)], -1)
 
 
 def _parameter_covariance(
