@@ -39,12 +39,12 @@ from vical.sim.sampling import SensorSampling, sample_sensor
 GOAL = make_transform(euler_to_matrix([0.3, -0.25, 0.35]), [0.1, -0.12, 0.08])
 
 
-def _move(sim: PandaSim, on_step=None) -> tuple[float, int]:
+def _move(sim: PandaSim, observer=None) -> tuple[float, int]:
     """Wall time [s] and physics steps of the benchmark motion from home."""
     sim.reset()
     T = sim.ee_pose() @ GOAL
     start = time.perf_counter()
-    result = sim.move_to(T, on_step=on_step)
+    result = sim.move_to(T, observer=observer)
     return time.perf_counter() - start, result.num_steps
 
 
@@ -57,7 +57,7 @@ def physics_table(sim: PandaSim, sampling: SensorSampling, repeats: int) -> list
     def recorded() -> float:
         sim.reset()
         recorder.start(truth, np.random.default_rng(1))
-        return _move(sim, recorder.on_step)[0]
+        return _move(sim, recorder)[0]
 
     full = min(recorded() for _ in range(repeats))
     frames = len(recorder.recording().frames)

@@ -2,11 +2,11 @@
 
 1. Env steps of the information MDP as it is trained (practitioner's workspace, the joint and the
    intrinsic task drawn per episode, random actions, reset seeds 32000..): wall time per step and
-   the share of its parts (IK, collision checks, physics with the recorder's step callback, camera
+   the share of its parts (IK, collision checks, physics with the recorder following it, camera
    observations, the recorder's catch-up: IMU readings, truth and path, the coverage + information
-   state), side by side with the same steps when the recorder catches up after every physics step
-   (the bookkeeping done step by step, as the simulator did before it was batched): the ratio, and
-   whether both give the same observations and rewards to the last bit. Alternated episode by
+   state), side by side with the same steps when every motion runs one physics step at a time in
+   Python (a step callback that does nothing; motions rolled out in MuJoCo are the shipped way):
+   the ratio, and whether both give the same observations and rewards to the last bit. Alternated episode by
    episode so both see the same machine load.
 2. ``vical-train +experiment=train_information_policy`` for ``--steps`` steps (default: the
    experiment's ``train.total_steps``, the training as shipped; 27-31 min) in a temporary run
@@ -44,7 +44,7 @@ LIMIT_MIN = 30.0
 PARTS = {
     "IK": (PandaIK, "solve"),
     "collision checks": (PandaSim, "first_collision"),
-    "physics + step callback": (PandaSim, "_execute"),
+    "physics": (PandaSim, "_execute"),
     "camera observations": (SensorRecorder, "_observe"),
     "recorder catch-up": (SensorRecorder, "_catch_up"),
     "coverage + information state": (EpisodeState, "add_frames"),
@@ -81,19 +81,18 @@ def timed_parts(totals: collections.Counter) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def step_by_step_recorder() -> Iterator[None]:
-    """The recorder catching up after every physics step."""
-    on_step = SensorRecorder.on_step
+def stepped_in_python() -> Iterator[None]:
+    """Every motion stepped one physics step at a time in Python (a step callback that does nothing)."""
+    execute = PandaSim._execute
 
-    def every_step(self, sim, t_ns):
-        on_step(self, sim, t_ns)
-        self._catch_up()
+    def step_by_step(self, plan, on_step, observer):
+        return execute(self, plan, on_step or (lambda sim, t_ns: None), observer)
 
-    SensorRecorder.on_step = every_step
+    PandaSim._execute = step_by_step
     try:
         yield
     finally:
-        SensorRecorder.on_step = on_step
+        PandaSim._execute = execute
 
 
 def episode(env, seed: int, totals: collections.Counter) -> tuple[float, int, list[np.ndarray]]:
@@ -112,7 +111,7 @@ def episode(env, seed: int, totals: collections.Counter) -> tuple[float, int, li
 
 def bench_env_step(episodes: int) -> list[str]:
     env = make_env(OmegaConf.to_container(_config([]).env, resolve=True))
-    modes = {"batched (shipped)": contextlib.nullcontext, "step by step": step_by_step_recorder}
+    modes = {"rollout (shipped)": contextlib.nullcontext, "stepped in Python": stepped_in_python}
     wall, steps = collections.Counter(), collections.Counter()
     parts = {mode: collections.Counter() for mode in modes}
     same = True
@@ -128,10 +127,10 @@ def bench_env_step(episodes: int) -> list[str]:
             same &= len(traces[0]) == len(traces[1]) and all(map(np.array_equal, *traces))
     finally:
         env.close()
-    base = "batched (shipped)"
+    base = "rollout (shipped)"
     lines = [
         f"env step of the information MDP (both tasks, random actions, {episodes} episodes, {steps[base]} steps):",
-        f"  {'recorder':<18} {'ms/step':>8} {'ratio':>6}  " + "  ".join(f"{name} [ms]" for name in PARTS),
+        f"  {'motions':<18} {'ms/step':>8} {'ratio':>6}  " + "  ".join(f"{name} [ms]" for name in PARTS),
     ]
     for mode in modes:
         per_step = 1e3 * wall[mode] / steps[mode]
@@ -162,7 +161,7 @@ def bench_training(steps: int | None, seed: int) -> list[str]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--episodes", type=int, default=6, help="env-step episodes per recorder mode")
+    parser.add_argument("--episodes", type=int, default=6, help="env-step episodes per mode")
     parser.add_argument("--steps", type=int, default=None, help="training steps (default: the experiment's)")
     parser.add_argument("--seed", type=int, default=6)
     args = parser.parse_args()

@@ -49,7 +49,7 @@ def record_rendered(seed: int = 7, time_offset: float = 0.012):
         recorder.start(truth, np.random.default_rng(seed))
         T_home = sim.ee_pose()
         for goal in excitation(1):
-            recorder.add_motion(sim.move_to(T_home @ goal, on_step=recorder.on_step))
+            recorder.add_motion(sim.move_to(T_home @ goal, observer=recorder))
         return recorder.recording()
     finally:
         recorder.close()

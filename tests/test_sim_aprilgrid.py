@@ -126,7 +126,7 @@ def test_intrinsic_and_joint_calibration_with_an_aprilgrid(tmp_path):
         recorder.start(truth, np.random.default_rng(7))
         T_home = sim.ee_pose()
         for goal in excitation(1):
-            recorder.add_motion(sim.move_to(T_home @ goal, on_step=recorder.on_step))
+            recorder.add_motion(sim.move_to(T_home @ goal, observer=recorder))
         rec = recorder.recording()
     finally:
         recorder.close()

@@ -43,7 +43,7 @@ def record(sampling: SensorSampling, truth, cycles: int, seed: int, detector=Non
         recorder.start(truth, np.random.default_rng(seed))
         T_home = sim.ee_pose()
         for goal in excitation(cycles):
-            result = sim.move_to(T_home @ goal, on_step=recorder.on_step)
+            result = sim.move_to(T_home @ goal, observer=recorder)
             assert result.reached, result.message
             recorder.add_motion(result)
         return recorder.recording()

@@ -173,11 +173,10 @@ def moving_rig():
     states = {sim.time_ns: (sim.data.qpos.copy(), sim.data.qvel.copy())}
 
     def on_step(s, t_ns):
-        recorder.on_step(s, t_ns)
         states[t_ns + s.timestep_ns] = (s.data.qpos.copy(), s.data.qvel.copy())  # post-step state
 
     T_goal = sim.ee_pose() @ make_transform(euler_to_matrix([0.25, -0.15, 0.2]), [0.08, -0.06, 0.05])
-    sim.move_to(T_goal, on_step=on_step)
+    sim.move_to(T_goal, on_step=on_step, observer=recorder)
     return sim, recorder, states
 
 
@@ -250,10 +249,10 @@ def test_averaged_samples_are_the_window_mean_of_the_kinematics():
     states = {sim.time_ns: (sim.data.qpos.copy(), sim.data.qvel.copy())}
 
     def on_step(s, t_ns):
-        recorder.on_step(s, t_ns)
         states[t_ns + s.timestep_ns] = (s.data.qpos.copy(), s.data.qvel.copy())
 
-    sim.move_to(sim.ee_pose() @ make_transform(euler_to_matrix([-0.2, 0.1, 0.15]), [0.0, 0.05, 0.05]), on_step)
+    T_goal = sim.ee_pose() @ make_transform(euler_to_matrix([-0.2, 0.1, 0.15]), [0.0, 0.05, 0.05])
+    sim.move_to(T_goal, on_step=on_step, observer=recorder)
     imu = recorder.recording().imu
     offsets, weights = window_weights(5, "average")
     for k in range(1, len(imu) - 1, 9):
@@ -269,7 +268,7 @@ def test_accelerometer_reads_gravity_at_rest():
     truth = replace(sample_sensor(sampling, np.random.default_rng(9)), imu_noise=ImuNoise(0.0, 0.0, 0.0, 0.0, 200.0))
     recorder = SensorRecorder(sim, sim.cfg.board.target, sampling)
     recorder.start(truth, np.random.default_rng(0))
-    sim.hold(0.2, on_step=recorder.on_step)
+    sim.hold(0.2, observer=recorder)
     imu = recorder.recording().imu
     R_world_imu = site_pose(sim.model, sim.data, "imu")[:3, :3]
     np.testing.assert_allclose(imu.accel, np.tile(R_world_imu.T @ [0.0, 0.0, 9.81], (len(imu), 1)), atol=1e-4)

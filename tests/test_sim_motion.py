@@ -202,3 +202,29 @@ def test_motion_never_writes_qpos_directly(sim, monkeypatch):
     # Semi-implicit Euler: q_{k+1} = q_k + dt * v_{k+1}, exactly.
     assert max(worst) < 1e-12
     assert mujoco.mjtIntegrator(sim.model.opt.integrator) == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+
+
+def test_a_motion_without_callback_runs_in_rollout_to_the_same_floats():
+    """Without ``on_step`` the steps run in MuJoCo's rollout; the result and the final state are those of stepping one
+    at a time in Python, to the last bit (the frame sensors of panda.xml give the logged poses)."""
+
+    def run(on_step):
+        sim = PandaSim(SimConfig(seed=4))
+        results = [
+            sim.move_to(pose_step(sim.ee_pose(), dp, drpy), on_step=on_step)
+            for dp, drpy in [([0.1, -0.05, 0.05], [0.2, 0.0, -0.1]), ([0.0, 0.08, 0.0], [0.0, 0.3, 0.0])]
+        ]
+        return results, sim
+
+    (rolled, sim_a), (stepped, sim_b) = run(None), run(lambda s, t_ns: None)
+    for a, b in zip(rolled, stepped, strict=True):
+        for field in ("path_length", "rotation_length", "max_tracking_error", "position_margin", "velocity_margin"):
+            assert getattr(a, field) == getattr(b, field), field
+        np.testing.assert_array_equal(a.T_final, b.T_final)
+        assert a.num_steps == b.num_steps > 300
+    for name in ("qpos", "qvel", "qacc_warmstart", "site_xpos", "sensordata"):
+        np.testing.assert_array_equal(getattr(sim_a.data, name), getattr(sim_b.data, name))
+    assert sim_a.step_count == sim_b.step_count
+    ee = sim_a.model.site("ee").id
+    np.testing.assert_array_equal(sim_a.data.sensor("ee_pos").data, sim_a.data.site_xpos[ee])
+    np.testing.assert_array_equal(sim_a.data.sensor("ee_xaxis").data, sim_a.data.site_xmat[ee].reshape(3, 3)[:, 0])

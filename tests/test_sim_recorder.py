@@ -34,8 +34,9 @@ def sim():
     return PandaSim()
 
 
-def _record(sim, truth, sampling=None, detector=None, keep_images=False, steps=None, follow=False):
-    """Record the motion ``steps``; ``follow`` reads the IMU samples after every motion, as the env does."""
+def _record(sim, truth, sampling=None, detector=None, keep_images=False, steps=None, follow=False, on_step=None):
+    """Record the motion ``steps``; ``follow`` reads the IMU samples after every motion, as the env does;
+    ``on_step`` makes the motions run step by step."""
     sampling = sampling or SensorSampling()
     sim.reset()
     recorder = SensorRecorder(sim, sim.cfg.board.target, sampling, detector, keep_images)
@@ -44,12 +45,46 @@ def _record(sim, truth, sampling=None, detector=None, keep_images=False, steps=N
         T = sim.ee_pose()
         for rpy, xyz in steps or [([0.25, 0.0, 0.25], [0.0, 0.08, 0.0]), ([-0.2, 0.15, -0.25], [0.05, -0.1, 0.05])]:
             T = T @ make_transform(euler_to_matrix(rpy), xyz)
-            recorder.add_motion(sim.move_to(T, on_step=recorder.on_step))
+            recorder.add_motion(sim.move_to(T, on_step=on_step, observer=recorder))
             if follow:
                 recorder.imu_samples()
         return recorder.recording({"seed": 5, "note": "test"})
     finally:
         recorder.close()
+
+
+def _rolled_or_stepped(sim, truth, keep_images, on_step):
+    sim.reset()
+    recorder = SensorRecorder(sim, sim.cfg.board.target, SensorSampling(), keep_images=keep_images)
+    try:
+        recorder.start(truth, np.random.default_rng(5))
+        # 113 steps: with OFFSET the exposure at 112.3 ms lies between this motion's last step and the next one's first
+        recorder.add_motion(sim.hold(0.113, on_step=on_step, observer=recorder))
+        for rpy, xyz in [([0.25, 0.0, 0.25], [0.0, 0.08, 0.0]), ([-0.2, 0.1, 0.0], [0.05, 0.0, 0.0])]:
+            T = sim.ee_pose() @ make_transform(euler_to_matrix(rpy), xyz)
+            recorder.add_motion(sim.move_to(T, on_step=on_step, observer=recorder))
+            recorder.imu_samples()
+        return recorder.recording()
+    finally:
+        recorder.close()
+
+
+@pytest.mark.parametrize(("time_offset", "keep_images"), [(0.0, False), (OFFSET, True), (-0.0047, False)])
+def test_a_recording_rolled_out_is_the_one_stepped_one_step_at_a_time(sim, time_offset, keep_images):
+    """Motions run in MuJoCo's rollout, cut only at the steps around the camera exposures (exposures on a step, between
+    two steps, and between two motions); stepped one at a time with a callback they give the same recording to the
+    last bit, rendered images included."""
+    truth = replace(mean_sensor(SensorSampling()), time_offset=time_offset)
+    rolled = _rolled_or_stepped(sim, truth, keep_images, None)
+    stepped = _rolled_or_stepped(sim, truth, keep_images, lambda s, t_ns: None)
+    assert len(rolled.frames) >= 8 and len(rolled.imu) > 150
+
+    def arrays(r):
+        return [r.imu.t, r.imu.gyro, r.imu.accel, r.frames.t, r.frames.images, *r.frames.corners, *r.frames.ids,
+                r.trajectory.T_world_imu, r.trajectory.v_world, r.path_profile.length, [r.path_length]]  # fmt: skip
+
+    for a, b in zip(arrays(rolled), arrays(stepped), strict=True):
+        np.testing.assert_array_equal(a, b)
 
 
 @pytest.fixture(scope="module")
@@ -200,10 +235,12 @@ def test_bad_setups_are_refused(sim):
         recorder.recording()
     with pytest.raises(RuntimeError, match=r"start\(truth, rng\) must be called before imu_samples\(\)"):
         recorder.imu_samples()
-    with pytest.raises(ImuSimulationError, match="before reset"):
-        sim.hold(0.01, on_step=recorder.on_step)
+    with pytest.raises(RuntimeError, match=r"start\(truth, rng\) must be called before a motion"):
+        sim.hold(0.01, observer=recorder)
     sim.reset()
     recorder.start(mean_sensor(SensorSampling()), np.random.default_rng(0))
     sim.hold(0.01)  # physics steps the recorder does not see
+    steps = sim.step_count
     with pytest.raises(ImuSimulationError, match="every physics step"):
-        sim.hold(0.01, on_step=recorder.on_step)
+        sim.hold(0.01, observer=recorder)
+    assert sim.step_count == steps  # refused before the motion ran

@@ -209,7 +209,7 @@ def record(cfg: DictConfig) -> Path:
         for i, step in enumerate(tqdm(s.steps, desc=APP, unit="step", disable=not s.progress)):
             T_start = sim.ee_pose()
             T_goal = step_pose(T_start, step[:3], step[3:])
-            result = sim.move_to(T_goal, on_step=recorder.on_step, settle_time=s.settle_time)
+            result = sim.move_to(T_goal, observer=recorder, settle_time=s.settle_time)
             recorder.add_motion(result)
             if result.clamped:
                 warnings.warn(clamp_warning(i, T_start, result), ClampedStepWarning, stacklevel=2)

@@ -150,7 +150,7 @@ class CalibrationEnv(gym.Env):
         self._steps = 0
         self._frames_seen = 0
         if self.config.reset_hold > 0:
-            self._record(self.sim.hold(self.config.reset_hold, on_step=self.recorder.on_step), np.zeros(6))
+            self._record(self.sim.hold(self.config.reset_hold, observer=self.recorder), np.zeros(6))
         return self._observation(), self._info()
 
     def step(self, action: np.ndarray) -> tuple[np.ndarray, float, bool, bool, dict]:
@@ -161,9 +161,7 @@ class CalibrationEnv(gym.Env):
         before = self.state.coverage.vector()
         excess_before = self.state.excess
         offset_before = self._offset.copy()
-        motion = self.sim.move_to(
-            self._goal_pose(a), on_step=self.recorder.on_step, settle_time=self.config.settle_time
-        )
+        motion = self.sim.move_to(self._goal_pose(a), observer=self.recorder, settle_time=self.config.settle_time)
         self._offset = self._current_offset()
         self._record(motion, self._offset - offset_before)
         self._steps += 1

@@ -163,8 +163,8 @@ class SimArm(Arm):
         if touching:
             raise MotionRefused(f"the path collides ({touching}) at {100 * fraction:.0f}% of the motion")
         if faults.latency > 0:
-            recorder.add_motion(sim.hold(faults.latency, on_step=recorder.on_step))
-        recorder.add_motion(sim.move_joints(ik.q, on_step=recorder.on_step))
+            recorder.add_motion(sim.hold(faults.latency, observer=recorder))
+        recorder.add_motion(sim.move_joints(ik.q, observer=recorder))
         self.motions += 1
         return self.pose()
 
@@ -216,7 +216,7 @@ class SimViSensor(ViSensor):
             return SensorData.empty()
         rig = self._rig
         if len(rig.recorder.imu_samples()) == self._imu_read:
-            rig.recorder.add_motion(rig.sim.hold(1.0 / self.camera_rate_hz, on_step=rig.recorder.on_step))
+            rig.recorder.add_motion(rig.sim.hold(1.0 / self.camera_rate_hz, observer=rig.recorder))
         recorder = rig.recorder
         stamps = recorder.stamps_since(self._frames_read)
         images = recorder.images_since(self._frames_read)

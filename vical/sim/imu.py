@@ -74,7 +74,7 @@ class ImuSiteReader:
     sensors stay in the scene as a cross-check (``tests/test_sim_imu.py``) and read the same
     values at rest.
 
-    ``record`` keeps the site pose of every physics step (cheap: it runs in the step callback);
+    ``record_steps`` keeps the site poses of a motion's physics steps (``record``: of one step);
     ``readings`` differences the poses kept since its last call in one vectorised pass. The per-row
     products go through the same BLAS kernels as a step-by-step evaluation, so the readings are the
     same floats however often ``readings`` is called.
@@ -84,8 +84,8 @@ class ImuSiteReader:
         self.model = model
         self._site = model.site(site).id
         self._gravity = np.array(model.opt.gravity, dtype=float)
-        self._p: list[np.ndarray] = []  # site positions (3,) of consecutive steps, the first at _t0_ns
-        self._R: list[np.ndarray] = []  # site orientations, row-major (9,)
+        self._p: list[np.ndarray] = []  # site positions (K_i, 3) of consecutive steps, the first at _t0_ns
+        self._R: list[np.ndarray] = []  # site orientations, row-major (K_i, 9)
         self._t0_ns = 0
         self._step_ns = 0
         self._t_ns: int | None = None  # time of the next physics step to record
@@ -103,6 +103,21 @@ class ImuSiteReader:
         Call right after the ``mj_step`` that started at ``t_ns`` (``data``'s kinematics are those
         of ``t_ns``); every physics step must be recorded.
         """
+        self.record_steps(t_ns, step_ns, data.site_xpos[self._site][None], data.site_xmat[self._site][None])
+
+    def record_steps(self, t0_ns: int, step_ns: int, p: np.ndarray, R: np.ndarray) -> None:
+        """Keep the site poses ``p`` (K, 3) [m], ``R`` (K, 9) (row-major) of the K physics steps from ``t0_ns``.
+
+        Every physics step must be recorded, in order.
+        """
+        self.check_next(t0_ns)
+        self._t_ns = t0_ns + len(p) * step_ns
+        self._step_ns = step_ns
+        self._p.append(np.array(p, dtype=float).reshape(-1, 3))
+        self._R.append(np.array(R, dtype=float).reshape(-1, 9))
+
+    def check_next(self, t_ns: int) -> None:
+        """Raise ``ImuSimulationError`` unless the next step to record is the one starting at ``t_ns``."""
         if self._t_ns != t_ns:
             if self._t_ns is None:
                 raise ImuSimulationError("IMU reader got a physics step before reset(t_ns) (SensorRecorder.start)")
@@ -110,10 +125,6 @@ class ImuSiteReader:
                 f"IMU reader expected the physics step starting at {self._t_ns} ns, got {t_ns} ns; "
                 "every physics step must be reported (reset the reader after moving without it)"
             )
-        self._t_ns = t_ns + step_ns
-        self._step_ns = step_ns
-        self._p.append(data.site_xpos[self._site].copy())
-        self._R.append(data.site_xmat[self._site].copy())
 
     def readings(self) -> SiteReadings:
         """The readings of every recorded step whose next step is recorded too, since the last call.
@@ -121,15 +132,15 @@ class ImuSiteReader:
         A reading needs the steps before and after it: the first recorded step never has one, and
         the last one waits for the next ``record``.
         """
-        n = len(self._p)
+        p = np.concatenate(self._p) if self._p else np.zeros((0, 3))
+        n = len(p)
         if n < 3:
             empty = np.zeros((0, 3))
             return SiteReadings(np.zeros(0, dtype=np.int64), np.zeros((0, 6)), empty, np.zeros((0, 3, 3)), empty, empty)
         h_ns = self._step_ns
         t_ns = self._t0_ns + h_ns * np.arange(1, n - 1, dtype=np.int64)
-        p = np.asarray(self._p)
-        R = np.asarray(self._R).reshape(-1, 3, 3)
-        self._p, self._R = self._p[-2:], self._R[-2:]  # the next reading's previous and own pose
+        R = np.concatenate(self._R).reshape(-1, 3, 3)
+        self._p, self._R = [p[-2:]], [R[-2:].reshape(-1, 9)]  # the next reading's previous and own pose
         self._t0_ns += (n - 2) * h_ns
         return self._central_difference(t_ns, p, R, h_ns * 1e-9)
 

@@ -1,14 +1,15 @@
 """Record a simulated sensor while the Panda moves: IMU, camera frames, ground truth -> ``Recording``.
 
-``SensorRecorder.on_step`` is the ``PandaSim.move_to`` step callback. At every physics step it
-keeps the IMU site's pose and the end effector's position and, at each camera exposure, observes the
-target from the camera pose interpolated between the two physics steps around the exposure. The
-kept poses become the IMU site's ideal rate and specific force (``ImuSiteReader``), the IMU
-model's samples (``vical.sim.imu``), the ground-truth IMU state at the IMU sample instants and the
-end effector's path in one vectorised pass whenever the IMU samples or the recording are asked
-for: a physics step costs the callback little, and the result does not depend on when it is asked.
+``SensorRecorder`` is the ``PandaSim.move_to`` step observer (``vical.sim.robot.StepObserver``). It
+keeps the IMU site's pose and the end effector's position of every physics step of a motion and, at
+each camera exposure, observes the target from the camera pose interpolated between the two
+physics steps around the exposure (the steps it asks to see live). The kept poses become the IMU
+site's ideal rate and specific force (``ImuSiteReader``), the IMU model's samples
+(``vical.sim.imu``), the ground-truth IMU state at the IMU sample instants and the end effector's
+path in one vectorised pass whenever the IMU samples or the recording are asked for: a physics step
+costs the recorder nothing, and the result does not depend on when it is asked.
 
-Clocks. The IMU clock is the simulation clock (``t_ns`` of ``on_step``). Camera frames are
+Clocks. The IMU clock is the simulation clock (the steps' ``t_ns``). Camera frames are
 stamped on a grid of the camera period in the camera clock; the frame stamped ``t_cam`` is
 exposed at IMU time ``t_cam + time_offset`` (Kalibr's sign, ``docs/conventions.md``). Only frames
 whose exposure falls inside the span of the IMU samples are kept (as a hardware-synchronised
@@ -28,7 +29,7 @@ from vical.data import CameraFrames, ImuSamples, PathProfile, Recording, SensorT
 from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
 from vical.sim.imu import ImuSimulator, ImuSiteReader, SiteReadings, row_dot
 from vical.sim.motion import MotionResult
-from vical.sim.robot import PandaSim
+from vical.sim.robot import PandaSim, StepPoses
 from vical.sim.sampling import SensorSampling, sensor_imu_pose
 from vical.sim.scene import camera_pose_cv, set_imu_pose
 
@@ -124,27 +125,40 @@ class SensorRecorder:
         self._log = _TruthLog([], [], [], [])
         self._path_length = 0.0
         self._duration = 0.0
-        self._ee_steps: list[np.ndarray] = []  # end-effector positions of the steps not yet on the path
+        self._ee_steps: list[np.ndarray] = []  # end-effector positions (K_i, 3) of the steps not yet on the path
         self._ee_t0_ns = self.sim.time_ns  # time of the first of them (the reader refuses a skipped step)
         self._ee_last: np.ndarray | None = None
         self._ee_path = 0.0
         self._path_log: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
 
-    def on_step(self, sim: PandaSim, t_ns: int) -> None:
-        """``PandaSim`` step callback: ``data``'s derived quantities belong to time ``t_ns``."""
-        data = sim.data
-        self._reader.record(data, t_ns, self._step_ns)  # refuses steps before start() and skipped steps
-        self._ee_steps.append(sim.ee_position())
+    def live_steps(self, t0_ns: int, num_steps: int, step_ns: int) -> list[int]:
+        """The steps of a motion around each camera exposure: the one it falls in and the first at or after it."""
+        self._require_started("a motion")
+        self._reader.check_next(t0_ns)  # before the motion runs: it must follow the steps recorded so far
         if self._next_stamp is None:
-            self._next_stamp = self._first_stamp(t_ns)
+            self._next_stamp = self._first_stamp(t0_ns)
+        steps, stamp = set(), self._next_stamp
+        while (exposure := stamp + self._offset_ns) < t0_ns + num_steps * step_ns:
+            within, after = (exposure - t0_ns) // step_ns, -((t0_ns - exposure) // step_ns)
+            steps |= {k for k in (within, after) if 0 <= k < num_steps}
+            stamp += self._cam_period_ns
+        return sorted(steps)
+
+    def on_live_step(self, sim: PandaSim, t_ns: int) -> None:
+        """``data``'s derived quantities belong to time ``t_ns``: keep or observe the camera pose of an exposure."""
         exposure = self._next_stamp + self._offset_ns
         if t_ns <= exposure < t_ns + self._step_ns:
-            self._before = (t_ns, camera_pose_cv(sim.model, data))
+            self._before = (t_ns, camera_pose_cv(sim.model, sim.data))
         if t_ns >= exposure and self._before is not None:
-            T_world_cam = interpolate_pose(exposure, *self._before, t_ns, camera_pose_cv(sim.model, data))
+            T_world_cam = interpolate_pose(exposure, *self._before, t_ns, camera_pose_cv(sim.model, sim.data))
             self._observe(self._next_stamp, T_world_cam)
             self._next_stamp += self._cam_period_ns
             self._before = None
+
+    def on_steps(self, poses: StepPoses) -> None:
+        """Keep the IMU site's poses and the end effector's positions of a motion's physics steps."""
+        self._reader.record_steps(poses.t0_ns, poses.step_ns, poses.imu_p, poses.imu_R)  # refuses skipped steps
+        self._ee_steps.append(poses.ee_p)
 
     def add_motion(self, result: MotionResult) -> None:
         """Account a finished ``MotionResult`` (path length [m] and time [s]) to the recording."""
@@ -232,7 +246,7 @@ class SensorRecorder:
 
     def _follow_path(self) -> None:
         """Add the end effector's kept steps to its path; log the path at the IMU sample instants."""
-        p = np.asarray(self._ee_steps)
+        p = np.concatenate(self._ee_steps)
         before = p[:1] if self._ee_last is None else self._ee_last[None]  # the first step moves nowhere
         d = p - np.vstack([before, p[:-1]])
         # sqrt(d_i @ d_i) per row: the floats np.linalg.norm gives one step at a time.

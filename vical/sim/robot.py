@@ -9,6 +9,13 @@ already at ``time_ns``. The ``on_step(sim, t_ns)`` callback runs after every phy
 ``t_ns`` the time of those derived quantities. Outside a motion (after ``reset`` and at the end of
 ``move_to``) ``mj_forward`` has run, so every quantity in ``data`` belongs to ``time_ns``.
 
+Observers. A ``StepObserver`` (the sensor recorder) needs the poses of the IMU site and the end
+effector at every physics step but live ``data`` only at a few steps (the camera exposures). Without
+an ``on_step`` callback a motion runs in MuJoCo's ``rollout`` (the steps in C, no Python between
+them), cut only after the steps the observer asked for; the poses come from the frame sensors of
+panda.xml, which copy ``site_xpos``/``site_xmat``. ``rollout`` runs the same ``mj_step`` from the
+same state and warm start, so both ways give the same floats (``tests/test_sim_motion.py``).
+
 Control. Joint torques = feed-forward (inverse dynamics of the plan) + PD on the plan, both in
 the affine actuators of panda.xml; the simulation never writes ``qpos`` while moving.
 """
@@ -16,9 +23,12 @@ the affine actuators of panda.xml; the simulation never writes ``qpos`` while mo
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol
 
 import mujoco
 import numpy as np
+from mujoco import rollout
 
 from vical.config import ConfigError
 from vical.data import NS_PER_S
@@ -29,6 +39,54 @@ from vical.sim.motion import JointPlan, MotionResult, feedforward_torques, motio
 from vical.sim.scene import build_model, site_pose
 
 StepCallback = Callable[["PandaSim", int], None]
+_STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
+_FRAME_SENSORS = ("pos", "xaxis", "yaxis", "zaxis")  # per tracked site in panda.xml: <site>_<suffix>
+
+
+@dataclass(frozen=True)
+class StepPoses:
+    """Poses of the tracked sites at consecutive physics steps of one motion.
+
+    Row ``k`` holds the derived quantities of the step starting at ``t0_ns + k * step_ns``.
+
+    Attributes:
+        t0_ns: [ns] time of row 0; step_ns: [ns] physics step.
+        imu_p: (K, 3) [m] and imu_R: (K, 9) (row-major ``site_xmat``) of site ``imu``.
+        ee_p: (K, 3) [m] and ee_R: (K, 9) of site ``ee``.
+    """
+
+    t0_ns: int
+    step_ns: int
+    imu_p: np.ndarray
+    imu_R: np.ndarray
+    ee_p: np.ndarray
+    ee_R: np.ndarray
+
+
+class StepObserver(Protocol):
+    """Follows a motion: the poses of every step afterwards, live ``data`` at the steps it asks for."""
+
+    def live_steps(self, t0_ns: int, num_steps: int, step_ns: int) -> list[int]:
+        """Indices ``k`` (ascending, ``0 <= k < num_steps``) of the steps starting at ``t0_ns + k * step_ns`` at
+        which ``on_live_step`` must see ``data``."""
+
+    def on_live_step(self, sim: PandaSim, t_ns: int) -> None:
+        """``data``'s derived quantities belong to the step starting at ``t_ns`` (as for ``on_step``)."""
+
+    def on_steps(self, poses: StepPoses) -> None:
+        """The poses of every step of the motion, after it."""
+
+
+def _frame_sensor_columns(model: mujoco.MjModel, site: str) -> tuple[int, ...]:
+    """Columns in ``sensordata`` of the frame sensors of ``site``: position, x, y and z axis."""
+    return tuple(int(model.sensor(f"{site}_{suffix}").adr[0]) for suffix in _FRAME_SENSORS)
+
+
+def _segments(num_steps: int, live: list[int]) -> list[tuple[int, int]]:
+    """``[first, last)`` step ranges covering ``0 .. num_steps``, each live step the last of its range."""
+    ends = [k + 1 for k in live if k + 1 < num_steps] + [num_steps]
+    starts = [0, *ends[:-1]]
+    return [(a, b) for a, b in zip(starts, ends, strict=True) if b > a]
 
 
 def _check_pose(T: np.ndarray, name: str) -> np.ndarray:
@@ -74,6 +132,8 @@ class PandaSim:
         self.ik = PandaIK(self.model, self.cfg.ik, self.limits, self.cfg.motion.joint_limit_margin)
         self._scratch = mujoco.MjData(self.model)
         self._ee = self.model.site("ee").id
+        self._frames = {site: _frame_sensor_columns(self.model, site) for site in ("imu", "ee")}
+        self._rollout = rollout.Rollout(nthread=0)  # on this thread: one trajectory, cut at the observer's steps
         self._geom_labels = [_geom_label(self.model, geom) for geom in range(self.model.ngeom)]
         self._home = self.model.key("home").id
         self.q_start = self._start_configuration()
@@ -217,14 +277,19 @@ class PandaSim:
 
     # ------------------------------------------------------------------ execution
     def move_to(
-        self, T_world_ee_target: np.ndarray, on_step: StepCallback | None = None, settle_time: float | None = None
+        self,
+        T_world_ee_target: np.ndarray,
+        on_step: StepCallback | None = None,
+        settle_time: float | None = None,
+        observer: StepObserver | None = None,
     ) -> MotionResult:
         """Move the end effector to ``T_world_ee_target`` (4, 4) in physics; never raises for infeasible targets.
 
         IK (closest reachable pose when unreachable), collision check along the joint path
         (stopping short of a contact), quintic plan within the scaled joint limits, execution
         with feed-forward + PD torques, then ``settle_time`` [s] (default ``sim.motion.settle_time``)
-        at rest. ``on_step(sim, t_ns)`` runs after every physics step (see the module doc).
+        at rest. ``on_step(sim, t_ns)`` runs after every physics step, ``observer`` follows the
+        motion (see the module doc).
         """
         T_req = _check_pose(T_world_ee_target, "T_world_ee_target")
         settle = self.cfg.motion.settle_time if settle_time is None else float(settle_time)
@@ -241,24 +306,34 @@ class PandaSim:
         q_goal, collision_message = self._safe_goal(q0, ik.q)
         if collision_message:
             messages.append(collision_message)
-        return self._move_joints(T_req, q_goal, settle, on_step, messages)
+        return self._move_joints(T_req, q_goal, settle, on_step, observer, messages)
 
     def move_joints(
-        self, q_goal: np.ndarray, on_step: StepCallback | None = None, settle_time: float | None = None
+        self,
+        q_goal: np.ndarray,
+        on_step: StepCallback | None = None,
+        settle_time: float | None = None,
+        observer: StepObserver | None = None,
     ) -> MotionResult:
         """Move to the joint positions ``q_goal`` (7,) (from ``solve_ik``, checked by ``first_collision``) in
         physics, as ``move_to`` executes its goal; no IK, no collision check."""
         q_goal = np.asarray(q_goal, dtype=float)
         settle = self.cfg.motion.settle_time if settle_time is None else float(settle_time)
         p, R = self.ik.forward(q_goal)
-        return self._move_joints(make_transform(R, p), q_goal, settle, on_step, [])
+        return self._move_joints(make_transform(R, p), q_goal, settle, on_step, observer, [])
 
     def _move_joints(
-        self, T_req: np.ndarray, q_goal: np.ndarray, settle: float, on_step: StepCallback | None, messages: list[str]
+        self,
+        T_req: np.ndarray,
+        q_goal: np.ndarray,
+        settle: float,
+        on_step: StepCallback | None,
+        observer: StepObserver | None,
+        messages: list[str],
     ) -> MotionResult:
         plan = self._plan(self.q, q_goal, settle)
         t_start = self.time_ns
-        trace = self._execute(plan, on_step)
+        trace = self._execute(plan, on_step, observer)
         return self._result(T_req, q_goal, plan, trace, messages, t_start)
 
     def _plan(self, q0: np.ndarray, q_goal: np.ndarray, settle: float) -> JointPlan:
@@ -267,31 +342,84 @@ class PandaSim:
         hold = self._steps_for(settle)
         return quintic_plan(q0, q_goal, steps, hold, dt)
 
-    def _execute(self, plan: JointPlan, on_step: StepCallback | None) -> dict[str, np.ndarray]:
+    def _execute(
+        self, plan: JointPlan, on_step: StepCallback | None, observer: StepObserver | None
+    ) -> dict[str, np.ndarray]:
         """Run the plan in physics; logs (K + 1, .) arrays of the states at steps 0..K."""
-        m, d, ee = self.model, self.data, self._ee
+        m, d = self.model, self.data
         ctrl = self._ctrl_table(plan)
-        n = plan.num_steps
+        n, t0_ns = plan.num_steps, self.time_ns
+        live = [] if observer is None else observer.live_steps(t0_ns, n, self.timestep_ns)
         q_log = np.empty((n + 1, NUM_JOINTS))
         v_log = np.empty((n + 1, NUM_JOINTS))
-        p_log = np.empty((n + 1, 3))
-        R_log = np.empty((n + 1, 9))
         q_log[0], v_log[0] = d.qpos, d.qvel
-        for k in range(n):
+        if on_step is None:
+            sensors = self._roll_out(ctrl[:n], live, observer, q_log[1:], v_log[1:])
+        else:
+            sensors = self._step_by_step(ctrl[:n], live, observer, on_step, q_log[1:], v_log[1:])
+        d.ctrl[:] = self._hold_ctrl(plan.q[-1])
+        mujoco.mj_forward(m, d)
+        sensors = np.vstack([sensors, d.sensordata])  # the state at the end (no step starts there)
+        p, R = self._frame(sensors, "ee")
+        if observer is not None:
+            observer.on_steps(StepPoses(t0_ns, self.timestep_ns, *self._frame(sensors[:n], "imu"), p[:n], R[:n]))
+        return {"q": q_log, "qd": v_log, "p": p, "R": R.reshape(-1, 3, 3)}
+
+    def _step_by_step(
+        self,
+        ctrl: np.ndarray,
+        live: list[int],
+        observer: StepObserver | None,
+        on_step: StepCallback,
+        q_out: np.ndarray,
+        v_out: np.ndarray,
+    ) -> np.ndarray:
+        """Steps one at a time with ``on_step`` after each; (K, nsensordata) sensor values of the steps."""
+        m, d = self.model, self.data
+        sensors = np.empty((len(ctrl), m.nsensordata))
+        live = set(live)
+        for k in range(len(ctrl)):
             d.ctrl[:] = ctrl[k]
             mujoco.mj_step(m, d)
             self._step += 1
             # Derived quantities now describe step k (pre-step state); qpos/qvel step k + 1.
-            p_log[k] = d.site_xpos[ee]
-            R_log[k] = d.site_xmat[ee]
-            q_log[k + 1] = d.qpos
-            v_log[k + 1] = d.qvel
-            if on_step is not None:
-                on_step(self, (self._step - 1) * self.timestep_ns)
-        d.ctrl[:] = self._hold_ctrl(plan.q[-1])
-        mujoco.mj_forward(m, d)
-        p_log[n], R_log[n] = d.site_xpos[ee], d.site_xmat[ee]
-        return {"q": q_log, "qd": v_log, "p": p_log, "R": R_log.reshape(-1, 3, 3)}
+            sensors[k], q_out[k], v_out[k] = d.sensordata, d.qpos, d.qvel
+            t_ns = (self._step - 1) * self.timestep_ns
+            on_step(self, t_ns)
+            if k in live:
+                observer.on_live_step(self, t_ns)
+        return sensors
+
+    def _roll_out(
+        self, ctrl: np.ndarray, live: list[int], observer: StepObserver | None, q_out: np.ndarray, v_out: np.ndarray
+    ) -> np.ndarray:
+        """The steps in MuJoCo's ``rollout``, cut after each live step; (K, nsensordata) sensor values of the steps."""
+        m, d = self.model, self.data
+        n = len(ctrl)
+        state = np.empty((1, n, mujoco.mj_stateSize(m, _STATE)))
+        sensors = np.empty((1, n, m.nsensordata))
+        control = np.ascontiguousarray(ctrl[None])
+        start = np.empty((1, state.shape[2]))
+        for first, last in _segments(n, live):
+            mujoco.mj_getState(m, d, start[0], _STATE)
+            self._rollout.rollout(
+                [m], [d], start, control[:, first:last],
+                nstep=last - first, initial_warmstart=d.qacc_warmstart[None], skip_checks=True,
+                state=state[:, first:last], sensordata=sensors[:, first:last],
+            )  # fmt: skip
+            self._step += last - first
+            if observer is not None and last - 1 in live:
+                observer.on_live_step(self, (self._step - 1) * self.timestep_ns)
+        qpos = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_TIME)  # offsets in the state vector
+        qvel = qpos + m.nq
+        q_out[:] = state[0, :, qpos : qpos + NUM_JOINTS]
+        v_out[:] = state[0, :, qvel : qvel + NUM_JOINTS]
+        return sensors[0]
+
+    def _frame(self, sensors: np.ndarray, site: str) -> tuple[np.ndarray, np.ndarray]:
+        """(K, 3) positions and (K, 9) row-major orientations of ``site`` from sensor rows (K, nsensordata)."""
+        pos, x, y, z = (sensors[:, c : c + 3] for c in self._frames[site])
+        return np.ascontiguousarray(pos), np.stack([x, y, z], axis=2).reshape(-1, 9)
 
     def _result(
         self,
@@ -330,7 +458,9 @@ class PandaSim:
         """Command the arm to hold its current joint positions (what a stop does to an interrupted motion)."""
         self.data.ctrl[:] = self._hold_ctrl(self.q)
 
-    def hold(self, duration: float, on_step: StepCallback | None = None) -> MotionResult:
+    def hold(
+        self, duration: float, on_step: StepCallback | None = None, observer: StepObserver | None = None
+    ) -> MotionResult:
         """Stay at rest at the current joint positions for ``duration`` [s] (physics keeps running)."""
         if not 0.0 <= duration <= 60.0:
             raise ValueError(f"hold duration must be in [0, 60] s, got {duration}")
@@ -339,5 +469,5 @@ class PandaSim:
         plan = quintic_plan(q0, q0, 0, self._steps_for(duration), dt)
         t_start = self.time_ns
         T_now = self.ee_pose()
-        trace = self._execute(plan, on_step)
+        trace = self._execute(plan, on_step, observer)
         return self._result(T_now, q0, plan, trace, [], t_start)
