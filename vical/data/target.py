@@ -131,13 +131,17 @@ class Target:
         """Number of AprilTags (ids 0 .. num_tags - 1) of an aprilgrid; 0 for a checkerboard."""
         return self.rows * self.cols if self.kind == "aprilgrid" else 0
 
-    @property
+    @functools.cached_property
     def points(self) -> np.ndarray:
-        """(N, 3) [m] board-frame points, row ``i`` is point id ``i``."""
+        """(N, 3) [m] board-frame points, row ``i`` is point id ``i`` (read-only: computed once per target, it is
+        read for every simulated and detected frame)."""
         if self.kind == "aprilgrid":
-            return self._aprilgrid_points()
-        r, c = np.divmod(np.arange(self.num_points), self.cols)
-        return np.stack([r * self.row_spacing, c * self.col_spacing, np.zeros(self.num_points)], axis=1)
+            points = self._aprilgrid_points()
+        else:
+            r, c = np.divmod(np.arange(self.num_points), self.cols)
+            points = np.stack([r * self.row_spacing, c * self.col_spacing, np.zeros(self.num_points)], axis=1)
+        points.flags.writeable = False
+        return points
 
     def _aprilgrid_points(self) -> np.ndarray:
         r, c = np.divmod(np.arange(self.num_points), 2 * self.cols)
