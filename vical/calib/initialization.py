@@ -169,7 +169,9 @@ def pnp(
     xy = xy[usable]
     img = np.ascontiguousarray(xy, dtype=np.float64)
     ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)  # planar target
-    if not ok:
+    # IPPE can answer NaN for an ordinary view (seen with OpenCV 5.0 on a 56-corner aprilgrid view at
+    # 0.8 m): a failure like any other, never a pose.
+    if not ok or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
         return None
     if refine:
         # IPPE solves from the plane homography, not for the least reprojection error: on a wide grid
