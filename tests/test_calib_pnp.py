@@ -1,4 +1,4 @@
-"""PnP of one view (``vical.calib.initialization.pnp``): a failed solve is None, never a non-finite pose."""
+"""PnP of one view (``vical.calib.initialization.pnp``): a pose where OpenCV's IPPE fails, never a non-finite one."""
 
 from pathlib import Path
 
@@ -25,24 +25,28 @@ def view():
 
 
 @pytest.mark.parametrize("refine", [False, True])
-def test_a_view_gives_a_finite_pose_that_reprojects_or_none(view, refine):
+def test_the_view_gets_the_pose_an_independent_solver_finds(view, refine):
     camera, obs = view
-    result = pnp(camera, obs, refine=refine)
-    if result is None:  # where IPPE fails on it (OpenCV 5.0 on x86-64)
-        return
-    T, rms = result
-    assert np.all(np.isfinite(T)) and rms < 0.5
-    # Against OpenCV's iterative solver from scratch: the same pose.
+    T, rms = pnp(camera, obs, refine=refine)
+    assert rms < 1.0  # [px] 0.25 px of corner noise, and a sensor whose intrinsics differ from the nominal ones here
     xy = undistorted(camera, obs.uv)
-    ok, rvec, tvec = cv2.solvePnP(obs.points, xy, np.eye(3), None, flags=cv2.SOLVEPNP_ITERATIVE)
+    ok, rvec, tvec = cv2.solvePnP(obs.points, xy, np.eye(3), None, flags=cv2.SOLVEPNP_SQPNP)
     assert ok
-    np.testing.assert_allclose(T[:3, 3], tvec.ravel(), atol=1e-3)
-    np.testing.assert_allclose(T[:3, :3], cv2.Rodrigues(rvec)[0], atol=1e-3)
+    np.testing.assert_allclose(T[:3, 3], tvec.ravel(), atol=2e-3)  # [m] at 0.8 m
+    np.testing.assert_allclose(T[:3, :3], cv2.Rodrigues(rvec)[0], atol=2e-3)
 
 
-def test_a_solver_that_answers_nan_is_a_failed_view(view, monkeypatch):
-    """Whatever OpenCV build runs the tests: an IPPE answer that is not finite is no pose."""
+def test_an_ippe_answer_that_is_not_finite_falls_back_to_the_iterative_solver(view, monkeypatch):
+    """Whatever OpenCV build runs the tests: IPPE made to answer NaN, the iterative solver gives the pose."""
     camera, obs = view
+    solve = cv2.solvePnP
     nan = np.full((3, 1), np.nan)
+
+    def ippe_fails(*args, flags, **kwargs):
+        return (True, nan, nan) if flags == cv2.SOLVEPNP_IPPE else solve(*args, flags=flags, **kwargs)
+
+    monkeypatch.setattr(cv2, "solvePnP", ippe_fails)
+    T, rms = pnp(camera, obs, refine=False)
+    assert np.all(np.isfinite(T)) and rms < 1.0
     monkeypatch.setattr(cv2, "solvePnP", lambda *args, **kwargs: (True, nan, nan))
-    assert pnp(camera, obs, refine=False) is None
+    assert pnp(camera, obs, refine=False) is None  # no solver finds a pose: a failed view

@@ -168,11 +168,14 @@ def pnp(
     obj = np.ascontiguousarray(obs.points[usable], dtype=np.float64)
     xy = xy[usable]
     img = np.ascontiguousarray(xy, dtype=np.float64)
-    ok, rvec, tvec = cv2.solvePnP(obj, img, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)  # planar target
-    # IPPE can answer NaN for an ordinary view (seen with OpenCV 5.0 on a 56-corner aprilgrid view at
-    # 0.8 m): a failure like any other, never a pose.
-    if not ok or not (np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec))):
-        return None
+    solved = cv2.solvePnP(obj, img, np.eye(3), None, flags=cv2.SOLVEPNP_IPPE)  # planar target
+    if not _finite_solution(*solved):
+        # IPPE can answer NaN for an ordinary view (seen with OpenCV 5.0 on a 56-corner aprilgrid view at
+        # 0.8 m); the iterative solver, started from the view's homography, solves it.
+        solved = cv2.solvePnP(obj, img, np.eye(3), None, flags=cv2.SOLVEPNP_ITERATIVE)
+        if not _finite_solution(*solved):
+            return None
+    _, rvec, tvec = solved
     if refine:
         # IPPE solves from the plane homography, not for the least reprojection error: on a wide grid
         # seen in perspective its residuals reached 2.4 px with 0.25 px corner noise.
@@ -186,6 +189,10 @@ def pnp(
     err = (p_cam[:, :2] / p_cam[:, 2:] - xy) * [camera.fx, camera.fy]
     rms = float(np.sqrt(np.mean(np.sum(err**2, axis=1))))
     return T, rms
+
+
+def _finite_solution(ok: bool, rvec: np.ndarray, tvec: np.ndarray) -> bool:
+    return bool(ok) and bool(np.all(np.isfinite(rvec)) and np.all(np.isfinite(tvec)))
 
 
 def frame_poses(
