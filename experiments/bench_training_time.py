@@ -9,7 +9,7 @@
    the ratio, and whether both give the same observations and rewards to the last bit. Alternated episode by
    episode so both see the same machine load.
 2. ``vical-train +experiment=train_information_policy`` for ``--steps`` steps (default: the
-   experiment's ``train.total_steps``, the training as shipped; 27-31 min) in a temporary run
+   experiment's ``train.total_steps``, the training as shipped; 27-30 min) in a temporary run
    directory: wall time, steps/s, and the whole training's time against the limit of 30 minutes
    for one seed on this 2-core machine (projected when ``--steps`` is shorter).
 
