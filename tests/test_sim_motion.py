@@ -1,6 +1,8 @@
 """IK, planning and execution of end-effector pose steps in MuJoCo physics."""
 
+import copy
 import os
+import pickle
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # before mujoco is imported, for tests that render later
 
@@ -228,3 +230,13 @@ def test_a_motion_without_callback_runs_in_rollout_to_the_same_floats():
     ee = sim_a.model.site("ee").id
     np.testing.assert_array_equal(sim_a.data.sensor("ee_pos").data, sim_a.data.site_xpos[ee])
     np.testing.assert_array_equal(sim_a.data.sensor("ee_xaxis").data, sim_a.data.site_xmat[ee].reshape(3, 3)[:, 0])
+
+
+def test_a_simulator_copy_moves_as_the_original():
+    """A PandaSim can be deep-copied and pickled (envs are), and the copy runs the same motion to the last bit."""
+    sim = PandaSim(SimConfig(seed=5))
+    twin = pickle.loads(pickle.dumps(copy.deepcopy(sim)))
+    goal = pose_step(sim.ee_pose(), [0.05, 0.0, -0.05], [0.0, 0.1, 0.1])
+    a, b = sim.move_to(goal), twin.move_to(goal)
+    assert a.path_length == b.path_length
+    np.testing.assert_array_equal(sim.data.qpos, twin.data.qpos)

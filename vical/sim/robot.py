@@ -133,7 +133,6 @@ class PandaSim:
         self._scratch = mujoco.MjData(self.model)
         self._ee = self.model.site("ee").id
         self._frames = {site: _frame_sensor_columns(self.model, site) for site in ("imu", "ee")}
-        self._rollout = rollout.Rollout(nthread=0)  # on this thread: one trajectory, cut at the observer's steps
         self._geom_labels = [_geom_label(self.model, geom) for geom in range(self.model.ngeom)]
         self._home = self.model.key("home").id
         self.q_start = self._start_configuration()
@@ -400,16 +399,18 @@ class PandaSim:
         sensors = np.empty((1, n, m.nsensordata))
         control = np.ascontiguousarray(ctrl[None])
         start = np.empty((1, state.shape[2]))
-        for first, last in _segments(n, live):
-            mujoco.mj_getState(m, d, start[0], _STATE)
-            self._rollout.rollout(
-                [m], [d], start, control[:, first:last],
-                nstep=last - first, initial_warmstart=d.qacc_warmstart[None], skip_checks=True,
-                state=state[:, first:last], sensordata=sensors[:, first:last],
-            )  # fmt: skip
-            self._step += last - first
-            if observer is not None and last - 1 in live:
-                observer.on_live_step(self, (self._step - 1) * self.timestep_ns)
+        # On this thread (no pool); made per motion, as it cannot be pickled and a PandaSim can.
+        with rollout.Rollout(nthread=0) as runner:
+            for first, last in _segments(n, live):
+                mujoco.mj_getState(m, d, start[0], _STATE)
+                runner.rollout(
+                    [m], [d], start, control[:, first:last],
+                    nstep=last - first, initial_warmstart=d.qacc_warmstart[None], skip_checks=True,
+                    state=state[:, first:last], sensordata=sensors[:, first:last],
+                )  # fmt: skip
+                self._step += last - first
+                if observer is not None and last - 1 in live:
+                    observer.on_live_step(self, (self._step - 1) * self.timestep_ns)
         qpos = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_TIME)  # offsets in the state vector
         qvel = qpos + m.nq
         q_out[:] = state[0, :, qpos : qpos + NUM_JOINTS]
