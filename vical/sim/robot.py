@@ -52,7 +52,7 @@ class StepPoses:
     Attributes:
         t0_ns: [ns] time of row 0; step_ns: [ns] physics step.
         imu_p: (K, 3) [m] and imu_R: (K, 9) (row-major ``site_xmat``) of site ``imu``.
-        ee_p: (K, 3) [m] and ee_R: (K, 9) of site ``ee``.
+        ee_p: (K, 3) [m] positions of site ``ee``.
     """
 
     t0_ns: int
@@ -60,7 +60,6 @@ class StepPoses:
     imu_p: np.ndarray
     imu_R: np.ndarray
     ee_p: np.ndarray
-    ee_R: np.ndarray
 
 
 class StepObserver(Protocol):
@@ -131,7 +130,6 @@ class PandaSim:
         self._set_gains()
         self.ik = PandaIK(self.model, self.cfg.ik, self.limits, self.cfg.motion.joint_limit_margin)
         self._scratch = mujoco.MjData(self.model)
-        self._ee = self.model.site("ee").id
         self._frames = {site: _frame_sensor_columns(self.model, site) for site in ("imu", "ee")}
         self._geom_labels = [_geom_label(self.model, geom) for geom in range(self.model.ngeom)]
         self._home = self.model.key("home").id
@@ -230,10 +228,6 @@ class PandaSim:
     def ee_pose(self) -> np.ndarray:
         """``T_world_ee`` (4, 4) from ``data`` (the current state outside motions; see module doc)."""
         return site_pose(self.model, self.data, "ee")
-
-    def ee_position(self) -> np.ndarray:
-        """(3,) [m] the ``ee`` site's position in ``data`` (during a motion: at the step callback's time)."""
-        return self.data.site_xpos[self._ee].copy()
 
     # ------------------------------------------------------------------ planning
     def solve_ik(self, T_world_ee: np.ndarray, q_start: np.ndarray | None = None) -> IKResult:
@@ -361,7 +355,7 @@ class PandaSim:
         sensors = np.vstack([sensors, d.sensordata])  # the state at the end (no step starts there)
         p, R = self._frame(sensors, "ee")
         if observer is not None:
-            observer.on_steps(StepPoses(t0_ns, self.timestep_ns, *self._frame(sensors[:n], "imu"), p[:n], R[:n]))
+            observer.on_steps(StepPoses(t0_ns, self.timestep_ns, *self._frame(sensors[:n], "imu"), p[:n]))
         return {"q": q_log, "qd": v_log, "p": p, "R": R.reshape(-1, 3, 3)}
 
     def _step_by_step(
@@ -399,6 +393,7 @@ class PandaSim:
         sensors = np.empty((1, n, m.nsensordata))
         control = np.ascontiguousarray(ctrl[None])
         start = np.empty((1, state.shape[2]))
+        ends_live = {k + 1 for k in live}
         # On this thread (no pool); made per motion, as it cannot be pickled and a PandaSim can.
         with rollout.Rollout(nthread=0) as runner:
             for first, last in _segments(n, live):
@@ -409,7 +404,7 @@ class PandaSim:
                     state=state[:, first:last], sensordata=sensors[:, first:last],
                 )  # fmt: skip
                 self._step += last - first
-                if observer is not None and last - 1 in live:
+                if last in ends_live:
                     observer.on_live_step(self, (self._step - 1) * self.timestep_ns)
         qpos = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_TIME)  # offsets in the state vector
         qvel = qpos + m.nq
