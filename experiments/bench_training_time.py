@@ -6,8 +6,8 @@
    observations, the recorder's catch-up: IMU readings, truth and path, the coverage + information
    state), side by side with the same steps when every motion runs one physics step at a time in
    Python (a step callback that does nothing; motions rolled out in MuJoCo are the shipped way):
-   the ratio, and whether both give the same observations and rewards to the last bit. Alternated episode by
-   episode so both see the same machine load.
+   the ratio, and whether both give the same observations and rewards to the last bit. Alternated
+   episode by episode so both see the same machine load.
 2. ``vical-train +experiment=train_information_policy`` for ``--steps`` steps (default: the
    experiment's ``train.total_steps``, the training as shipped; 27-30 min) in a temporary run
    directory: wall time, steps/s, and the whole training's time against the limit of 30 minutes
