@@ -48,6 +48,11 @@ def test_so3_exp_matches_rodrigues_of_opencv():
     assert np.allclose(so3_exp(w), cv2.Rodrigues(w)[0], atol=1e-12)
 
 
+def test_so3_log_matches_rodrigues_of_opencv():
+    for R in [*random_rotations(50, seed=4), np.eye(3)]:  # (OpenCV gives 0 for angles of 1e-5 rad and less)
+        np.testing.assert_allclose(so3_log(R), cv2.Rodrigues(R)[0].ravel(), rtol=0.0, atol=1e-12)
+
+
 def test_quaternion_roundtrip_and_known_value():
     for R in random_rotations(20):
         q = matrix_to_quat(R)

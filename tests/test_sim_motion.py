@@ -67,6 +67,20 @@ def test_ik_reaches_50_random_reachable_targets():
         assert np.all(result.q >= PANDA_LIMITS.q_min) and np.all(result.q <= PANDA_LIMITS.q_max)
 
 
+def test_ik_step_is_numpys_damped_least_squares_to_the_last_bit(sim):
+    rng = np.random.default_rng(8)
+    q = np.array([0.0, -1.0, 0.0, -2.0, 0.0, 1.9, 0.79])  # inside every joint's range: nothing frozen
+    for _ in range(200):
+        J, err = rng.normal(size=(6, 7)), rng.normal(size=6) * 10.0 ** rng.integers(-6, 0)
+        expected = J.T @ np.linalg.solve(J @ J.T + sim.cfg.ik.damping**2 * np.eye(6), err)
+        assert np.array_equal(sim.ik._step(J, err, q), expected)
+
+
+def test_ik_damping_must_be_positive():
+    with pytest.raises(ValueError, match=r"sim\.ik\.damping"):
+        IKConfig(damping=0.0)
+
+
 def test_ik_restarts_stay_near_the_start_unless_their_spread_is_zero(sim):
     q0 = np.array([0.0, -1.0, 0.0, -2.0, 0.0, 1.9, 0.79])  # every joint >= 1 rad inside its range
     rng = np.random.default_rng(3)

@@ -12,6 +12,8 @@ Conventions (see ``docs/conventions.md``):
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 _SMALL_ANGLE = 1e-8
@@ -36,9 +38,13 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
 def so3_log(R: np.ndarray) -> np.ndarray:
     """Rotation vector (3,) [rad] of the rotation matrix ``R`` (3, 3); angle in [0, pi]."""
     R = np.asarray(R, dtype=float)
-    vee = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin(theta) axis
-    cos_theta = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    theta = float(np.arctan2(0.5 * np.linalg.norm(vee), cos_theta))  # well conditioned at 0 and pi
+    # Scalar arithmetic on Python floats: the IK calls this ~200 times per env step, and numpy's per-call
+    # overhead on 3 numbers was most of its cost. Each float is the one np.trace, np.clip and
+    # np.linalg.norm give (the same operations in the same order).
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()
+    vee = np.array([r21 - r12, r02 - r20, r10 - r01])  # 2 sin(theta) axis
+    cos_theta = min(max((r00 + r11 + r22 - 1.0) / 2.0, -1.0), 1.0)
+    theta = float(np.arctan2(0.5 * math.sqrt(vee.dot(vee)), cos_theta))  # well conditioned at 0 and pi
     if theta < 1e-6:
         return 0.5 * vee
     if np.pi - theta < 1e-4:

@@ -224,7 +224,7 @@ class IKConfig:
             )
         require(self.max_iterations >= 1, "sim.ik.max_iterations", "an integer in [1, 10000]", self.max_iterations)
         require_range("sim.ik.restart_spread", self.restart_spread, 0.0, 3.0)
-        require_range("sim.ik.damping", self.damping, 0.0, 1.0)
+        require_range("sim.ik.damping", self.damping, 0.0, 1.0, low_open=True)
         require_range("sim.ik.max_step", self.max_step, 0.0, 3.0, low_open=True)
         require_range("sim.ik.position_tolerance", self.position_tolerance, 0.0, 0.01, low_open=True)
         require_range("sim.ik.rotation_tolerance", self.rotation_tolerance, 0.0, 0.01, low_open=True)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from numpy.linalg import _umath_linalg
 
 from vical.geometry import so3_log
 from vical.sim.config import NUM_JOINTS, IKConfig
@@ -85,13 +86,23 @@ class PandaIK:
 
     def forward(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``ee`` position (3,) [m] and rotation (3, 3) in the world at joint positions ``q`` (7,)."""
+        p, R = self._kinematics(q)
+        return p.copy(), R.copy()
+
+    def _kinematics(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``ee`` position and rotation at ``q`` as views of the scratch data (valid until its next call)."""
         self._data.qpos[:NUM_JOINTS] = q
         mujoco.mj_kinematics(self.model, self._data)
-        return self._data.site_xpos[self._site].copy(), self._data.site_xmat[self._site].reshape(3, 3).copy()
+        return self._data.site_xpos[self._site], self._data.site_xmat[self._site].reshape(3, 3)
 
-    def _error(self, q: np.ndarray, T_target: np.ndarray) -> np.ndarray:
-        p, R = self.forward(q)
-        return np.concatenate([T_target[:3, 3] - p, so3_log(T_target[:3, :3] @ R.T)])
+    def _error(self, q: np.ndarray, p_target: np.ndarray, R_target: np.ndarray) -> np.ndarray:
+        """(6,) position difference and rotation vector from ``ee`` at ``q`` to the target; leaves the kinematics
+        of ``q`` in the scratch data (the Jacobian reuses them)."""
+        p, R = self._kinematics(q)
+        err = np.empty(6)
+        np.subtract(p_target, p, out=err[:3])
+        err[3:] = so3_log(R_target @ R.T)
+        return err
 
     def _jacobian(self) -> np.ndarray:
         mujoco.mj_comPos(self.model, self._data)
@@ -106,20 +117,21 @@ class PandaIK:
 
         Without freezing, clamping would undo part of the step and the descent could stall.
         """
-        dq = J.T @ np.linalg.solve(J @ J.T + self._eye6, err)
+        dq = J.T @ _solve(J @ J.T + self._eye6, err, signature="dd->d")
         at_low, at_high = q <= self.q_lo, q >= self.q_hi
         if not (at_low.any() or at_high.any()):  # the usual case: no joint at a limit
             return dq
         blocked = (at_low & (dq < 0)) | (at_high & (dq > 0))
         if blocked.any():
             Jf = J * ~blocked
-            dq = Jf.T @ np.linalg.solve(Jf @ Jf.T + self._eye6, err)
+            dq = Jf.T @ _solve(Jf @ Jf.T + self._eye6, err, signature="dd->d")
         return dq
 
     def _attempt(self, q0: np.ndarray, T_target: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """One DLS descent from ``q0``: (q, final error (6,), iterations)."""
         q = np.clip(q0, self.q_lo, self.q_hi)
-        err = self._error(q, T_target)
+        p_target, R_target = T_target[:3, 3], T_target[:3, :3]
+        err = self._error(q, p_target, R_target)
         for it in range(1, self.cfg.max_iterations + 1):
             J = self._jacobian()  # kinematics of q are in self._data from _error
             dq = self._step(J, err, q)
@@ -127,7 +139,7 @@ class PandaIK:
             if largest > self.cfg.max_step:
                 dq *= self.cfg.max_step / largest
             q = np.minimum(np.maximum(q + dq, self.q_lo), self.q_hi)
-            err = self._error(q, T_target)
+            err = self._error(q, p_target, R_target)
             if self._converged(err):
                 return q, err, it
         return q, err, self.cfg.max_iterations
@@ -170,7 +182,12 @@ class PandaIK:
         )
 
 
+# np.linalg.solve's own kernel (the same LAPACK gesv, the same floats) without its per-call checks, which cost
+# more than the 6x6 solve itself in the IK's inner loop; the damped matrix is never singular (sim.ik.damping > 0).
+_solve = _umath_linalg.solve1
+
+
 def _norm(v: np.ndarray) -> float:
     """Euclidean norm of a vector: the float ``np.linalg.norm`` gives (sqrt of the dot product), without its
     overhead in the IK's inner loop."""
-    return math.sqrt(v @ v)
+    return math.sqrt(v.dot(v))
