@@ -119,10 +119,11 @@ class PandaIK:
         """
         dq = J.T @ _solve(J @ J.T + self._eye6, err, signature="dd->d")
         at_low, at_high = q <= self.q_lo, q >= self.q_hi
-        if not (at_low.any() or at_high.any()):  # the usual case: no joint at a limit
+        # count_nonzero: a flag test without the reduction machinery of any(), half its cost on 7 flags
+        if not (np.count_nonzero(at_low) or np.count_nonzero(at_high)):  # the usual case: no joint at a limit
             return dq
         blocked = (at_low & (dq < 0)) | (at_high & (dq > 0))
-        if blocked.any():
+        if np.count_nonzero(blocked):
             Jf = J * ~blocked
             dq = Jf.T @ _solve(Jf @ Jf.T + self._eye6, err, signature="dd->d")
         return dq
