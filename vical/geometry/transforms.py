@@ -38,7 +38,7 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
 def so3_log(R: np.ndarray) -> np.ndarray:
     """Rotation vector (3,) [rad] of the rotation matrix ``R`` (3, 3); angle in [0, pi]."""
     R = np.asarray(R, dtype=float)
-    # Scalar arithmetic on Python floats: the IK calls this ~200 times per env step, and numpy's per-call
+    # Scalar arithmetic on Python floats: the IK calls this ~240 times per env step, and numpy's per-call
     # overhead on 3 numbers was most of its cost. Each float is the one np.trace, np.clip and
     # np.linalg.norm give (the same operations in the same order).
     (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R.tolist()

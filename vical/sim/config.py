@@ -202,7 +202,7 @@ class IKConfig:
             ``N(0, restart_spread)`` per joint, so solutions stay on the arm's current branch and a
             small pose step never becomes a swing across the workspace; 0 draws them uniformly over
             the joint ranges (a global search, as the paper's tables were measured).
-        damping: Levenberg damping of the least-squares step [m or rad].
+        damping: Levenberg damping of the least-squares step [m or rad], > 0.
         max_step: largest joint change per iteration [rad].
         position_tolerance: converged below this position error [m].
         rotation_tolerance: converged below this rotation error [rad].
