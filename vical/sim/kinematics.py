@@ -117,7 +117,7 @@ class PandaIK:
 
         Without freezing, clamping would undo part of the step and the descent could stall.
         """
-        dq = J.T @ _solve(J @ J.T + self._eye6, err, signature="dd->d")
+        dq = self._damped_step(J, err)
         at_low, at_high = q <= self.q_lo, q >= self.q_hi
         # count_nonzero: a flag test without the reduction machinery of any(), half its cost on 7 flags
         if not (np.count_nonzero(at_low) or np.count_nonzero(at_high)):  # the usual case: no joint at a limit
@@ -125,8 +125,12 @@ class PandaIK:
         blocked = (at_low & (dq < 0)) | (at_high & (dq > 0))
         if np.count_nonzero(blocked):
             Jf = J * ~blocked
-            dq = Jf.T @ _solve(Jf @ Jf.T + self._eye6, err, signature="dd->d")
+            dq = self._damped_step(Jf, err)
         return dq
+
+    def _damped_step(self, J: np.ndarray, err: np.ndarray) -> np.ndarray:
+        """``J^T (J J^T + lambda^2 I)^-1 e`` (7,)."""
+        return J.T @ _solve(J @ J.T + self._eye6, err, signature="dd->d")
 
     def _attempt(self, q0: np.ndarray, T_target: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
         """One DLS descent from ``q0``: (q, final error (6,), iterations)."""
