@@ -424,6 +424,26 @@ class Recording:
             duration=min(self.duration, (t_end - self.t0) / NS_PER_S),
         )
 
+    def window(self, t_start_ns: int, t_end_ns: int) -> Recording:
+        """The part of the recording stamped ``t_start_ns <= t <= t_end_ns``: samples, every camera's frames, truth
+        states; ``path_length`` and ``duration`` those of the window."""
+        t0, t1 = int(t_start_ns), int(t_end_ns)
+        trajectory, profile = self.trajectory, self.path_profile
+
+        def inside(t: np.ndarray) -> np.ndarray:
+            return (t >= t0) & (t <= t1)
+
+        return replace(
+            self,
+            imu=self.imu.slice_time(t0, t1),
+            frames=self.frames.select(inside(self.frames.t)),
+            other_frames={name: f.select(inside(f.t)) for name, f in self.other_frames.items()},
+            trajectory=None if trajectory is None else trajectory.select(inside(trajectory.t)),
+            path_profile=None if profile is None else profile.select(inside(profile.t)),
+            path_length=self.path_length if profile is None else profile.length_at(t1) - profile.length_at(t0),
+            duration=(min(t1, self.t_end) - max(t0, self.t0)) / NS_PER_S,
+        )
+
     def until_path(self, budget_m: float) -> Recording:
         """The recording up to the instant the end effector's path reached ``budget_m`` [m] (``until``).
 

@@ -5,8 +5,11 @@ Recognised, in this order:
 1. a vical recording directory (``recording.yaml``),
 2. an EuRoC/ASL folder (``cam0/data.csv`` in it or in its ``mav0/``),
 3. a ROS1 bag (a file starting with ``#ROSBAG V2.0``),
-4. a corner CSV (``*.csv``), with the IMU from ``imu_csv`` (EuRoC format) when given,
-5. a folder of images (intrinsic-only: no IMU; timestamps from file order at ``rate_hz``).
+4. a corner folder (``camN/<timestamp ns>.csv`` per frame with board coordinates and ``imu0.csv``:
+   ``vical.io.board_points``),
+5. a corner CSV (``*.csv``: vical's point ids, or named columns with board coordinates), with the IMU
+   from ``imu_csv`` (EuRoC format) when given,
+6. a folder of images (intrinsic-only: no IMU; timestamps from file order at ``rate_hz``).
 
 ``open_imu`` reads an IMU-only recording (a static one, for ``vical-imu-noise``): an EuRoC folder or
 IMU CSV, or a bag's IMU topic.
@@ -22,6 +25,14 @@ import numpy as np
 
 from vical.data import ImuSamples, Recording, Target
 from vical.io.bag import read_bag, read_bag_imu
+from vical.io.board_points import (
+    camera_folders,
+    corner_folder_imu,
+    has_board_points,
+    is_corner_folder,
+    read_board_point_csv,
+    read_camera_folder,
+)
 from vical.io.checks import GYRO_UNITS
 from vical.io.csvfiles import read_corners_csv, read_imu_csv
 from vical.io.errors import FormatError, SourceSettingError
@@ -33,7 +44,8 @@ BAG_MAGIC = b"#ROSBAG V2.0"
 
 
 def detect_source(path: str | os.PathLike) -> str:
-    """``"recording"``, ``"euroc"``, ``"bag"``, ``"corners_csv"`` or ``"image_folder"``; raise if none fits."""
+    """``"recording"``, ``"euroc"``, ``"bag"``, ``"corner_folder"``, ``"corners_csv"`` or ``"image_folder"``; raise
+    if none fits."""
     path = Path(path)
     if not path.exists():
         raise FormatError(f"{path} does not exist")
@@ -42,6 +54,8 @@ def detect_source(path: str | os.PathLike) -> str:
             return "recording"
         if find_euroc_root(path) is not None:
             return "euroc"
+        if is_corner_folder(path):
+            return "corner_folder"
         if list_images(path):
             return "image_folder"
     else:
@@ -52,7 +66,7 @@ def detect_source(path: str | os.PathLike) -> str:
             return "corners_csv"
     raise FormatError(
         f"{path} is none of: a vical recording directory (recording.yaml), an EuRoC folder (cam0/data.csv), "
-        "a ROS1 bag, a corner CSV (.csv) or a folder of images"
+        "a corner folder (cam0/<timestamp>.csv), a ROS1 bag, a corner CSV (.csv) or a folder of images"
     )
 
 
@@ -98,12 +112,36 @@ def open_recording(
         return read_euroc(path, target, detector, keep_images, **units)
     if kind == "bag":
         return read_bag(path, target, detector, image_topic, imu_topic, keep_images, **units)
+    if kind == "corner_folder":
+        return read_corner_folder(path, target, imu_csv, **units)
     if kind == "corners_csv":
         imu = read_imu_csv(imu_csv, **units) if imu_csv is not None else _no_imu()
-        frames = read_corners_csv(path, target)
+        frames = read_board_point_csv(path, target) if _names_board_points(path) else read_corners_csv(path, target)
         return Recording(imu, frames, target, metadata={"source": "corners_csv", "path": str(Path(path).resolve())})
     frames = read_image_folder(path, target, detector, rate_hz, keep_images=keep_images)
     return Recording(_no_imu(), frames, target, metadata={"source": "image_folder", "path": str(Path(path).resolve())})
+
+
+def _names_board_points(path: str | os.PathLike) -> bool:
+    with open(path, encoding="utf-8", errors="replace") as f:
+        return has_board_points(f.readline())
+
+
+def read_corner_folder(
+    path: str | os.PathLike,
+    target: Target,
+    imu_csv: str | os.PathLike | None = None,
+    gyro_unit: str = "rad/s",
+    accel_unit: str = "m/s^2",
+) -> Recording:
+    """A corner folder's cameras (``camN/``, cam0 first) and its IMU (``imu_csv``, else its ``imu0.csv``)."""
+    root = Path(path)
+    imu_path = imu_csv if imu_csv is not None else corner_folder_imu(root)
+    imu = read_imu_csv(imu_path, gyro_unit, accel_unit) if imu_path is not None else _no_imu()
+    cameras = {name: read_camera_folder(root / name, target) for name in camera_folders(root)}
+    frames = cameras.pop("cam0")
+    meta = {"source": "corner_folder", "path": str(root.resolve())}
+    return Recording(imu, frames, target, metadata=meta, other_frames=cameras)
 
 
 def _no_imu() -> ImuSamples:

@@ -1,0 +1,107 @@
+"""Detections named by their board coordinates (YAC's per-frame files, named-column CSVs), and calibrating a window."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vical.apps.calibrate import time_window
+from vical.calib.errors import CalibrationError
+from vical.calib.synthetic import RigCamera, make_recording
+from vical.data import Target
+from vical.io.csvfiles import write_imu_csv
+from vical.io.errors import CsvFormatError
+from vical.io.sources import detect_source, open_recording
+
+REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "euroc_imu_april_0-36s"
+HEADER = "#ts,tag_rows,tag_cols,tag_size,tag_spacing,kp_x,kp_y,p_x,p_y,p_z,tag_id,corner_idx\n"
+
+
+@pytest.fixture(scope="module")
+def rig():
+    """A 3 s aprilgrid recording with two cameras."""
+    rec = make_recording(duration=3.0, target=Target.aprilgrid(), seed=3, pixel_sigma=0.2)
+    T = rec.truth.T_cam_imu.copy()
+    T[0, 3] += 0.11
+    other = RigCamera(rec.truth.camera, T, 0.0)
+    return make_recording(duration=3.0, target=Target.aprilgrid(), seed=3, pixel_sigma=0.2,
+                          other_cameras={"cam1": other})  # fmt: skip
+
+
+def write_yac_folder(rec, root: Path, tag_size: float | None = None) -> Path:
+    """The recording as YAC lays out detections: camN/<t_ns>.csv with board coordinates, and imu0.csv."""
+    target = rec.target
+    for name in rec.camera_names:
+        folder = root / name
+        folder.mkdir(parents=True)
+        frames = rec.frames_of(name)
+        for t, uv, ids in zip(frames.t.tolist(), frames.corners, frames.ids, strict=True):
+            rows = [
+                f"{t},{target.rows},{target.cols},{tag_size or target.row_spacing:f},{target.tag_spacing:f},"
+                f"{u:.10f},{v:.10f},{x:f},{y:f},{z:f},{i // 4},{i % 4}\n"
+                for (u, v), (x, y, z), i in zip(uv.tolist(), target.points[ids].tolist(), ids.tolist(), strict=True)
+            ]
+            (folder / f"{t}.csv").write_text(HEADER + "".join(rows[::-1]))  # any row order
+    write_imu_csv(rec.imu, root / "imu0.csv")
+    return root
+
+
+def test_a_yac_corner_folder_reads_as_the_recording_it_was_written_from(rig, tmp_path):
+    root = write_yac_folder(rig, tmp_path / "yac")
+    assert detect_source(root) == "corner_folder"
+    rec = open_recording(root, rig.target)
+    assert rec.camera_names == ["cam0", "cam1"]
+    for name in rec.camera_names:
+        got, want = rec.frames_of(name), rig.frames_of(name)
+        np.testing.assert_array_equal(got.t, want.t)
+        for a, b, ia, ib in zip(got.corners, want.corners, got.ids, want.ids, strict=True):
+            np.testing.assert_array_equal(ia, ib)
+            np.testing.assert_allclose(a, b, atol=1e-9)
+    np.testing.assert_array_equal(rec.imu.t, rig.imu.t)
+
+
+def test_a_board_of_another_size_is_named_in_one_line(rig, tmp_path):
+    root = write_yac_folder(rig, tmp_path / "yac", tag_size=0.06)
+    with pytest.raises(CsvFormatError, match=r"tag_size 0.06, but the target is aprilgrid 6 x 6, tag size 0.088 m"):
+        open_recording(root, rig.target)
+    path = tmp_path / "corners.csv"  # no grid columns: the board points themselves give it away
+    path.write_text("ts,kp_x,kp_y,p_x,p_y,p_z\n1700000000000000000,10.5,20.5,0.088,0,0\n")
+    with pytest.raises(CsvFormatError, match=r"board point \(0.088, 0, 0\) m is no point of the target \(aprilgrid"):
+        open_recording(path, Target.aprilgrid(tag_size=0.1))
+
+
+def test_a_named_column_corner_csv_reads_like_a_point_id_one(rig, tmp_path):
+    target, frames = rig.target, rig.frames
+    lines = ["timestamp [ns],u [px],v [px],p_x [m],p_y [m],p_z [m]\n"]
+    for t, uv, ids in zip(frames.t.tolist(), frames.corners, frames.ids, strict=True):
+        lines += [f"{t},{u!r},{v!r},{x!r},{y!r},{z!r}\n" for (u, v), (x, y, z) in
+                  zip(uv.tolist(), target.points[ids].tolist(), strict=True)]  # fmt: skip
+    path = tmp_path / "corners.csv"
+    path.write_text("".join(lines))
+    rec = open_recording(path, target)
+    seen = frames.num_detections > 0
+    np.testing.assert_array_equal(rec.frames.t, frames.t[seen])
+    for a, b in zip(rec.frames.ids, [i for i, s in zip(frames.ids, seen, strict=True) if s], strict=True):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_window_keeps_every_cameras_frames_and_the_imu_inside_it(rig):
+    cut = time_window(rig, 1.0, 1.5)
+    t0, t1 = rig.t0 + 1_000_000_000, rig.t0 + 2_500_000_000
+    for name in rig.camera_names:
+        frames = cut.frames_of(name)
+        assert len(frames) and frames.t.min() >= t0 and frames.t.max() <= t1
+        assert len(frames) == np.count_nonzero((rig.frames_of(name).t >= t0) & (rig.frames_of(name).t <= t1))
+    assert cut.imu.t.min() >= t0 and cut.imu.t.max() <= t1
+    assert time_window(rig, 0.0, None) is rig
+    with pytest.raises(CalibrationError, match=r"--start 9 s holds no camera frame: the recording spans 0..3.\d+ s"):
+        time_window(rig, 9.0, None)
+
+
+@pytest.mark.skipif(not REALDATA.is_dir(), reason=f"the real dev set is not at {REALDATA}")
+def test_the_real_dev_set_reads_as_a_stereo_recording_with_its_imu():
+    rec = open_recording(REALDATA, Target.aprilgrid(6, 6, 0.088, 0.3))
+    assert rec.camera_names == ["cam0", "cam1"] and len(rec.frames) == 720 and len(rec.frames_of("cam1")) == 720
+    assert len(rec.imu) > 7000 and 190 < 1e9 / np.median(np.diff(rec.imu.t)) < 210
+    corners = sum(len(i) for i in rec.frames.ids)
+    assert corners > 90_000  # ~130 corners in each of ~700 views
