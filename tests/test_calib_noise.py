@@ -52,8 +52,9 @@ def test_declared_noise_from_a_tenth_to_a_hundred_times_the_truth_never_loses_a_
     rec = recording()
     result = calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", (640, 480), PAPER.scaled(scale))
     assert np.all(np.isfinite(result.covariance)) and np.all(np.diag(result.covariance) > 0)
-    # The IMU is weighted by the noise its residuals show, whatever was declared.
-    assert result.imu_noise_scale * scale == pytest.approx(1.0, rel=0.35)
+    # An inflated imu.yaml is corrected to the noise the residuals show; densities below the truth keep their weight
+    # (``declared-or-less``), and the residuals still show the true noise to within the bias of judging it at them.
+    assert 0.4 < result.imu_noise_scale * scale < 1.5
     errors = calibration_errors(result, rec.truth)
     assert errors.rotation_deg < 0.1 and errors.translation_mm < 3.0 and errors.time_offset_ms < 0.2
 

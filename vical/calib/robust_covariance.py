@@ -37,11 +37,19 @@ def _offsets(values: gtsam.Values) -> tuple[int, dict[int, np.ndarray]]:
     return start, columns
 
 
-def _normal_equations(linear: gtsam.GaussianFactorGraph, columns: dict[int, np.ndarray], P: int, clusters: np.ndarray):
-    """The information ``H = A^T A`` (P, P, sparse) and each window's gradient ``A_c^T b_c`` (P, C)."""
+def _normal_equations(
+    linear: gtsam.GaussianFactorGraph,
+    columns: dict[int, np.ndarray],
+    P: int,
+    clusters: np.ndarray,
+    variance_scale: np.ndarray,
+):
+    """The information ``H = A^T A`` (P, P, sparse), the noise's information ``M = sum_k s_k A_k^T A_k`` (P, P,
+    sparse; ``s_k`` the true variance of factor k over the one it is weighted with) and each window's gradient
+    ``A_c^T b_c`` (P, C)."""
     ids = np.unique(clusters[clusters >= 0])
     window = np.searchsorted(ids, clusters)
-    rows, cols, entries = [], [], []
+    rows, cols, entries, scales = [], [], [], []
     gradients = np.zeros((P, len(ids)))
     for k in range(linear.size()):
         factor = linear.at(k)
@@ -50,10 +58,64 @@ def _normal_equations(linear: gtsam.GaussianFactorGraph, columns: dict[int, np.n
         rows.append(np.repeat(index, len(index)))
         cols.append(np.tile(index, len(index)))
         entries.append((A.T @ A).ravel())
+        scales.append(np.full(len(index) ** 2, variance_scale[k]))
         if clusters[k] >= 0:
             gradients[index, window[k]] += A.T @ b
-    H = scipy.sparse.csc_matrix((np.concatenate(entries), (np.concatenate(rows), np.concatenate(cols))), shape=(P, P))
-    return H, gradients
+    where = (np.concatenate(rows), np.concatenate(cols))
+    H = scipy.sparse.csc_matrix((np.concatenate(entries), where), shape=(P, P))
+    M = scipy.sparse.csc_matrix((np.concatenate(entries) * np.concatenate(scales), where), shape=(P, P))
+    return H, M, gradients
+
+
+def _inverse_columns(H: scipy.sparse.csc_matrix, theta: np.ndarray) -> np.ndarray | None:
+    """``H^-1 E_theta`` (P, k), or None for a singular ``H`` (Jacobi-equilibrated sparse LU)."""
+    scale = 1.0 / np.sqrt(np.maximum(H.diagonal(), np.finfo(float).tiny))
+    try:
+        lu = scipy.sparse.linalg.splu((scipy.sparse.diags(scale) @ H @ scipy.sparse.diags(scale)).tocsc())
+    except RuntimeError:
+        return None
+    rhs = np.zeros((H.shape[0], len(theta)))
+    rhs[theta, np.arange(len(theta))] = scale[theta]
+    return scale[:, None] * lu.solve(rhs)
+
+
+def sandwich_covariances(
+    linear: gtsam.GaussianFactorGraph,
+    values: gtsam.Values,
+    keys: Sequence[int],
+    clusters: np.ndarray,
+    variance_scale: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray | None] | None:
+    """The keys' covariance under the measured noise levels, and the cluster-robust one, of a solve weighted by the
+    declared noise (in the keys' tangent spaces, in order; the graph linearised at the solution ``values``).
+
+    A solve that weighs its factors by a noise whose true variance is ``s_k`` times the declared one has the
+    covariance ``H^-1 (sum_k s_k H_k) H^-1`` (``H_k = A_k^T A_k``): exact for white noise of the measured
+    levels (``vical.calib.variance``). The cluster-robust one measures it from the residuals themselves.
+
+    Args:
+        linear: the graph linearised at the solution (whitened factors).
+        values: the solution.
+        keys: the variables whose joint covariance is wanted.
+        clusters: (F,) the window of each factor of ``linear`` (-1: none, e.g. priors, which are no data).
+        variance_scale: (F,) the true variance of each factor over its weight's (1: as declared).
+
+    Returns:
+        (noise-level covariance, robust covariance or None with fewer than two windows); None when the
+        information matrix is singular.
+    """
+    P, columns = _offsets(values)
+    H, M, gradients = _normal_equations(linear, columns, P, clusters, variance_scale)
+    theta = np.concatenate([columns[k] for k in keys])
+    X = _inverse_columns(H, theta)  # H^-1 E_theta
+    if X is None:
+        return None
+    scaled = X.T @ (M @ X)
+    C = gradients.shape[1]
+    if C < 2:
+        return scaled, None
+    pulls = gradients.T @ X  # (C, k): each window's pull g_c^T H^-1 on the parameters
+    return scaled, C / (C - 1) * (pulls.T @ pulls)
 
 
 def robust_covariance(
@@ -70,22 +132,8 @@ def robust_covariance(
     Returns:
         The (k, k) covariance, or None with fewer than two windows or a singular information matrix.
     """
-    C = len(np.unique(clusters[clusters >= 0]))
-    if C < 2:
-        return None
-    P, columns = _offsets(values)
-    H, gradients = _normal_equations(linear, columns, P, clusters)
-    theta = np.concatenate([columns[k] for k in keys])
-    scale = 1.0 / np.sqrt(np.maximum(H.diagonal(), np.finfo(float).tiny))  # Jacobi equilibration
-    try:
-        lu = scipy.sparse.linalg.splu((scipy.sparse.diags(scale) @ H @ scipy.sparse.diags(scale)).tocsc())
-    except RuntimeError:
-        return None
-    rhs = np.zeros((P, len(theta)))
-    rhs[theta, np.arange(len(theta))] = scale[theta]
-    X = scale[:, None] * lu.solve(rhs)  # H^-1 E_theta
-    pulls = gradients.T @ X  # (C, k): each window's pull g_c^T H^-1 on the parameters
-    return C / (C - 1) * (pulls.T @ pulls)
+    found = sandwich_covariances(linear, values, keys, clusters, np.ones(linear.size()))
+    return None if found is None else found[1]
 
 
 def widen(model: np.ndarray, robust: np.ndarray) -> np.ndarray:

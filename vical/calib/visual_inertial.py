@@ -44,7 +44,7 @@ from vical.calib.observations import FrameObservation, collect_observations
 from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats, TimeOffsetTrace
 from vical.calib.rig import OtherCamera, initialise_other, pair, prepare_other
-from vical.calib.robust_covariance import robust_covariance, widen
+from vical.calib.robust_covariance import sandwich_covariances, widen
 from vical.calib.solver import covariance_or_unobservable, optimize
 from vical.calib.time_alignment import align, increment_mismatch, rotation_increments
 from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
@@ -65,6 +65,12 @@ REWEIGHT_TOLERANCE = 1.15
 MAX_REWEIGHTS = 3
 REWEIGHT_EXPONENT_DOWN, REWEIGHT_EXPONENT_UP = 2.0, 1.5
 IMU_NOISE_WARNING = 2.0  # tell the user when the IMU's noise is off by more than this factor
+# How the sensors' measured noise enters the solve (docs/calibration.md, "Weighting the sensors"); the uncertainty
+# always uses the noise levels the residuals show at the solution. "declared": the IMU weighted by its declared
+# densities, the corners by the noise PnP measures; "measured": every sensor reweighted by its measured noise;
+# "declared-or-less": reweighted, but the IMU never below the weight its declared densities give (an inflated
+# imu.yaml is corrected, an excess over the datasheet, which is seldom white, is not).
+NOISE_WEIGHTINGS = ("declared", "measured", "declared-or-less")
 CLUSTER_NS = 500_000_000  # [ns] time windows of the cluster-robust covariance
 WIDENING_WARNING = 2.0  # tell the user when a 1-sigma was widened by more than this factor
 IMU_RESIDUAL_DIM = 15  # per CombinedImuFactor: rotation, velocity, position, accel and gyro bias changes
@@ -115,6 +121,7 @@ class ViOptions:
     imu_model: str = "calibrated"
     g_sensitivity: bool = False
     imu_intrinsics: ImuIntrinsics | None = None
+    noise_weighting: str = "declared-or-less"
 
     def __post_init__(self) -> None:
         checks = {
@@ -137,6 +144,11 @@ class ViOptions:
         for name, (value, allowed, ok) in checks.items():
             if not ok:
                 raise CalibrationError(f"calibration option {name} must be {allowed}, got {value!r}")
+        if self.noise_weighting not in NOISE_WEIGHTINGS:
+            allowed = list(NOISE_WEIGHTINGS)
+            raise CalibrationError(
+                f"calibration option noise_weighting must be one of {allowed}, got {self.noise_weighting!r}"
+            )
         check_imu_model(self.imu_model, self.g_sensitivity)
 
     @property
@@ -166,6 +178,8 @@ class _Problem:
     t0_ns: int
     sigma_px: float = 1.0
     imu_noise_scale: float = 1.0  # a posteriori / declared IMU noise (the variance factors' product)
+    # (cameras, IMU) noise the residuals show at the final solution over the noise they were weighted with
+    noise_factors: tuple[float, float] = (1.0, 1.0)
     warnings: list[str] = field(default_factory=list)
     others: list[OtherCamera] = field(default_factory=list)  # a rig's other cameras
     outliers: list[int] = field(default_factory=list)  # frame indices of the frames dropped as outliers
@@ -488,25 +502,32 @@ def _noise_factors(g: _Graph, values: gtsam.Values) -> tuple[float, float]:
 
 
 def _reweighted_solve(problem: _Problem, g: _Graph, solution, est: _Estimate, joint: bool):
-    """Weight each sensor by the noise its residuals show, solving again while a weight is off (``_noise_factors``).
+    """Weight each sensor by the noise its residuals show, solving again while a weight is off (``_noise_factors``),
+    as ``ViOptions.noise_weighting`` says: not at all (``declared``), freely (``measured``), or with the IMU never
+    weighted below its declared densities (``declared-or-less``).
 
     Noise-free corners (the corner noise at its floor) leave nothing to weigh: any weights give the
     exact solution, and the IMU's own model error would take over.
     """
     iterations = 0
-    if problem.sigma_px <= MIN_PIXEL_SIGMA:
+    scheme = problem.options.noise_weighting
+    if problem.sigma_px <= MIN_PIXEL_SIGMA or scheme == "declared":
         return g, solution, est, iterations
     for _ in range(MAX_REWEIGHTS):
         s_camera, s_imu = _noise_factors(g, solution.values)
         if not all(np.isfinite([s_camera, s_imu])):
             break
         s_camera = max(s_camera, MIN_PIXEL_SIGMA / problem.sigma_px)  # the corner noise keeps its floor
+        if scheme == "declared-or-less" and s_imu > 1 and problem.imu_noise_scale >= 1:
+            s_imu = 1.0  # at its declared weight, and the residuals ask for less: it stays
         if max(s_camera, 1 / s_camera, s_imu, 1 / s_imu) <= REWEIGHT_TOLERANCE:
             break
         # A factor measured at the old weights falls short of the truth (the redundancy is judged at those
         # weights): measured 0.33 and 0.18 for settings 10x and 100x the truth, 5.0 for 0.1x. Steps of
         # s^2 (s < 1) and s^1.5 (s > 1) reach the truth in two or three rounds; an overshoot comes back.
         step = s_imu ** (REWEIGHT_EXPONENT_DOWN if s_imu < 1 else REWEIGHT_EXPONENT_UP)
+        if scheme == "declared-or-less":
+            step = min(step, 1.0 / problem.imu_noise_scale)
         problem.sigma_px *= s_camera
         for other in problem.others:
             other.sigma_px *= s_camera
@@ -517,14 +538,42 @@ def _reweighted_solve(problem: _Problem, g: _Graph, solution, est: _Estimate, jo
     return g, solution, est, iterations
 
 
-def _imu_noise_warning(scale: float) -> list[str]:
+def _measured_noise(problem: _Problem, g: _Graph, values: gtsam.Values) -> tuple[float, float]:
+    """(cameras, IMU) noise at the solution over their weights; 1 where it cannot be measured (no redundancy)."""
+    if problem.sigma_px <= MIN_PIXEL_SIGMA:  # noise-free corners: nothing to measure against
+        return 1.0, 1.0
+    factors = _noise_factors(g, values)
+    return tuple(float(f) if np.isfinite(f) and f > 0 else 1.0 for f in factors)
+
+
+def _variance_scale(problem: _Problem, g: _Graph, num_factors: int) -> np.ndarray:
+    """(F,) each factor's measured variance over the variance it was weighted with (priors: 1)."""
+    s_camera, s_imu = problem.noise_factors
+    scale = np.ones(num_factors)
+    scale[: len(g.imu_factors)] = s_imu**2
+    corners = np.flatnonzero(g.factor_states[:num_factors] >= 0)
+    scale[corners[corners >= g.first_corner_factor]] = s_camera**2
+    return scale
+
+
+def _imu_noise_warning(scale: float, declared: ImuNoise, weighting: str) -> list[str]:
+    """A note when the IMU's residuals show a noise ``scale`` x the ``declared`` densities, with the imu.yaml values
+    that would match them."""
     if 1 / IMU_NOISE_WARNING <= scale <= IMU_NOISE_WARNING:
         return []
-    side = "larger" if scale > 1 else "smaller"
+    side = "larger; 5-15x is common for real IMUs" if scale > 1 else "smaller: inflated densities are common"
+    kept = weighting == "declared" or (weighting == "declared-or-less" and scale > 1)
+    how = (
+        "the estimate weighs the IMU by the declared densities, its uncertainty by the measured noise"
+        if kept
+        else "the solve weighted the IMU by its measured noise and the uncertainty uses it"
+    )
+    match = declared.scaled(scale)
     return [
-        f"the IMU residuals show a noise {scale:.2g}x the declared densities ({side}); the solve weighted the IMU "
-        "by its measured noise and the uncertainty uses it. Check the IMU noise settings (imu.yaml)"
-        + (": inflated densities are common and harmless here" if scale < 1 else "")
+        f"the IMU residuals show a noise {scale:.3g}x the declared densities ({side}); {how}. imu.yaml values that "
+        f"match the residuals: gyroscope_noise_density {match.gyro_noise_density:.3g}, accelerometer_noise_density "
+        f"{match.accel_noise_density:.3g}, gyroscope_random_walk {match.gyro_random_walk:.3g}, "
+        f"accelerometer_random_walk {match.accel_random_walk:.3g}"
     ]
 
 
@@ -580,22 +629,26 @@ def _parameter_covariance(
     T_cam_imu: np.ndarray,
     joint: bool,
     fixed_offset: bool,
+    variance_scale: np.ndarray,
     index: int = 0,
     imu_theta: np.ndarray | None = None,
 ):
     """(P, P) covariance in the order of the result's parameter names and its widening (P,) over the noise model's.
 
     Of camera ``index``'s variables (0: the first camera's), the first bias and, with ``imu_theta`` (the
-    estimated IMU intrinsics), those. The noise model's covariance
-    widened wherever the cluster-robust one (``vical.calib.robust_covariance``) is larger; a fixed time offset
-    gets zero variance.
+    estimated IMU intrinsics), those. The covariance under the measured noise levels (``variance_scale``, per
+    factor) widened wherever the cluster-robust one (``vical.calib.robust_covariance``) is larger; a fixed time
+    offset gets zero variance.
     """
     offset_keys = [] if fixed_offset else [_key("d", index)]
     intrinsic_keys = [] if imu_theta is None else [I_KEY]
     keys = ([_key("k", index)] if joint else []) + [_key("e", index), *offset_keys, _key("b", 0), *intrinsic_keys]
     linear = g.graph.linearize(values)
     model = covariance_or_unobservable(linear, values, keys)
-    robust = robust_covariance(linear, values, keys, _clusters(g, linear.size()))
+    found = sandwich_covariances(linear, values, keys, _clusters(g, linear.size()), variance_scale)
+    if found is not None and np.all(np.isfinite(model)):
+        model = found[0]
+    robust = None if found is None else found[1]
     cov = model if robust is None else widen(model, robust)
     offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
     camera_block = [np.eye(values.atVector(_key("k", index)).size)] if joint else []
@@ -694,8 +747,9 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
     joint = task == "joint"
     values = solution.values
     camera = problem.camera
+    scale = _variance_scale(problem, g, g.graph.size())
     covariance, widening = _parameter_covariance(
-        g, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset, imu_theta=est.imu_theta
+        g, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset, scale, imu_theta=est.imu_theta
     )
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
     if est.imu_theta is not None:
@@ -762,8 +816,9 @@ def _other_result(
     other, factors, paired, frame_index = entry
     joint = task == "joint"
     values = solution.values
+    scale = _variance_scale(problem, g, g.graph.size())
     covariance, widening = _parameter_covariance(
-        g, values, other.T_cam_imu, joint, not problem.options.estimate_time_offset, other.index
+        g, values, other.T_cam_imu, joint, not problem.options.estimate_time_offset, scale, other.index
     )
     camera = other.camera
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
@@ -870,8 +925,10 @@ def run_visual_inertial(
     joint = task == "joint"
     g, solution, est, iterations = _solve_rounds(problem, est, joint)
     g, solution, est, more = _reweighted_solve(problem, g, solution, est, joint)
+    problem.noise_factors = _measured_noise(problem, g, solution.values)
+    problem.imu_noise_scale *= problem.noise_factors[1]  # the weight's scale times what remains at the solution
     problem.warnings += _span_warnings(problem, g) + _gap_warnings(g.state_times)
-    problem.warnings += _imu_noise_warning(problem.imu_noise_scale)
+    problem.warnings += _imu_noise_warning(problem.imu_noise_scale, imu_noise, options.noise_weighting)
     first = _result(task, problem, g, solution, est, iterations + more, start)
     first = replace(first, frame_log=_frame_log(frames, every, problem, g, first.reprojection_frames))
     return [first] + [
