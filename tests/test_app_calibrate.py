@@ -1,6 +1,9 @@
 """vical-calibrate end to end on saved synthetic recordings: files written, numbers right, errors clear; a result
 the data do not support (a gyro logged in deg/s) fails with its cause; --out is never overwritten silently."""
 
+import re
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import yaml
@@ -10,7 +13,7 @@ from vical.apps.calibrate import main
 from vical.calib.checks import check_memory
 from vical.calib.errors import CalibrationSettingError
 from vical.calib.synthetic import Excitation, make_recording
-from vical.data import ImuIntrinsics, ImuNoise, ImuSamples
+from vical.data import ImuIntrinsics, ImuNoise, ImuSamples, Target
 from vical.geometry import CameraModel, transform_error
 from vical.io.checks import MAX_GYRO_RAD_S
 from vical.io.csvfiles import write_corners_csv, write_imu_csv
@@ -111,20 +114,70 @@ def test_a_gyro_logged_in_deg_per_s_fails_naming_the_flag_and_keeps_its_files_ma
     out = tmp_path / "out"
     assert main([*args, "--image-size", "640", "480", "--out", str(out), "--no-report"]) == 2
     (line,) = capsys.readouterr().err.splitlines()
-    assert line.startswith("vical-calibrate: error: the calibration failed: the IMU residuals")
-    assert (
-        "the gyro reads 5" in line and "x the rotation the camera sees: it logs deg/s; pass --gyro-unit deg/s" in line
-    )
+    assert line.startswith("vical-calibrate: error: the calibration failed: the gyro reads 5")
+    assert "x the rotation the camera sees: it logs deg/s; pass --gyro-unit deg/s" in line
     assert sorted(p.name for p in out.iterdir()) == [
         "camchain-imucam.failed.yaml", "frames.csv", "imu.yaml", "results.txt"
     ]  # fmt: skip
-    assert (out / "results.txt").read_text().startswith("FAILED: the calibration failed: the IMU residuals")
+    assert (out / "results.txt").read_text().startswith("FAILED: the calibration failed: the gyro reads 5")
 
     fixed = tmp_path / "fixed"
     argv = [*args, "--image-size", "640", "480", "--gyro-unit", "deg/s", "--out", str(fixed), "--no-report"]
     assert main(argv) == 0
     _, T_cam_imu, shift = read_camchain(fixed / "camchain-imucam.yaml")
     assert np.rad2deg(transform_error(T_cam_imu, rec.truth.T_cam_imu)[0]) < 1.0 and abs(shift) < 0.002
+
+
+def _csv_inputs(folder, rec, imu, target):
+    write_imu_csv(imu, folder / "imu.csv")
+    write_corners_csv(rec.frames, folder / "corners.csv")
+    write_target_yaml(folder / "target.yaml", target)
+    write_imu_yaml(folder / "imu.yaml", rec.truth.imu_noise)
+    args = ["corners.csv", "--imu-csv", "imu.csv", "--target", "target.yaml", "--imu-yaml", "imu.yaml"]
+    return [str(folder / a) if a.endswith((".csv", ".yaml")) else a for a in args] + ["--image-size", "640", "480"]
+
+
+@pytest.fixture(scope="module")
+def moving(tmp_path_factory):
+    """6 s of motion in front of the paper's checkerboard, its IMU as recorded."""
+    return make_recording(duration=6.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=4), tmp_path_factory
+
+
+def test_an_accelerometer_in_g_fails_naming_the_flag_where_no_reader_checked_it(moving, tmp_path, capsys):
+    """A recording directory keeps its samples as saved: the calibrator's own evidence (gravity reads 1) names it."""
+    rec, _ = moving
+    save_recording(replace(rec, imu=ImuSamples(rec.imu.t, rec.imu.gyro, rec.imu.accel / 9.81)), tmp_path / "rec")
+    assert main([str(tmp_path / "rec"), "--out", str(tmp_path / "out"), "--no-report"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("vical-calibrate: error: the calibration failed: the accelerometer reads 1")
+    assert "it logs g; pass --accel-unit g" in line
+
+
+def test_a_board_given_too_large_fails_naming_its_true_size(moving, tmp_path, capsys):
+    rec, _ = moving
+    true = rec.target
+    wrong = Target.checkerboard(true.rows, true.cols, 2 * true.row_spacing)  # 14 cm squares for 7 cm ones
+    args = _csv_inputs(tmp_path, rec, rec.imu, wrong)
+    assert main([*args, "--out", str(tmp_path / "out"), "--no-report"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    found = re.search(
+        r"the board is ([\d.]+)x smaller than --target says \(0.14 m; the data suggest ([\d.]+) m\)", line
+    )
+    assert found and 1.8 < float(found.group(1)) < 2.2 and 0.063 < float(found.group(2)) < 0.077
+
+
+def test_imu_noise_ten_times_the_declared_is_a_warning_with_matching_values_not_a_failure(tmp_path, capsys):
+    noisy = make_recording(duration=6.0, imu_noise=ImuNoise().scaled(10.0), pixel_sigma=0.3, seed=4)
+    args = _csv_inputs(tmp_path, noisy, noisy.imu, noisy.target)  # imu.yaml: the paper's densities, a tenth of it
+    args[args.index("--imu-yaml") + 1] = str(tmp_path / "declared.yaml")
+    write_imu_yaml(tmp_path / "declared.yaml", ImuNoise())
+    assert main([*args, "--out", str(tmp_path / "out"), "--no-report"]) == 0
+    text = capsys.readouterr().out
+    warning = next(line for line in text.splitlines() if "IMU residuals show a noise" in line)
+    assert "imu.yaml values that match the residuals: gyroscope_noise_density" in warning
+    _, T_cam_imu, _ = read_camchain(tmp_path / "out" / "camchain-imucam.yaml")
+    rotation, translation = transform_error(T_cam_imu, noisy.truth.T_cam_imu)
+    assert np.rad2deg(rotation) < 1.0 and translation < 0.05  # 6 s of a noisy IMU: usable, not precise
 
 
 def test_an_out_with_files_is_refused_and_replaced_whole_with_overwrite(recording_dir, tmp_path, capsys):

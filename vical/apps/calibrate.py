@@ -74,7 +74,15 @@ from vical.calib.errors import CalibrationError
 from vical.calib.intrinsics import MIN_VIEWS, calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
 from vical.calib.nominal import nominal_T_cam_imu
-from vical.calib.plausibility import gyro_scale, implausibilities, likely_gyro_unit
+from vical.calib.plausibility import (
+    accel_scale,
+    board_scale,
+    gyro_scale,
+    implausibilities,
+    likely_accel_unit,
+    likely_gyro_unit,
+    wrong_board_scale,
+)
 from vical.calib.report import summary_table, weak_sigma_text, write_frames_csv, write_report, write_results_text
 from vical.calib.result import CalibrationResult
 from vical.calib.visual_inertial import ViOptions
@@ -194,6 +202,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=4000.0,
         help="[MB] refuse a solve that would need more (default 4000)",
     )
+    p.add_argument(
+        "--start", type=_number(0), default=0.0, help="[s] calibrate from this time after the recording's start"
+    )
+    p.add_argument(
+        "--duration", type=_number(0, closed=False), help="[s] calibrate this much of the recording (default: all)"
+    )
     p.add_argument("--out", default="calibration", help="output directory (default: ./calibration)")
     p.add_argument("--overwrite", action="store_true", help="replace an --out that holds files (as a whole)")
     p.add_argument("--no-report", action="store_true", help="skip the PNG/PDF plots")
@@ -258,9 +272,30 @@ def load_source(args: argparse.Namespace, chain: CameraChain | None = None) -> t
         gyro_unit=args.gyro_unit,
         accel_unit=args.accel_unit,
     )
+    rec = time_window(rec, args.start, args.duration)
     if args.task != "intrinsic" and len(rec.imu) < 2:
         raise CalibrationError(_no_imu_message(kind, args))
     return rec, detector
+
+
+def time_window(rec: Recording, start: float, duration: float | None) -> Recording:
+    """The part of ``rec`` from ``start`` [s] after its first timestamp, ``duration`` [s] long (None: to its end).
+
+    A window that holds no frame is refused in one line with the recording's span.
+    """
+    if start == 0 and duration is None:
+        return rec
+    span = (rec.t_end - rec.t0) / 1e9
+    t0 = rec.t0 + round(start * 1e9)
+    t1 = rec.t_end if duration is None else t0 + round(duration * 1e9)
+    cut = rec.window(t0, t1)
+    if not len(cut.frames):
+        asked = f"--start {start:g} s" + ("" if duration is None else f" --duration {duration:g} s")
+        raise CalibrationError(
+            f"{asked} holds no camera frame: the recording spans 0..{span:.2f} s from its first timestamp; "
+            "choose a window inside it"
+        )
+    return cut
 
 
 def _no_imu_message(kind: str, args: argparse.Namespace) -> str:
@@ -409,10 +444,8 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
             result = calibrate_two_stage(rec.frames, rec.imu, rec.target, args.model, size, noise, **common)
     if hint:
         result = replace(result, warnings=[hint, *result.warnings])
-    problems = implausibilities(result, nominal_T_cam_imu() if T_guess is None else T_guess)
-    failure = (
-        f"the calibration failed: {'; '.join(problems)}; {_cause(result, rec.frames, rec, args)}" if problems else None
-    )
+    failure = _failure(implausibilities(result, nominal_T_cam_imu() if T_guess is None else T_guess),
+                       wrong_settings(result, rec.frames, rec, args))  # fmt: skip
     _write_outputs(out, result, rec, args, noise, failure, chain)
     if failure:
         raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
@@ -494,32 +527,53 @@ def _intrinsics(frames, rec: Recording, args, size, initial: CameraModel | None)
 
 def _rig_failure(results: dict[str, CalibrationResult], guesses: dict, rec: Recording, args) -> str | None:
     """Why the rig's calibration failed (the cameras that show it, and the likely cause), or None."""
+    first = next(iter(results))
+    proven = wrong_settings(results[first], rec.frames_of(first), rec, args)
     found = rig_problems(results, guesses)
-    if found is None:
+    return _failure([] if found is None else [found[0]], proven)
+
+
+def _failure(problems: list[str], proven: list[str]) -> str | None:
+    """The failure line: what the data prove wrong, each with its fix, and what makes the result untrustworthy
+    (with the likely causes when nothing was proven); None when nothing is wrong."""
+    if not problems and not proven:
         return None
-    problems, camera = found
-    return f"the calibration failed: {problems}; {_cause(results[camera], rec.frames_of(camera), rec, args)}"
+    if proven:
+        return f"the calibration failed: {'; '.join(proven + problems)}"
+    causes = "likely causes: the lens model (--model), or a --target file that does not describe the board"
+    return f"the calibration failed: {'; '.join(problems)}; {causes}"
 
 
-def _cause(result: CalibrationResult, frames, rec: Recording, args) -> str:
-    """The likely cause of a failed calibration of the camera of ``frames``, with the option that fixes it."""
-    scale = gyro_scale(frames, rec.imu, rec.target, result.camera) if result.imu_residuals is not None else None
+def wrong_settings(result: CalibrationResult, frames, rec: Recording, args) -> list[str]:
+    """What the data prove wrong in the settings of a camera-IMU calibration of the camera of ``frames``, each with
+    the option that fixes it (``vical.calib.plausibility``); empty for a camera-only result."""
+    if result.imu_residuals is None:
+        return []
+    found = []
+    scale = gyro_scale(frames, rec.imu, rec.target, result.camera)
     unit = likely_gyro_unit(scale, args.gyro_unit)
     if unit == "deg/s":
-        cause = f"the gyro reads {scale:.1f}x the rotation the camera sees: it logs deg/s; pass --gyro-unit deg/s"
+        found.append(f"the gyro reads {scale:.1f}x the rotation the camera sees: it logs deg/s; pass --gyro-unit deg/s")
     elif unit == "rad/s":
-        cause = (
-            f"the gyro reads 1/{1 / scale:.1f} of the rotation the camera sees: it logs rad/s; "
-            "leave out --gyro-unit deg/s"
+        found.append(f"the gyro reads 1/{1 / scale:.1f} of the rotation the camera sees: it logs rad/s; leave out "
+                     "--gyro-unit deg/s")  # fmt: skip
+    accel = accel_scale(rec.imu)
+    unit = likely_accel_unit(accel, args.accel_unit)
+    if unit == "g":
+        found.append(f"the accelerometer reads {accel * 9.81:.3g} m/s^2 in the median where gravity alone is 9.81: "
+                     "it logs g; pass --accel-unit g")  # fmt: skip
+    elif unit == "m/s^2":
+        found.append(f"the accelerometer reads {accel:.3g} g in the median where gravity alone is 1 g: it logs "
+                     "m/s^2; leave out --accel-unit g")  # fmt: skip
+    board = board_scale(frames, rec.imu, rec.target, result.camera, result.T_cam_imu[:3, :3], result.time_offset)
+    if wrong_board_scale(board):
+        size = rec.target.row_spacing
+        found.append(
+            f"the camera's accelerations are {board[0]:.2f}x the IMU's: the board is {board[0]:.2f}x smaller than "
+            f"--target says ({size:g} m; the data suggest {size / board[0]:.3g} m); give the board's true size in "
+            "--target"
         )
-    elif result.imu_noise_scale is not None:
-        cause = (
-            "likely causes: the IMU's units (--gyro-unit, --accel-unit), its noise densities (--imu-yaml), a time "
-            "offset beyond --max-time-offset, or a --target file that does not describe the board"
-        )
-    else:
-        cause = "likely causes: the lens model (--model), or a --target file that does not describe the board"
-    return cause
+    return found
 
 
 def _write_outputs(
