@@ -7,6 +7,11 @@ model) and OpenVINS's ``config/*/kalibr_imucam_chain.yaml`` and ``kalibr_imu_cha
 
 from __future__ import annotations
 
+import re
+import warnings
+from dataclasses import replace
+from decimal import Decimal
+
 import numpy as np
 import pytest
 import yaml
@@ -16,7 +21,8 @@ from vical.geometry.transforms import euler_to_matrix, invert_transform, make_tr
 from vical.io.checks import FormatWarning
 from vical.io.errors import KalibrFormatError
 from vical.io.kalibr import read_imu_intrinsics, read_imu_yaml
-from vical.io.kalibr_chain import read_chain, read_imu_file, write_chain, write_imu_file
+from vical.io.kalibr_chain import chain_of, read_chain, read_imu_file, write_chain, write_imu_file
+from vical.io.yamlfile import dump_yaml
 
 # A rig of four cameras on a bar, 11 cm apart, each slightly turned; the IMU behind cam0.
 T_CAM_IMU = [
@@ -331,3 +337,87 @@ def test_an_unknown_imu_model_is_refused(tmp_path):
     path.write_text(OPENVINS_IMU_CHAIN.replace('model: "kalibr"', 'model: "bosch"'))
     with pytest.raises(KalibrFormatError, match=r"model 'bosch' is not a Kalibr or OpenVINS IMU model"):
         read_imu_yaml(path)
+
+
+# ------------------------------------------------------------------------------- digits
+def _published_rows(T: np.ndarray, indent: str) -> str:
+    """Rows as published camchains print them: 9 decimals, fixed point."""
+    return "\n".join(f"{indent}- [{', '.join(f'{v:.9f}' for v in row)}]" for row in T)
+
+
+def published_camchain(n: int, openvins: bool) -> str:
+    """A camchain-imucam whose matrices carry 9 decimals: Kalibr's ``T_cam_imu`` and ``T_cn_cnm1`` rows flush with
+    the key, or OpenVINS's ``%YAML:1.0`` file with ``T_imu_cam`` rows indented under it."""
+    text = "%YAML:1.0\n" if openvins else ""
+    indent = "    " if openvins else "  "
+    for k in range(n):
+        text += f"cam{k}:\n  camera_model: pinhole\n  intrinsics: [{461.6 + k}, 460.2, 362.7, 246.0]\n"
+        text += "  distortion_model: radtan\n  distortion_coeffs: [-0.27695, 0.06712, 0.000875, 0.000116]\n"
+        text += f"  resolution: [752, 480]\n  rostopic: /cam{k}/image_raw\n"
+        if k > 0:
+            text += "  T_cn_cnm1:\n" + _published_rows(T_CAM_IMU[k] @ invert_transform(T_CAM_IMU[k - 1]), indent) + "\n"
+        if openvins:
+            text += "  T_imu_cam:\n" + _published_rows(invert_transform(T_CAM_IMU[k]), indent) + "\n"
+        else:
+            text += "  T_cam_imu:\n" + _published_rows(T_CAM_IMU[k], indent) + f"\n  timeshift_cam_imu: {-8.1e-05}\n"
+    return text
+
+
+MATRIX = re.compile(r"^  (T_\w+):\n((?:\s+- \[.*\]\n){4})", re.MULTILINE)
+
+
+def matrix_digits(text: str) -> dict[tuple[str, str], list[list[Decimal]]]:
+    """Each camera's matrices as the decimal numbers their text spells ((camera, key) -> rows)."""
+    found = {}
+    for section in re.split(r"^(?=cam\d+:)", text, flags=re.MULTILINE):
+        camera = section.split(":", 1)[0]
+        for key, rows in MATRIX.findall(section):
+            numbers = re.findall(r"\[(.*)\]", rows)
+            found[camera, key] = [[Decimal(v) for v in row.split(", ")] for row in numbers]
+    return found
+
+
+@pytest.mark.parametrize("openvins", [False, True], ids=["kalibr-T_cam_imu", "openvins-T_imu_cam"])
+def test_matrices_passed_through_keep_their_key_and_digits_on_every_rewrite(tmp_path, openvins):
+    path = tmp_path / "camchain-imucam.yaml"
+    path.write_text(published_camchain(3, openvins))
+    original = matrix_digits(path.read_text())
+    extrinsic = "T_imu_cam" if openvins else "T_cam_imu"
+    assert sorted(original) == sorted(
+        [(f"cam{k}", extrinsic) for k in range(3)] + [("cam1", "T_cn_cnm1"), ("cam2", "T_cn_cnm1")]
+    )
+    for _ in range(5):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", FormatWarning)  # the 9-decimal rotations are rounded: read as such
+            chain = read_chain(path)
+        write_chain(path, chain)
+        assert matrix_digits(path.read_text()) == original
+
+
+def test_computed_matrices_are_written_with_round_trip_digits(tmp_path):
+    """Re-estimated extrinsics (numpy float64) come out in Python's shortest round-tripping digits: the written
+    numbers read back bit-exact, in the file's key (``T_imu_cam``), and ``T_cn_cnm1`` follows from them."""
+    given = tmp_path / "kalibr_imucam_chain.yaml"
+    given.write_text(published_camchain(2, openvins=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FormatWarning)
+        base = read_chain(given)
+    turn = make_transform(euler_to_matrix([1e-3, -2e-3, 3e-3]), [1e-4, 2e-4, -3e-4])
+    moved = chain_of([replace(c, T_cam_imu=c.T_cam_imu @ turn, section={}) for c in base.cameras], base)
+    out = tmp_path / "out.yaml"
+    write_chain(out, moved)
+    written = load(out)
+    for camera in moved.cameras:
+        assert written[camera.name]["T_imu_cam"] == invert_transform(camera.T_cam_imu).tolist()
+        assert "T_cam_imu" not in written[camera.name]
+    assert (
+        written["cam1"]["T_cn_cnm1"]
+        == (moved.cameras[1].T_cam_imu @ invert_transform(moved.cameras[0].T_cam_imu)).tolist()
+    )
+    assert "!!" not in out.read_text() and "'" not in out.read_text()  # numbers, not tagged objects or strings
+
+
+def test_numpy_numbers_are_written_as_python_numbers(tmp_path):
+    path = tmp_path / "values.yaml"
+    dump_yaml(path, {"sum": np.float64(0.1) + np.float64(0.2), "count": np.int64(3), "row": np.array([1 / 3, 2.0])})
+    assert path.read_text() == "sum: 0.30000000000000004\ncount: 3\nrow: [0.3333333333333333, 2.0]\n"

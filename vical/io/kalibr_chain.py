@@ -4,7 +4,8 @@
 ``kalibr_imucam_chain.yaml``; ``write_chain`` writes it back. What vical interprets (camera model,
 ``T_cam_imu`` or its variants, ``timeshift_cam_imu``, ``T_cn_cnm1``, ``cam_overlaps``, ``rostopic``,
 ``resolution``) is written from the values, in the spelling the file used (``T_imu_cam`` stays
-``T_imu_cam``, ``distortion_coefficients`` stays so); every other key, per camera and at the top,
+``T_imu_cam``, ``distortion_coefficients`` stays so; a matrix whose value is the one read is written as
+read, digit for digit); every other key, per camera and at the top,
 is written back as read, in the file's order. OpenCV's ``%YAML:1.0`` header (OpenVINS reads its
 files with ``cv::FileStorage``) is kept. YAML comments are not kept.
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -33,6 +35,7 @@ from vical.data import ImuNoise, Recording
 from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel
 from vical.geometry.transforms import invert_transform
+from vical.io.checks import FormatWarning
 from vical.io.errors import FormatError, KalibrFormatError, read_text_file
 from vical.io.kalibr import (
     DISTORTION_ALIASES,
@@ -86,6 +89,12 @@ class ChainCamera:
         """The section's keys that vical does not interpret, as read."""
         return {k: v for k, v in self.section.items() if k not in _interpreted_camera_keys()}
 
+    @property
+    def extrinsic_as_read(self) -> bool:
+        """``T_cam_imu`` is the one the section's extrinsic reads as (not re-estimated since)."""
+        key, inverted = extrinsic_key(self.section)
+        return _same_matrix(self.T_cam_imu, matrix_as_read(self.section, key, inverted))
+
 
 def _interpreted_camera_keys() -> set[str]:
     keys = {"camera_model", "intrinsics", "distortion_model", "distortion_coeffs", "distortion_coefficients"}
@@ -118,15 +127,17 @@ class CameraChain:
         raise KeyError(name)
 
     def relative_pose(self, name: str) -> np.ndarray | None:
-        """(4, 4) ``T_cn_cnm1`` of camera ``name``: from the two cameras' ``T_cam_imu`` when both have one,
-        else as the file gave it (None for ``cam0``)."""
+        """(4, 4) ``T_cn_cnm1`` of camera ``name``: from the two cameras' ``T_cam_imu`` when both have one and
+        either differs from its file's, else as the file gave it (None for ``cam0``)."""
         index = self.names.index(name)
         if index == 0:
             return None
         previous, camera = self.cameras[index - 1], self.cameras[index]
-        if camera.T_cam_imu is not None and previous.T_cam_imu is not None:
-            return camera.T_cam_imu @ invert_transform(previous.T_cam_imu)
-        return camera.T_cn_cnm1
+        if camera.T_cam_imu is None or previous.T_cam_imu is None:
+            return camera.T_cn_cnm1
+        if camera.T_cn_cnm1 is not None and camera.extrinsic_as_read and previous.extrinsic_as_read:
+            return camera.T_cn_cnm1  # the file's (checked against the two on reading): its digits, not a product's
+        return camera.T_cam_imu @ invert_transform(previous.T_cam_imu)
 
 
 def chain_of(cameras: list[ChainCamera], base: CameraChain | None = None) -> CameraChain:
@@ -252,10 +263,10 @@ def _camera_section(camera: ChainCamera, T_cn_cnm1: np.ndarray | None) -> dict[s
         del new["rostopic"]
     new["cam_overlaps"] = list(camera.cam_overlaps)
     if T_cn_cnm1 is not None:
-        new["T_cn_cnm1"] = _matrix_like(old.get("T_cn_cnm1"), T_cn_cnm1)
+        new["T_cn_cnm1"] = _matrix_entry(old, "T_cn_cnm1", T_cn_cnm1)
     if camera.T_cam_imu is not None:
-        key, inverted = next(((k, inv) for k, inv in EXTRINSIC_KEYS if k in old), ("T_cam_imu", False))
-        new[key] = _matrix_like(old.get(key), invert_transform(camera.T_cam_imu) if inverted else camera.T_cam_imu)
+        key, inverted = extrinsic_key(old)
+        new[key] = _matrix_entry(old, key, camera.T_cam_imu, inverted)
     if camera.timeshift_cam_imu is not None:
         key = next((k for k in TIMESHIFT_KEYS if k in old), TIMESHIFT_KEYS[0])
         new[key] = float(camera.timeshift_cam_imu)
@@ -270,6 +281,36 @@ def _keep_spelling(old: dict[str, Any], new: dict[str, Any]) -> None:
         new["distortion_model"] = old["distortion_model"]
     if "distortion_coefficients" in old and "distortion_coeffs" not in old:
         new["distortion_coefficients"] = new.pop("distortion_coeffs")
+
+
+def extrinsic_key(section: dict[str, Any]) -> tuple[str, bool]:
+    """The section's extrinsic key and whether it holds ``T_imu_cam`` (inverted); Kalibr's ``T_cam_imu`` without one."""
+    return next(((k, inverted) for k, inverted in EXTRINSIC_KEYS if k in section), ("T_cam_imu", False))
+
+
+def matrix_as_read(section: dict[str, Any], key: str, inverted: bool = False) -> np.ndarray | None:
+    """The (4, 4) matrix vical reads from ``section[key]`` (inverted when ``inverted``), None without the key.
+
+    The reader's warnings (a rounded rotation) were given when the file was read and are not repeated."""
+    if key not in section:
+        return None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FormatWarning)
+        T = parse_transform(section[key], key, key)
+    return invert_transform(T) if inverted else T
+
+
+def _same_matrix(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    return a is not None and b is not None and np.array_equal(a, b)
+
+
+def _matrix_entry(old: dict[str, Any], key: str, T: np.ndarray, inverted: bool = False) -> Any:
+    """``T`` under ``key``: the file's entry when it reads as ``T``, so that a matrix passed through keeps its
+    digits (re-deriving it would invert twice, whose round-off grows on every pass when the file's rotation is
+    rounded), else ``T`` (inverted when ``inverted``) in the file's layout."""
+    if _same_matrix(matrix_as_read(old, key, inverted), T):
+        return old[key]
+    return _matrix_like(old.get(key), invert_transform(T) if inverted else T)
 
 
 def _matrix_like(old: Any, T: np.ndarray) -> Any:
