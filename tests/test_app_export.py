@@ -155,7 +155,7 @@ def test_a_rig_with_a_camera_of_unknown_truth_gets_no_true_camchain(tmp_path, ca
         (
             lambda rec: replace(rec, other_frames={"cam1": replace(rec.other_frames["cam1"], images=None)}),
             [],
-            r"the recording's cam1 has no images; record it with images \(vical-record images=true\)",
+            r"the recording has no images of cam1; record it with images \(vical-record images=true\)",
         ),
         (
             lambda rec: rec,

@@ -104,7 +104,9 @@ def check_images(rec: Recording) -> None:
     """Refuse a recording with a camera without images (an export writes every camera or nothing)."""
     for name in rec.camera_names:
         if rec.frames_of(name).images is None:
-            raise FormatError(f"the recording's {name} has no images; record it with images (vical-record images=true)")
+            raise FormatError(
+                f"the recording has no images of {name}; record it with images (vical-record images=true)"
+            )
 
 
 def knows_every_truth(rec: Recording) -> bool:
