@@ -63,9 +63,10 @@ def test_bad_task_settings_are_refused_by_name():
     with pytest.raises(ConfigError, match="unknown setting"):
         CalibrationTask.from_config({"name": "x", "metric": "intrinsic_relative"})
     with pytest.raises(
-        ConfigError, match=r"task\.camera_model must be one of \('radtan', 'equidistant', 'ds', 'eucm'\)"
+        ConfigError,
+        match=r"task\.camera_model must be one of \('radtan', 'equidistant', 'ds', 'eucm', 'omni', 'omni-radtan'\)",
     ):
-        CalibrationTask(camera_model="omni")
+        CalibrationTask(camera_model="kb4")
     assert CalibrationTask(camera_model="ds").camera_model == "ds"
 
 

@@ -150,7 +150,10 @@ def test_camera_dict_round_trip_keeps_the_model():
 @pytest.mark.parametrize(
     ("kwargs", "message"),
     [
-        ({"distortion": "fov"}, r"camera model 'fov' unknown; use one of \['radtan', 'equidistant', 'ds', 'eucm'\]"),
+        (
+            {"distortion": "fov"},
+            r"camera model 'fov' unknown; use one of \['radtan', 'equidistant', 'ds', 'eucm', 'omni', 'omni-radtan'\]",
+        ),
         ({"distortion": "ds", "dist": [0.1, 1.2]}, r"ds parameter alpha must be in \[0, 1\], got 1.2"),
         ({"distortion": "ds", "dist": [-1.5, 0.5]}, r"ds parameter xi must be in \[-1, 1\], got -1.5"),
         ({"distortion": "eucm", "dist": [-0.1, 1.0]}, r"eucm parameter alpha must be in \[0, 1\], got -0.1"),

@@ -223,7 +223,7 @@ def test_bad_camchain_files(tmp_path):
 
     check(lambda c: c.pop("intrinsics"), r"\[cam0\]: required key 'intrinsics'")
     check(lambda c: c.update(distortion_model="fov"), "'fov' is not supported")
-    check(lambda c: c.update(camera_model="omni"), "'omni' is not supported")
+    check(lambda c: c.update(camera_model="kb4"), "'kb4' is not supported")
     check(lambda c: c["T_cam_imu"][0].__setitem__(0, 2.0), "T_cam_imu is not a rigid transform")
     check(lambda c: c.update(T_imu_cam=c["T_cam_imu"]), "several extrinsics")
     check(lambda c: c.update(intrinsics=[-1.0, 1.0, 1.0, 1.0]), "focal lengths must be positive")
@@ -279,8 +279,16 @@ def test_wide_angle_camchain_has_kalibrs_layout_and_round_trips(tmp_path, model,
 @pytest.mark.parametrize(
     ("entry", "message"),
     [
-        ("camera_model: omni\nintrinsics: [0.8, 300, 300, 320, 240]\ndistortion_model: none",
-         r"camera_model 'omni' is not supported; use one of \['pinhole', 'ds', 'eucm'\]"),
+        ("camera_model: kb4\nintrinsics: [300, 300, 320, 240]\ndistortion_model: none",
+         r"camera_model 'kb4' is not supported; use one of \['pinhole', 'ds', 'eucm', 'omni'\]"),
+        ("camera_model: omni\nintrinsics: [0.8, 300, 300, 320, 240]\ndistortion_model: equidistant\n"
+         "distortion_coeffs: [0.1, 0, 0, 0]", "camera_model omni with distortion_model 'equidistant' and "
+         r"distortion_coeffs \[0\.1, 0, 0, 0\] is not supported; vical reads camera_model omni with distortion_model "
+         r"none \(and an empty list\) or radtan"),
+        ("camera_model: omni\nintrinsics: [-0.8, 300, 300, 320, 240]\ndistortion_model: none",
+         "omni parameter xi must be >= 0, got -0.8"),
+        ("camera_model: omni\nintrinsics: [300, 300, 320, 240]\ndistortion_model: none",
+         "intrinsics must hold 5 finite numbers"),
         ("camera_model: ds\nintrinsics: [300, 300, 320, 240]\ndistortion_model: none",
          "intrinsics must hold 6 finite numbers"),
         ("camera_model: ds\nintrinsics: [-0.2, 1.4, 300, 300, 320, 240]\ndistortion_model: none",

@@ -61,7 +61,14 @@ def kalibr_result_name(prefix: str, bag: Path) -> str:
     return f"{prefix}-{tag}.yaml"
 
 
-KALIBR_MODELS = {"radtan": "pinhole-radtan", "equidistant": "pinhole-equi", "ds": "ds-none", "eucm": "eucm-none"}
+KALIBR_MODELS = {
+    "radtan": "pinhole-radtan",
+    "equidistant": "pinhole-equi",
+    "ds": "ds-none",
+    "eucm": "eucm-none",
+    "omni": "omni-none",
+    "omni-radtan": "omni-radtan",
+}
 
 
 def kalibr_commands(

@@ -22,8 +22,14 @@ MAX_INIT_VIEWS = 20  # homographies used for the closed-form focal length
 HOMOGRAPHY_OUTLIER_FACTOR = 5.0  # a view fitting its homography this many times worse than the median is not used
 MIN_HOMOGRAPHY_OUTLIER_PX = 3.0  # [px] ... unless its fit is still this good
 MAX_PNP_RMS_PX = 20.0  # [px] a PnP pose that reprojects worse than this is not used as a starting point
-# Wide-angle starting coefficients: the stereographic projection ``m = 2 tan(theta / 2)``.
-STEREOGRAPHIC = {"ds": np.array([0.0, 0.5]), "eucm": np.array([0.5, 1.0])}
+# Wide-angle starting coefficients: the stereographic projection ``m = 2 tan(theta / 2)`` (omni's ``xi = 1``: half
+# of it, ``tan(theta / 2)``, the focal length scan takes up the factor).
+STEREOGRAPHIC = {
+    "ds": np.array([0.0, 0.5]),
+    "eucm": np.array([0.5, 1.0]),
+    "omni": np.array([1.0]),
+    "omni-radtan": np.array([1.0, 0.0, 0.0, 0.0, 0.0]),
+}
 # Rays further than this from the axis are left out of PnP and of the wide-angle focal-length fit: on the
 # unit-depth plane PnP works in, their few pixels of model error at the start become huge.
 MAX_INIT_RAY_ANGLE = np.deg2rad(85.0)

@@ -32,8 +32,12 @@ _COEFFICIENT_THRESHOLDS = {  # [-]
     # 0.001 (ds) and alpha 0.001, beta 0.0035 (eucm); ds's focal length trades off against xi (0.45 % of f).
     "ds": {"xi": 0.01, "alpha": 0.003},
     "eucm": {"alpha": 0.003, "beta": 0.01},
+    # omni on the same data: xi 0.002, its focal length trading off against xi (0.18 % of f); omni-radtan's xi,
+    # k1 and focal length can hardly be told apart (xi 0.03, f 1.5 %): they are reported weak, as they are.
+    "omni": {"xi": 0.01},
+    "omni-radtan": {"xi": 0.01, "k1": 0.005, "k2": 0.01, "p1": 0.0005, "p2": 0.0005},
 }
-_FOCAL_THRESHOLD = {"ds": 0.006}  # of the focal length; 0.002 for the other models
+_FOCAL_THRESHOLD = {"ds": 0.006, "omni": 0.006}  # of the focal length; 0.002 for the other models
 
 
 def thresholds(camera: CameraModel) -> dict[str, float]:

@@ -1,4 +1,4 @@
-"""Camera models: pinhole with radial-tangential or equidistant distortion, double sphere, extended unified.
+"""Camera models: pinhole with radial-tangential or equidistant distortion, double sphere, extended unified, unified.
 
 Frames and units: points ``p_cam`` (N, 3) [m] are in the OpenCV/Kalibr camera frame (+z along
 the optical axis, +x right, +y down in the image); pixels ``uv`` (N, 2) [px] with the centre of the
@@ -14,17 +14,20 @@ OpenCV and GTSAM exactly:
   ``theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)``,
   ``x_d = theta_d / r * x`` (OpenCV ``fisheye``, GTSAM ``Cal3Fisheye``).
 
-Two wide-angle models project rays up to and beyond 90 deg from the axis (fields of view of 180
-deg and more), as Kalibr's and basalt's ``ds`` and ``eucm`` (``vical.geometry.wide_angle``):
+Wide-angle models project rays up to and beyond 90 deg from the axis (fields of view of 180
+deg and more), as Kalibr's and basalt's ``ds``, ``eucm`` and ``omni`` (``vical.geometry.wide_angle``):
 
 - ``ds`` (coefficients ``[xi, alpha]``): the double sphere model;
-- ``eucm`` (coefficients ``[alpha, beta]``): the extended unified camera model.
+- ``eucm`` (coefficients ``[alpha, beta]``): the extended unified camera model;
+- ``omni`` (coefficients ``[xi]``): the unified projection ``x / (z + xi |p|)`` (Kalibr's omni-none);
+- ``omni-radtan`` (coefficients ``[xi, k1, k2, p1, p2]``): the unified projection's coordinates
+  distorted by ``radtan`` before the focal lengths (Kalibr's omni-radtan).
 
-They have no normalised-plane distortion: the model name sits in ``distortion`` beside the
-pinhole models' names so that every part of vical handles one kind of camera description, and
-their two coefficients are the ``dist`` array. ``distort`` / ``undistort`` still map between
-unit-depth coordinates ``p[:2] / p[2]`` and ``((u - cx) / fx, (v - cy) / fy)`` for rays in front of
-the camera; ``bearings`` unprojects every pixel to a unit ray, behind the image plane too.
+The model name sits in ``distortion`` beside the pinhole models' names so that every part of vical
+handles one kind of camera description, and the model's coefficients are the ``dist`` array.
+``distort`` / ``undistort`` still map between unit-depth coordinates ``p[:2] / p[2]`` and
+``((u - cx) / fx, (v - cy) / fy)`` for rays in front of the camera; ``bearings`` unprojects every
+pixel to a unit ray, behind the image plane too.
 
 The simulator can also place the centre of distortion away from the principal point
 (``distortion_center_offset`` [px], the paper's "asymmetric distortion"): distortion is then
@@ -41,10 +44,11 @@ import numpy as np
 from vical.geometry import wide_angle
 from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
 
+PINHOLE_COEFFICIENTS = {"radtan": ("k1", "k2", "p1", "p2"), "equidistant": ("k1", "k2", "k3", "k4")}
 COEFFICIENT_NAMES = {
-    "radtan": ("k1", "k2", "p1", "p2"),
-    "equidistant": ("k1", "k2", "k3", "k4"),
+    **PINHOLE_COEFFICIENTS,
     **wide_angle.COEFFICIENTS,
+    **{m: (*wide_angle.COEFFICIENTS[pr], *PINHOLE_COEFFICIENTS[d]) for m, (pr, d) in wide_angle.DISTORTED.items()},
 }
 DISTORTION_MODELS = {model: len(names) for model, names in COEFFICIENT_NAMES.items()}
 CAMERA_MODELS = tuple(COEFFICIENT_NAMES)
@@ -60,11 +64,12 @@ class CameraModel:
 
     Attributes:
         distortion: the model, one of ``CAMERA_MODELS``: ``"radtan"``, ``"equidistant"`` (pinhole with
-            that distortion), ``"ds"`` or ``"eucm"`` (wide-angle models).
+            that distortion), ``"ds"``, ``"eucm"``, ``"omni"`` or ``"omni-radtan"`` (wide-angle models).
         width, height: image size [px].
         fx, fy: focal lengths [px]; cx, cy: principal point [px].
         dist: the model's coefficients, ``COEFFICIENT_NAMES[distortion]``: (4,) ``[k1, k2, p1, p2]`` or
-            ``[k1, k2, k3, k4]``; (2,) ``[xi, alpha]`` (ds) or ``[alpha, beta]`` (eucm).
+            ``[k1, k2, k3, k4]``; (2,) ``[xi, alpha]`` (ds) or ``[alpha, beta]`` (eucm); (1,) ``[xi]`` (omni);
+            (5,) ``[xi, k1, k2, p1, p2]`` (omni-radtan).
         distortion_center_offset: (2,) [px] centre of distortion minus principal point
             (simulation of asymmetric pinhole lenses; zero for every calibrated model).
     """
@@ -169,14 +174,32 @@ class CameraModel:
             raise CameraModelError(f"focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
         if not np.all(np.isfinite(self.dist)) or not np.all(np.isfinite(self.distortion_center_offset)):
             raise CameraModelError(f"distortion coefficients must be finite, got {self.dist}")
-        problem = wide_angle.check_coefficients(self.distortion, self.dist) if self.is_wide_angle else None
+        problem = wide_angle.check_coefficients(*self.projection) if self.is_wide_angle else None
         if problem:
             raise CameraModelError(problem)
 
     @property
     def is_wide_angle(self) -> bool:
-        """Whether the model is one of the wide-angle models (``ds``, ``eucm``) rather than a distorted pinhole."""
+        """Whether the model is one of the wide-angle models (``ds``, ``eucm``, ``omni``, ``omni-radtan``) rather
+        than a distorted pinhole."""
         return self.distortion in WIDE_ANGLE_MODELS
+
+    @property
+    def projection(self) -> tuple[str, np.ndarray]:
+        """A wide-angle model's projection (``wide_angle.PROJECTIONS``: omni-radtan's is omni) and its coefficients
+        (wide-angle models only)."""
+        return _wide_angle_parts(self.distortion, self.dist)[0]
+
+    @property
+    def lens_distortion(self) -> tuple[str, np.ndarray] | None:
+        """The pinhole distortion a wide-angle model applies to its projected coordinates and its coefficients
+        (omni-radtan: ``radtan``, ``[k1, k2, p1, p2]``); None for ds, eucm, omni."""
+        return _wide_angle_parts(self.distortion, self.dist)[1]
+
+    def _lens_distort(self, m: np.ndarray) -> np.ndarray:
+        """A wide-angle model's projected coordinates ``x / den, y / den`` (N, 2) as its lens distorts them."""
+        lens = self.lens_distortion
+        return m if lens is None else _DISTORTIONS[lens[0]](m, lens[1])
 
     @property
     def coefficient_names(self) -> tuple[str, ...]:
@@ -192,8 +215,8 @@ class CameraModel:
         x = np.atleast_2d(np.asarray(xy, dtype=float))
         if self.is_wide_angle:
             p = np.hstack([x, np.ones((len(x), 1))])
-            return x / wide_angle.denominator(self.distortion, self.dist, p)[:, None]
-        distort = _radtan if self.distortion == "radtan" else _equidistant
+            return self._lens_distort(x / wide_angle.denominator(*self.projection, p)[:, None])
+        distort = _DISTORTIONS[self.distortion]
         if not self.distortion_center_offset.any():
             return distort(x, self.dist)
         shift = self._centre_shift()
@@ -207,39 +230,34 @@ class CameraModel:
         """
         target = np.atleast_2d(np.asarray(xy_d, dtype=float))
         if self.is_wide_angle:
-            rays, _ = wide_angle.unproject(self.distortion, self.dist, target)
+            rays, _ = self._wide_angle_bearings(target, iterations)
             z = np.where(rays[:, 2] > 0, rays[:, 2], np.nan)
             return rays[:, :2] / z[:, None]
-        x = target.copy()
-        eps = 1e-7
-        for _ in range(iterations):
-            r = self.distort(x) - target
-            jx = (self.distort(x + [eps, 0.0]) - self.distort(x - [eps, 0.0])) / (2 * eps)
-            jy = (self.distort(x + [0.0, eps]) - self.distort(x - [0.0, eps])) / (2 * eps)
-            det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
-            det = np.where(np.abs(det) < 1e-12, 1e-12, det)
-            dx = (jy[:, 1] * r[:, 0] - jy[:, 0] * r[:, 1]) / det
-            dy = (-jx[:, 1] * r[:, 0] + jx[:, 0] * r[:, 1]) / det
-            x = x - np.stack([dx, dy], axis=1)
-            if np.max(np.abs(r)) < 1e-14:
-                break
-        return x
+        return _inverse(self.distort, target, iterations)
+
+    def _wide_angle_bearings(self, m_d: np.ndarray, iterations: int = 30) -> tuple[np.ndarray, np.ndarray]:
+        """Unit rays (N, 3) of a wide-angle model's ``((u - cx) / fx, (v - cy) / fy)`` (N, 2) and the mask of those
+        it unprojects: the lens distortion undone (Newton's method), then the projection (closed form)."""
+        m = m_d if self.lens_distortion is None else _inverse(self._lens_distort, m_d, iterations)
+        return wide_angle.unproject(*self.projection, m)
 
     def check_invertible(self, margin: float = 1.15) -> None:
         """Raise ``CameraModelError`` when the distortion folds over within the image.
 
         The radial map must be monotonic over every radius the image (enlarged by ``margin``)
-        can reach, else undistortion and image warping are ill-defined. The wide-angle models are
-        one-to-one on their valid domain by construction.
+        can reach, else undistortion and image warping are ill-defined. The wide-angle projections are
+        one-to-one on their valid domain by construction; omni-radtan's radtan is checked over the projected
+        coordinates the image reaches.
         """
-        if self.is_wide_angle:
+        if self.is_wide_angle and self.lens_distortion is None:
             return
+        distort = self._lens_distort if self.is_wide_angle else self.distort
         corners_px = np.array([[0, 0], [self.width - 1, 0], [0, self.height - 1], [self.width - 1, self.height - 1]])
         xn = (corners_px - [self.cx, self.cy]) / [self.fx, self.fy] - self._centre_shift()
         r_max = float(np.max(np.linalg.norm(xn, axis=1))) * margin
         r = np.linspace(0.0, r_max, 400)[1:]
-        xd = self.distort(np.stack([r, np.zeros_like(r)], axis=1) + self._centre_shift()) - self._centre_shift()
-        yd = self.distort(np.stack([np.zeros_like(r), r], axis=1) + self._centre_shift()) - self._centre_shift()
+        xd = distort(np.stack([r, np.zeros_like(r)], axis=1) + self._centre_shift()) - self._centre_shift()
+        yd = distort(np.stack([np.zeros_like(r), r], axis=1) + self._centre_shift()) - self._centre_shift()
         if np.any(np.diff(xd[:, 0]) <= 0) or np.any(np.diff(yd[:, 1]) <= 0):
             raise CameraModelError(
                 f"{self.distortion} coefficients {self.dist.tolist()} are not invertible over the image "
@@ -265,10 +283,10 @@ class CameraModel:
         """
         p = np.atleast_2d(np.asarray(p_cam, dtype=float))
         if self.is_wide_angle:
-            ok = wide_angle.valid(self.distortion, self.dist, p) & (np.linalg.norm(p, axis=1) > 1e-12)
-            den = wide_angle.denominator(self.distortion, self.dist, p)
+            ok = wide_angle.valid(*self.projection, p) & (np.linalg.norm(p, axis=1) > 1e-12)
+            den = wide_angle.denominator(*self.projection, p)
             m = p[:, :2] / np.where(ok, den, np.nan)[:, None]
-            return self.normalized_to_pixels(m), ok
+            return self.normalized_to_pixels(self._lens_distort(m)), ok
         in_front = p[:, 2] > 1e-9
         z = np.where(in_front, p[:, 2], 1.0)
         return self.normalized_to_pixels(self.distort(p[:, :2] / z[:, None])), in_front
@@ -305,7 +323,7 @@ class CameraModel:
             return self._wide_angle_jacobians(p)
         inv_z = 1.0 / p[:, 2]
         x, y = p[:, 0] * inv_z, p[:, 1] * inv_z
-        jacobian = _radtan_jacobian if self.distortion == "radtan" else _equidistant_jacobian
+        jacobian = _JACOBIANS[self.distortion]
         xd, yd, d_xy, d_dist = jacobian(x, y, self.dist)
         n = len(p)
         uv = np.stack([self.fx * xd + self.cx, self.fy * yd + self.cy], axis=1)
@@ -323,20 +341,28 @@ class CameraModel:
         return uv, d_point, d_params
 
     def _wide_angle_jacobians(self, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``project_jacobians`` of ``u = fx x / den + cx``, ``v = fy y / den + cy`` (points in the valid domain)."""
-        den, d_den, d_coeffs = wide_angle.denominator_jacobians(self.distortion, self.dist, p)
+        """``project_jacobians`` of ``u = fx d(m)_x + cx``, ``v = fy d(m)_y + cy`` with ``m = (x, y) / den`` and ``d``
+        the lens distortion (none for ds, eucm, omni) (points in the valid domain)."""
+        den, d_den, d_coeffs = wide_angle.denominator_jacobians(*self.projection, p)
+        lens = self.lens_distortion
         m = p[:, :2] / den[:, None]
-        f = np.array([self.fx, self.fy])
-        uv = m * f + [self.cx, self.cy]
-        # d m_i / d p = (e_i - m_i d den / d p) / den
+        # d m_i / d p = (e_i - m_i d den / d p) / den; d m / d coeffs = -m d den / d coeffs / den
         d_m = -m[:, :, None] * d_den[:, None, :]
         d_m[:, 0, 0] += 1.0
         d_m[:, 1, 1] += 1.0
         d_m /= den[:, None, None]
+        d_m_coeffs = -(m / den[:, None])[:, :, None] * d_coeffs[:, None, :]
+        m_d, d_lens = m, np.zeros((len(p), 2, 0))
+        if lens is not None:  # chain rule through the distortion of m
+            xd, yd, d_md_dm, d_lens = _JACOBIANS[lens[0]](m[:, 0], m[:, 1], lens[1])
+            m_d = np.stack([xd, yd], axis=1)
+            d_m, d_m_coeffs = d_md_dm @ d_m, d_md_dm @ d_m_coeffs
+        f = np.array([self.fx, self.fy])
+        uv = m_d * f + [self.cx, self.cy]
         d_params = np.zeros((len(p), 2, 4 + len(self.dist)))
-        d_params[:, 0, 0], d_params[:, 1, 1] = m[:, 0], m[:, 1]
+        d_params[:, 0, 0], d_params[:, 1, 1] = m_d[:, 0], m_d[:, 1]
         d_params[:, 0, 2], d_params[:, 1, 3] = 1.0, 1.0
-        d_params[:, :, 4:] = -(f * m / den[:, None])[:, :, None] * d_coeffs[:, None, :]
+        d_params[:, :, 4:] = f[None, :, None] * np.concatenate([d_m_coeffs, d_lens], axis=2)
         return uv, f[None, :, None] * d_m, d_params
 
     def unproject(self, uv: np.ndarray) -> np.ndarray:
@@ -351,7 +377,7 @@ class CameraModel:
         """
         m = self.pixels_to_normalized(uv)
         if self.is_wide_angle:
-            return wide_angle.unproject(self.distortion, self.dist, m)
+            return self._wide_angle_bearings(m)
         xy = self.undistort(m)
         rays = np.hstack([xy, np.ones((len(xy), 1))])
         return rays / np.linalg.norm(rays, axis=1, keepdims=True), np.all(np.isfinite(rays), axis=1)
@@ -407,19 +433,51 @@ def _neutral_coefficients(model: str) -> np.ndarray:
     return np.array([0.0, 1.0]) if model == "eucm" else np.zeros(DISTORTION_MODELS.get(model, 4))
 
 
+def _wide_angle_parts(model: str, coeffs: np.ndarray) -> tuple[tuple[str, np.ndarray], tuple[str, np.ndarray] | None]:
+    """A wide-angle model's projection and its coefficients, and the distortion it applies to the projected
+    coordinates with that distortion's coefficients (None for the models without: ds, eucm, omni)."""
+    projection, lens = wide_angle.DISTORTED.get(model, (model, None))
+    n = len(wide_angle.COEFFICIENTS[projection])
+    return (projection, coeffs[:n]), None if lens is None else (lens, coeffs[n:])
+
+
 def _wide_edge_focal(model: str, coeffs: np.ndarray, hfov: float, width: int) -> float:
     """[px] focal length that images the ray ``hfov / 2`` from the axis at the image edge ``W / 2`` from the centre."""
     coeffs = np.asarray(coeffs, dtype=float)
-    problem = wide_angle.check_coefficients(model, coeffs) if coeffs.shape == (2,) else f"{model} needs 2 coefficients"
+    count = DISTORTION_MODELS[model]
+    if coeffs.shape != (count,):
+        raise CameraModelError(f"{model} needs {count} coefficients {list(COEFFICIENT_NAMES[model])}")
+    projection, lens = _wide_angle_parts(model, coeffs)
+    problem = wide_angle.check_coefficients(*projection)
     if problem:
         raise CameraModelError(problem)
     edge = np.array([[np.sin(hfov / 2.0), 0.0, np.cos(hfov / 2.0)]])
-    den = wide_angle.denominator(model, coeffs, edge)[0]
-    if not (wide_angle.valid(model, coeffs, edge)[0] and den > 0):
+    den = wide_angle.denominator(*projection, edge)[0]
+    m = edge[:, :2] / den
+    m_x = float((m if lens is None else _DISTORTIONS[lens[0]](m, lens[1]))[0, 0])
+    if not (wide_angle.valid(*projection, edge)[0] and den > 0 and m_x > 0):
         raise CameraModelError(
             f"{model} with coefficients {coeffs.tolist()} does not project rays {hfov / 2:.3f} rad off axis"
         )
-    return float((width / 2.0) * den / edge[0, 0])
+    return float((width / 2.0) / m_x)
+
+
+def _inverse(distort, target: np.ndarray, iterations: int) -> np.ndarray:
+    """The coordinates (N, 2) that ``distort`` maps to ``target`` (N, 2), by Newton's method from ``target``."""
+    x = target.copy()
+    eps = 1e-7
+    for _ in range(iterations):
+        r = distort(x) - target
+        jx = (distort(x + [eps, 0.0]) - distort(x - [eps, 0.0])) / (2 * eps)
+        jy = (distort(x + [0.0, eps]) - distort(x - [0.0, eps])) / (2 * eps)
+        det = jx[:, 0] * jy[:, 1] - jy[:, 0] * jx[:, 1]
+        det = np.where(np.abs(det) < 1e-12, 1e-12, det)
+        dx = (jy[:, 1] * r[:, 0] - jy[:, 0] * r[:, 1]) / det
+        dy = (-jx[:, 1] * r[:, 0] + jx[:, 0] * r[:, 1]) / det
+        x = x - np.stack([dx, dy], axis=1)
+        if np.max(np.abs(r)) < 1e-14:
+            break
+    return x
 
 
 def _radtan(x: np.ndarray, coeffs: np.ndarray) -> np.ndarray:
@@ -494,3 +552,7 @@ def _equidistant_jacobian(x: np.ndarray, y: np.ndarray, coeffs: np.ndarray):
     per_r = np.where(small[:, None], np.stack([r**2, r**4, r**6, r**8], axis=1), powers / r_safe[:, None])
     d_dist = np.stack([x[:, None] * per_r, y[:, None] * per_r], axis=1)
     return x * scale, y * scale, d_xy, d_dist
+
+
+_DISTORTIONS = {"radtan": _radtan, "equidistant": _equidistant}
+_JACOBIANS = {"radtan": _radtan_jacobian, "equidistant": _equidistant_jacobian}

@@ -1,6 +1,6 @@
-"""Wide-angle projections: the double sphere (``ds``) and extended unified (``eucm``) camera models.
+"""Wide-angle projections: double sphere (``ds``), extended unified (``eucm``) and unified (``omni``) camera models.
 
-Both map a camera-frame point ``p = (x, y, z)`` (N, 3) [m] to pixels as a pinhole on a warped depth::
+Each maps a camera-frame point ``p = (x, y, z)`` (N, 3) [m] to pixels as a pinhole on a warped depth::
 
     u = fx * x / den(p) + cx,    v = fy * y / den(p) + cy
 
@@ -13,20 +13,33 @@ rays up to and beyond 90 deg from the optical axis (fields of view of 180 deg an
 - ``eucm`` (Khomutenko, Garcia, Martinet 2016, "An Enhanced Unified Camera Model"), coefficients
   ``[alpha, beta]``: ``rho = sqrt(beta (x^2 + y^2) + z^2)``, ``den = alpha rho + (1 - alpha) z``;
   ``alpha`` in [0, 1], ``beta > 0``.
+- ``omni`` (Geyer, Daniilidis 2000; Mei, Rives 2007, the unified projection), coefficient ``[xi]``:
+  ``den = z + xi |p|``; ``xi >= 0`` (``xi = 0`` is a pinhole, ``xi = 1`` the stereographic projection).
 
-These are the parameterisations of Kalibr's ``ds`` / ``eucm`` and basalt. Each model projects
-only part of the space one-to-one (``valid``): beyond a cone around ``-z`` its image folds back
-over the image of nearer rays (``alpha > 0.5``) or its denominator vanishes (``alpha <= 0.5``).
-Unprojection is closed-form and defined on the image of that domain (``unproject``).
+These are the parameterisations of Kalibr's ``ds`` / ``eucm`` / ``omni`` and basalt. Kalibr's ``omni-radtan``
+applies the radial-tangential distortion to the omni projection's ``x / den, y / den`` before the focal
+lengths (``DISTORTED``; ``vical.geometry.camera`` applies it). Each model projects only part of the space
+one-to-one (``valid``): beyond a cone around ``-z`` its image folds back over the image of nearer rays
+(``alpha > 0.5``, ``xi > 1``) or its denominator vanishes (``alpha <= 0.5``, ``xi <= 1``). Unprojection is
+closed-form and defined on the image of that domain (``unproject``).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-COEFFICIENTS = {"ds": ("xi", "alpha"), "eucm": ("alpha", "beta")}
-WIDE_ANGLE_MODELS = tuple(COEFFICIENTS)
-_CLOSED_RANGES = {"xi": (-1.0, 1.0), "alpha": (0.0, 1.0)}  # eucm's beta has only a lower bound, open: > 0
+COEFFICIENTS = {"ds": ("xi", "alpha"), "eucm": ("alpha", "beta"), "omni": ("xi",)}  # of each projection
+PROJECTIONS = tuple(COEFFICIENTS)
+# Models that distort a projection's x / den, y / den with a pinhole model's distortion (Kalibr's omni-radtan):
+# model -> (projection, distortion); its coefficients are the projection's, then the distortion's.
+DISTORTED = {"omni-radtan": ("omni", "radtan")}
+WIDE_ANGLE_MODELS = (*PROJECTIONS, *DISTORTED)
+# Each coefficient's (lowest, highest or None: no bound, whether the lowest is excluded).
+_RANGES = {
+    "ds": {"xi": (-1.0, 1.0, False), "alpha": (0.0, 1.0, False)},
+    "eucm": {"alpha": (0.0, 1.0, False), "beta": (0.0, None, True)},
+    "omni": {"xi": (0.0, None, False)},
+}
 
 
 def check_coefficients(model: str, coeffs: np.ndarray) -> str | None:
@@ -39,15 +52,16 @@ def check_coefficients(model: str, coeffs: np.ndarray) -> str | None:
 
 
 def invalid_coefficient(model: str, coeffs: np.ndarray) -> tuple[str, str] | None:
-    """The first of ``coeffs`` outside its valid range, as (its name, the range in words), or None when none is.
+    """The first of ``coeffs`` (a projection's, ``COEFFICIENTS[model]``) outside its valid range, as (its name,
+    the range in words), or None when none is.
 
     The one place of the ranges: the camera model and the simulator's sensor config both check against it.
     """
     for name, value in zip(COEFFICIENTS[model], coeffs, strict=True):
-        if name == "beta":
-            valid_value, allowed = value > 0.0, "> 0"
+        low, high, low_open = _RANGES[model][name]
+        if high is None:
+            valid_value, allowed = (value > low, f"> {low:g}") if low_open else (value >= low, f">= {low:g}")
         else:
-            low, high = _CLOSED_RANGES[name]
             valid_value, allowed = low <= value <= high, f"in [{low:g}, {high:g}]"
         if not valid_value:
             return name, allowed
@@ -67,6 +81,9 @@ def valid(model: str, coeffs: np.ndarray, p: np.ndarray) -> np.ndarray:
     boundary's ``c = z / d1``) that cone is ``z > -w2 d1`` with ``w2 = xi (1 - w1^2) + w1 sqrt(1 - xi^2 (1 - w1^2))``.
     """
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
+    if model == "omni":  # den > 0 (xi <= 1), or short of the fold at z / |p| = -1 / xi (xi > 1)
+        (xi,) = coeffs.tolist()
+        return z > -min(xi, 1.0 / xi if xi > 0 else 0.0) * np.sqrt(x * x + y * y + z * z)
     if model == "ds":
         xi, alpha = coeffs.tolist()
         w1 = _fold_weight(alpha)
@@ -80,6 +97,8 @@ def denominator(model: str, coeffs: np.ndarray, p: np.ndarray) -> np.ndarray:
     """``den`` (N,) of points (N, 3)."""
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
     r2 = x * x + y * y
+    if model == "omni":
+        return z + coeffs[0] * np.sqrt(r2 + z * z)
     if model == "ds":
         xi, alpha = coeffs.tolist()
         s = xi * np.sqrt(r2 + z * z) + z
@@ -89,10 +108,17 @@ def denominator(model: str, coeffs: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def denominator_jacobians(model: str, coeffs: np.ndarray, p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``den`` (N,), ``d den / d p`` (N, 3) and ``d den / d coeffs`` (N, 2) of points (N, 3)."""
+    """``den`` (N,), ``d den / d p`` (N, 3) and ``d den / d coeffs`` (N, C) of points (N, 3)."""
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
     r2 = x * x + y * y
-    d_coeffs = np.empty((len(p), 2))
+    d_coeffs = np.empty((len(p), len(COEFFICIENTS[model])))
+    if model == "omni":
+        (xi,) = coeffs.tolist()
+        d = np.sqrt(r2 + z * z)
+        d_point = xi * p / d[:, None]
+        d_point[:, 2] += 1.0
+        d_coeffs[:, 0] = d
+        return z + xi * d, d_point, d_coeffs
     if model == "ds":
         xi, alpha = coeffs.tolist()
         d1 = np.sqrt(r2 + z * z)
@@ -121,7 +147,14 @@ def unproject(model: str, coeffs: np.ndarray, m: np.ndarray) -> tuple[np.ndarray
     and a mask (N,) of those inside the image of the valid domain (the others are NaN)."""
     mx, my = m[:, 0], m[:, 1]
     r2 = mx * mx + my * my
-    if model == "ds":
+    if model == "omni":  # the point on the unit sphere: Mei's lifting
+        (xi,) = coeffs.tolist()
+        inside = r2 <= 1.0 / (xi * xi - 1.0) if xi > 1.0 else np.ones(len(m), dtype=bool)
+        r2 = np.where(inside, r2, 0.0)
+        scale = (xi + np.sqrt(1.0 + (1.0 - xi * xi) * r2)) / (1.0 + r2)
+        rays = scale[:, None] * np.stack([mx, my, np.ones_like(mx)], axis=1)
+        rays[:, 2] -= xi
+    elif model == "ds":
         xi, alpha = coeffs.tolist()
         inside = r2 <= 1.0 / (2.0 * alpha - 1.0) if alpha > 0.5 else np.ones(len(m), dtype=bool)
         r2 = np.where(inside, r2, 0.0)

@@ -116,10 +116,10 @@ def _camera_sensor_yaml(frames: CameraFrames, truth: SensorTruth | None) -> dict
                 stacklevel=3,
             )
         data["T_BS"] = _matrix(invert_transform(truth.T_cam_imu))
-        kalibr = kalibr_intrinsics(cam)  # ds / eucm as Kalibr names them; the pinhole models in EuRoC's words
+        kalibr = kalibr_intrinsics(cam)  # as Kalibr names the models; the distortions in EuRoC's words
         data["camera_model"] = kalibr["camera_model"]
         data["intrinsics"] = kalibr["intrinsics"]
-        data["distortion_model"] = EUROC_DISTORTION_NAMES.get(cam.distortion, kalibr["distortion_model"])
+        data["distortion_model"] = EUROC_DISTORTION_NAMES.get(kalibr["distortion_model"], kalibr["distortion_model"])
         data["distortion_coefficients"] = kalibr["distortion_coeffs"]
         data["timeshift_cam_imu"] = float(truth.time_offset)
     return data

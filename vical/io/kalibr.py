@@ -22,7 +22,9 @@ Camera models, as Kalibr writes them: ``camera_model: pinhole`` with ``intrinsic
 and a ``distortion_model`` (radtan, equidistant and their aliases); ``camera_model: ds`` (double
 sphere, ``intrinsics: [xi, alpha, fu, fv, pu, pv]``) and ``camera_model: eucm`` (extended unified,
 ``intrinsics: [alpha, beta, fu, fv, pu, pv]``), both with ``distortion_model: none`` and
-``distortion_coeffs: []``.
+``distortion_coeffs: []``; ``camera_model: omni`` (unified, ``intrinsics: [xi, fu, fv, pu, pv]``) with
+``distortion_model: none`` (vical's ``omni``) or ``radtan`` (vical's ``omni-radtan``, the
+coefficients ``[k1, k2, p1, p2]`` in ``distortion_coeffs``).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from vical.data import ImuIntrinsics, ImuNoise, Target, TargetError
+from vical.geometry import wide_angle
 from vical.geometry.camera import CameraModel, CameraModelError
 from vical.geometry.transforms import invert_transform
 from vical.io.checks import warn
@@ -52,7 +55,7 @@ DISTORTION_ALIASES = {
     "equi": "equidistant",
     "fisheye": "equidistant",
 }
-WIDE_ANGLE_CAMERA_MODELS = ("ds", "eucm")  # Kalibr's names, vical's too
+WIDE_ANGLE_CAMERA_MODELS = wide_angle.PROJECTIONS  # Kalibr's names (ds, eucm, omni), vical's too
 CAMERA_MODEL_NAMES = ("pinhole", *WIDE_ANGLE_CAMERA_MODELS)
 # (key, whether the stored matrix is T_imu_cam and must be inverted)
 EXTRINSIC_KEYS = (("T_cam_imu", False), ("T_imu_cam", True), ("T_BS", True), ("T_SC", True), ("body_T_cam0", True))
@@ -93,11 +96,12 @@ def camera_entry(
 def kalibr_intrinsics(camera: CameraModel) -> dict[str, Any]:
     """Kalibr's ``camera_model``, ``intrinsics``, ``distortion_model`` and ``distortion_coeffs`` of a camera."""
     if camera.is_wide_angle:
+        (projection, coeffs), lens = camera.projection, camera.lens_distortion
         return {
-            "camera_model": camera.distortion,
-            "intrinsics": [float(v) for v in (*camera.dist, *camera.intrinsics)],
-            "distortion_model": "none",
-            "distortion_coeffs": [],
+            "camera_model": projection,
+            "intrinsics": [float(v) for v in (*coeffs, *camera.intrinsics)],
+            "distortion_model": "none" if lens is None else lens[0],
+            "distortion_coeffs": [] if lens is None else [float(v) for v in lens[1]],
         }
     return {
         "camera_model": "pinhole",
@@ -117,7 +121,7 @@ def write_camchain_imucam(
     """Write a one-camera Kalibr ``camchain-imucam.yaml`` (or ``camchain.yaml`` when both are None).
 
     Args:
-        camera: pinhole camera with radtan or equidistant distortion, or a ds or eucm camera.
+        camera: pinhole camera with radtan or equidistant distortion, or a ds, eucm, omni or omni-radtan camera.
         T_cam_imu: (4, 4) maps IMU points into the camera frame, or None.
         timeshift_cam_imu: [s] ``t_imu = t_cam + timeshift_cam_imu``, or None.
         rostopic: the image topic Kalibr associates with ``cam0``.
@@ -152,9 +156,9 @@ def _camera_model(entry: dict[str, Any], where: str) -> CameraModel:
     width, height = _floats(entry, "resolution", 2, where)
     key = "distortion_coeffs" if "distortion_coeffs" in entry else "distortion_coefficients"
     if model in WIDE_ANGLE_CAMERA_MODELS:
-        _check_no_distortion(entry, model, key, where)
-        *dist, fx, fy, cx, cy = _floats(entry, "intrinsics", 6, where)
-        name = model
+        name, lens = _wide_angle_model(entry, model, key, where)
+        *coeffs, fx, fy, cx, cy = _floats(entry, "intrinsics", len(wide_angle.COEFFICIENTS[model]) + 4, where)
+        dist = [*coeffs, *(_floats(entry, key, 4, where) if lens else [])]
     else:
         fx, fy, cx, cy = _floats(entry, "intrinsics", 4, where)
         dist_name = str(require(entry, "distortion_model", where, KalibrFormatError))
@@ -169,15 +173,23 @@ def _camera_model(entry: dict[str, Any], where: str) -> CameraModel:
         raise KalibrFormatError(f"{where}: {exc}") from exc
 
 
-def _check_no_distortion(entry: dict[str, Any], model: str, key: str, where: str) -> None:
-    """A ``ds`` / ``eucm`` camera has no distortion model on top: ``distortion_model: none``, no coefficients."""
-    name = entry.get("distortion_model", "none")
-    coeffs = entry.get(key)
-    if name != "none" or (coeffs is not None and np.size(coeffs)):
-        raise KalibrFormatError(
-            f"{where}: camera_model {model} with distortion_model {name!r} and {key} {coeffs!r} is not supported; "
-            "vical's ds and eucm carry no extra distortion: write distortion_model: none and an empty list"
-        )
+def _wide_angle_model(entry: dict[str, Any], model: str, key: str, where: str) -> tuple[str, str | None]:
+    """vical's model of a Kalibr ``ds`` / ``eucm`` / ``omni`` entry and the distortion it applies on top (None:
+    ``distortion_model: none`` with no coefficients; omni also takes radtan)."""
+    name = str(entry.get("distortion_model", "none"))
+    lens = DISTORTION_ALIASES.get(name)
+    distorted = {lens_name: m for m, (projection, lens_name) in wide_angle.DISTORTED.items() if projection == model}
+    if name == "none":
+        coeffs = entry.get(key)
+        if coeffs is None or not np.size(coeffs):
+            return model, None
+    elif lens in distorted:
+        return distorted[lens], lens
+    allowed = " or ".join(["none (and an empty list)", *distorted])
+    raise KalibrFormatError(
+        f"{where}: camera_model {model} with distortion_model {name!r} and {key} {entry.get(key)!r} is not "
+        f"supported; vical reads camera_model {model} with distortion_model {allowed}"
+    )
 
 
 def _floats(entry: dict[str, Any], key: str, n: int, where: str) -> np.ndarray:

@@ -21,7 +21,6 @@ import numpy as np
 from vical.config import ConfigError, from_mapping, require, require_range
 from vical.data import ImuIntrinsics, ImuNoise, SensorTruth
 from vical.geometry import (
-    CAMERA_MODELS,
     CameraModel,
     CameraModelError,
     body_imu_from_cam_imu,
@@ -32,6 +31,8 @@ from vical.geometry import (
 from vical.geometry.wide_angle import WIDE_ANGLE_MODELS, invalid_coefficient
 
 NOISE_UNITS = ("continuous", "discrete")
+# The camera models the simulator draws (its coefficients' distributions); omni, omni-radtan are calibrated, not drawn.
+SAMPLED_MODELS = ("radtan", "equidistant", "ds", "eucm")
 INTRINSIC_STDS = (
     "accel_scale_std", "accel_misalignment_std", "gyro_scale_std", "gyro_misalignment_std", "g_sensitivity_std"
 )  # fmt: skip
@@ -98,7 +99,7 @@ class CameraSampling:
             isinstance(self.height, int) and self.height > 0, f"{key}.height", "a positive integer [px]", self.height
         )
         require_range(f"{key}.rate_hz", self.rate_hz, 0.0, None, low_open=True)
-        require(self.distortion in CAMERA_MODELS, f"{key}.distortion", f"one of {CAMERA_MODELS}", self.distortion)
+        require(self.distortion in SAMPLED_MODELS, f"{key}.distortion", f"one of {SAMPLED_MODELS}", self.distortion)
         self.hfov.check(f"{key}.hfov")
         max_hfov = 2.0 * np.pi if self.distortion in WIDE_ANGLE_MODELS else np.pi
         require_range(f"{key}.hfov.mean", self.hfov.mean, 0.0, max_hfov, low_open=True, high_open=True)
