@@ -40,6 +40,14 @@ def test_a_sound_result_has_nothing_against_it_and_each_sign_of_failure_is_named
     assert implausibilities(replace(result, T_cam_imu=stuck), guess) == [
         "the camera-IMU translation is exactly its initial guess"
     ]
+    assert implausibilities(replace(result, status="max_iterations", iterations=50), guess) == [
+        "the solve did not converge in 50 iterations (the views constrain the parameters too weakly: add views tilted "
+        "30-60 deg, near the image's corners, at several distances)"
+    ]
+    outside = replace(result, camera=replace(result.camera, cx=833.0, cy=721.0))
+    assert implausibilities(outside, guess) == [
+        "the principal point (833.0, 721.0) px lies outside the 640 x 480 image"
+    ]
     # IMU residuals 10x the declared noise are what real IMUs show: no evidence of a wrong setting.
     assert implausibilities(replace(result, imu_noise_scale=10.0), guess) == []
     blurred = replace(result, reprojection=ResidualStats(5.0, 5.0, 1.0, 5.5, 9.0, 100))
@@ -79,3 +87,16 @@ def test_the_boards_scale_is_the_cameras_accelerations_over_the_imus(calibrated,
     scale, sigma = board_scale(rec.frames, rec.imu, declared, truth.camera, truth.T_cam_imu[:3, :3], truth.time_offset)
     assert scale == pytest.approx(declared_over_true, rel=0.12) and sigma < 0.05  # 6 s of motion: within 12 %
     assert wrong_board_scale((scale, sigma)) == (declared_over_true > 1.5 or declared_over_true < 1 / 1.5)
+
+
+def test_an_intrinsic_solve_stopped_far_from_its_minimum_is_named_a_failure():
+    """A start three times the true focal length with two iterations allowed: the solve stops unconverged, and
+    that alone fails the result."""
+    from vical.calib.intrinsics import calibrate_intrinsics
+
+    rec = make_recording(duration=4.0, pixel_sigma=0.3, seed=2)
+    truth = rec.truth.camera
+    far = replace(truth, fx=3 * truth.fx, fy=3 * truth.fy)
+    result = calibrate_intrinsics(rec.frames, rec.target, "radtan", initial_camera_guess=far, max_iterations=2)
+    assert result.status == "max_iterations"
+    assert implausibilities(result)[0].startswith("the solve did not converge in 2 iterations")

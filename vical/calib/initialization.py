@@ -95,6 +95,31 @@ def starting_camera(model: str, camera: CameraModel) -> CameraModel:
     return CameraModel(model, camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy, coeffs)
 
 
+def opencv_camera(observations: list[FrameObservation], size: tuple[int, int]) -> CameraModel | None:
+    """A radtan start from OpenCV's ``calibrateCamera`` (its own closed form refined with k3 fixed) on a spread-out
+    subset of the views; None when it fails or answers no plausible camera (principal point outside the image).
+
+    A second opinion for the solves that the homography start leaves unconverged: with strong distortion (real
+    lenses' k1 of -0.3) Zhang's undistorted focal length can start Levenberg-Marquardt in a valley that never
+    converges (a focal length 3x the truth, the principal point outside the image).
+    """
+    usable = [o for o in observations if len(o.ids) >= MIN_INIT_CORNERS]
+    usable = usable[:: max(1, len(usable) // (2 * MAX_INIT_VIEWS))]
+    if len(usable) < 3:
+        return None
+    objects = [o.points.astype(np.float32) for o in usable]
+    pixels = [o.uv.astype(np.float32) for o in usable]
+    try:
+        _, K, dist, *_ = cv2.calibrateCamera(objects, pixels, size, None, None, flags=cv2.CALIB_FIX_K3)
+    except cv2.error:
+        return None
+    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
+    w, h = size
+    if not (np.all(np.isfinite(K)) and fx > 0 and fy > 0 and 0 <= cx < w and 0 <= cy < h):
+        return None
+    return CameraModel("radtan", w, h, fx, fy, cx, cy, np.asarray(dist, float).ravel()[:4])
+
+
 def initial_camera(observations: list[FrameObservation], model: str, size: tuple[int, int]) -> CameraModel:
     """A starting camera of ``model`` with the image centre as principal point: no distortion and Zhang's focal
     lengths (pinhole models), or the stereographic projection whose focal length best straightens the views."""

@@ -20,7 +20,7 @@ from vical.calib.checks import image_coverage_warnings
 from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError
 from vical.calib.frame_log import build_frame_log, left_out
-from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera, starting_camera
+from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera, opencv_camera, starting_camera
 from vical.calib.model_fit import COMPARISON, misfit_warnings
 from vical.calib.observations import FrameObservation, collect_observations, image_size
 from vical.calib.outliers import reject_outliers
@@ -153,7 +153,7 @@ def calibrate_intrinsics(
     if image_size_px is None and initial_camera_guess is not None:
         image_size_px = (initial_camera_guess.width, initial_camera_guess.height)
     size = image_size(frames, image_size_px)
-    camera0 = initial_camera_guess or initial_camera(observations, model, size)
+    camera0 = initial_camera_guess or _start(observations, model, size)
     if camera0.distortion != model:  # keep the guessed focal length and principal point, start undistorted
         camera0 = starting_camera(model, camera0)
     # Unrefined planar poses: the joint solve refines them, and outliers are judged after it.
@@ -168,6 +168,10 @@ def calibrate_intrinsics(
     camera, T_cam_target, graph, solution = _add_unplaced_frames(
         solve, *solve(camera0, {k: T for k, (T, _) in poses.items()}), min(MIN_INIT_CORNERS, target.num_points)
     )
+    if not _settled(camera, solution) and initial_camera_guess is None:
+        found = _from_opencv_start(solve, model, size, min(MIN_INIT_CORNERS, target.num_points))
+        if found is not None and _better(found[3], solution):
+            camera, T_cam_target, graph, solution = found
     # Wrong detections pull the least-squares fit: drop them and solve again from this solution.
     rejection = reject_outliers(camera, observations, T_cam_target, min(MIN_INIT_CORNERS, target.num_points))
     if rejection.changed:
@@ -220,6 +224,40 @@ def calibrate_intrinsics(
         frame_log=build_frame_log(frames, frame_index, min_corners, decided),
         reprojection_pixels=pixels,
     )
+
+
+def _start(observations: list[FrameObservation], model: str, size: tuple[int, int]) -> CameraModel:
+    """The closed-form start (``initial_camera``); where its homographies cannot give a focal length (views
+    nearly head-on), OpenCV's for radtan, whose distortion terms can still pin it."""
+    try:
+        return initial_camera(observations, model, size)
+    except CalibrationError:
+        fallback = opencv_camera(observations, size) if model == "radtan" else None
+        if fallback is None:
+            raise
+        return fallback
+
+
+def _settled(camera: CameraModel, solution) -> bool:
+    """A solve that converged to a camera whose principal point lies in its image."""
+    inside = 0 <= camera.cx < camera.width and 0 <= camera.cy < camera.height
+    return solution.status == "converged" and inside
+
+
+def _from_opencv_start(solve: _Solve, model: str, size: tuple[int, int], min_corners: int):
+    """The solve from OpenCV's start (``initialization.opencv_camera``; radtan only), or None without one."""
+    camera0 = opencv_camera(solve.observations, size) if model == "radtan" else None
+    if camera0 is None:
+        return None
+    poses = frame_poses(camera0, solve.observations, min_corners, refine=False)
+    if len(poses) < MIN_VIEWS:
+        return None
+    return solve(camera0, {k: T for k, (T, _) in poses.items()})
+
+
+def _better(candidate, current) -> bool:
+    """Whether the solution ``candidate`` beats ``current``: converged over not, then the lower error."""
+    return (candidate.status == "converged", -candidate.error) > (current.status == "converged", -current.error)
 
 
 def _add_unplaced_frames(solve: _Solve, camera, T_cam_target, graph, solution, min_corners: int):

@@ -9,8 +9,9 @@ weighting:
 - ``accel_scale``: the accelerometer's median magnitude over gravity (about 1/9.81 for g read as m/s^2);
 - ``board_scale``: the camera's accelerations over the IMU's (the ratio of the board's declared size to
   its true one: a wrong tag size or square);
-- ``implausibilities``: a solve that never left its initial guess, and corners that the model cannot
-  fit (a reprojection rms far above any detector's noise: a wrong target or lens model).
+- ``implausibilities``: a solve that did not converge or never left its initial guess, a principal point
+  outside the image, and corners that the model cannot fit (a reprojection rms far above any detector's
+  noise: a wrong target or lens model).
 
 IMU residuals above the declared noise are no such evidence: real IMUs routinely show 5-15x their
 datasheet densities (vibration, unmodelled effects), and calibrators take the declared values as given.
@@ -53,6 +54,17 @@ def implausibilities(
         pixel_sigma: [px] the declared corner noise (``DEFAULT_PIXEL_SIGMA`` when None).
     """
     found = []
+    if result.status != "converged":
+        found.append(
+            f"the solve did not converge in {result.iterations} iterations (the views constrain the parameters too "
+            "weakly: add views tilted 30-60 deg, near the image's corners, at several distances)"
+        )
+    camera = result.camera
+    if not (0 <= camera.cx < camera.width and 0 <= camera.cy < camera.height):
+        found.append(
+            f"the principal point ({camera.cx:.1f}, {camera.cy:.1f}) px lies outside the {camera.width} x "
+            f"{camera.height} image"
+        )
     guessed = initial_T_cam_imu is not None and result.T_cam_imu is not None
     if result.iterations == 0:
         found.append("the solve made no step from its initial guess (0 iterations)")
