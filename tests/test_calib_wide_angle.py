@@ -12,7 +12,6 @@ from vical.calib.report import results_text
 from vical.calib.synthetic import Excitation, default_camera, make_recording, scattered_views, wide_angle_camera
 from vical.data import ImuNoise, Target
 from vical.geometry import COEFFICIENT_NAMES
-from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
 from vical.io.csvfiles import write_corners_csv
 from vical.io.kalibr import read_camchain, write_target_yaml
 
@@ -60,8 +59,8 @@ def test_radtan_on_a_180_deg_fisheye_fits_visibly_worse_and_the_results_say_so()
     )
     (comparison,) = [w for w in wrong.warnings if w.startswith("lens models on these corners")]
     assert "radtan" in comparison and "(used)" in comparison
-    # any wide-angle model (omni-radtan's 9 parameters may beat ds by a thousandth of a pixel), never a pinhole one
-    assert comparison.endswith(tuple(f"; {model} fits best" for model in WIDE_ANGLE_MODELS))
+    # omni-radtan's 5 coefficients beat ds by a thousandth of a pixel (0.407 vs 0.408 px): the fewer coefficients win
+    assert comparison.endswith(("; ds fits best", "; eucm fits best"))
     assert "camera: ds 640 x 480" in results_text(right) and "  xi" in results_text(right)
 
 

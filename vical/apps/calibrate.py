@@ -146,8 +146,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--model",
         choices=CAMERA_MODELS,
         default="radtan",
-        help="lens model: pinhole with radtan or equidistant distortion, or the wide-angle ds (double sphere) or "
-        "eucm (extended unified); default radtan",
+        help="lens model: pinhole with radtan or equidistant distortion, or the wide-angle ds (double sphere), "
+        "eucm (extended unified), omni (unified, Kalibr's omni-none) or omni-radtan; default radtan",
     )
     p.add_argument(
         "--intrinsics", help="Kalibr camchain.yaml with the known intrinsics (extrinsic task), one section per camera"

@@ -1,10 +1,12 @@
 """Closed-form starting points: focal length from plane homographies, frame poses from PnP.
 
-Wide-angle models (``ds``, ``eucm``) start as the stereographic projection both contain
-(``ds`` with ``xi = 0, alpha = 0.5``; ``eucm`` with ``alpha = 0.5, beta = 1``): near the axis it
+Wide-angle models (``ds``, ``eucm``, ``omni``, ``omni-radtan``) start as the stereographic projection they all
+contain (``ds`` with ``xi = 0, alpha = 0.5``; ``eucm`` with ``alpha = 0.5, beta = 1``; ``omni`` with ``xi = 1``
+and no distortion): near the axis it
 images like a pinhole of the same focal length, and towards 90 deg it stays much closer to a
 fisheye lens than a pinhole does. Its focal length is the one under which the views' rays fit
-plane homographies best (a pinhole's homographies cannot describe a fisheye image).
+plane homographies best (a pinhole's homographies cannot describe a fisheye image). OpenCV's
+``calibrateCamera`` gives radtan a second start (``opencv_camera``).
 """
 
 from __future__ import annotations

@@ -1,11 +1,14 @@
-"""Intrinsic calibration (pinhole + radtan or equidistant, double sphere, extended unified) from target observations.
+"""Intrinsic calibration (pinhole + radtan or equidistant, double sphere, extended unified, omni with or without
+radtan) from target observations.
 
 Graph: one ``Pose3`` per frame (the camera pose in the target frame, ``T_target_cam``), the camera
-parameters ``[fx, fy, cx, cy, *coefficients]`` (a vector of 8 or 6, no skew, as Kalibr's models) and
+parameters ``[fx, fy, cx, cy, *coefficients]`` (4 + the model's coefficients, no skew, as Kalibr's models) and
 one corner factor per frame (``vical.calib.corner_factors``: the target points are constants).
 Initialisation: Zhang's focal lengths from plane homographies (principal point at the image centre,
 no distortion; wide-angle models from the focal length that best straightens the views), then PnP
-per frame.
+per frame. A radtan solve that this start leaves unconverged or with its principal point outside the
+image is solved again from OpenCV's ``calibrateCamera`` (``initialization.opencv_camera``), and the
+better of the two kept.
 """
 
 from __future__ import annotations
@@ -28,9 +31,17 @@ from vical.calib.result import CalibrationResult, ResidualStats
 from vical.calib.solver import covariance_or_unobservable, optimize
 from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
 from vical.data import CameraFrames, Target
-from vical.geometry import CAMERA_MODELS, COEFFICIENT_NAMES, CameraModel, CameraModelError, invert_transform
+from vical.geometry import (
+    CAMERA_MODELS,
+    COEFFICIENT_NAMES,
+    DISTORTION_MODELS,
+    CameraModel,
+    CameraModelError,
+    invert_transform,
+)
 
 MIN_VIEWS = 3  # intrinsics with a free principal point need three views of a plane (Zhang)
+SAME_FIT = 0.02  # models whose reprojection rms lie within 2 % of each other fit alike
 MODELS = CAMERA_MODELS
 
 K_KEY = gtsam.symbol("k", 0)
@@ -134,8 +145,8 @@ def calibrate_intrinsics(
     Args:
         frames: camera frames with corner detections.
         target: the calibration target.
-        model: ``"radtan"`` (as GTSAM's ``Cal3DS2``), ``"equidistant"`` (``Cal3Fisheye``), ``"ds"`` or
-            ``"eucm"`` (wide-angle, ``vical.geometry.wide_angle``).
+        model: ``"radtan"`` (as GTSAM's ``Cal3DS2``), ``"equidistant"`` (``Cal3Fisheye``), or a wide-angle
+            model (``"ds"``, ``"eucm"``, ``"omni"``, ``"omni-radtan"``: ``vical.geometry.wide_angle``).
         image_size_px: ``(width, height)`` [px]; taken from ``frames.images`` or the initial guess if None.
         initial_camera_guess: starting intrinsics (Zhang's closed form if None).
         pixel_sigma: [px] corner noise; None estimates it from the residuals and scales the covariance.
@@ -270,6 +281,17 @@ def _add_unplaced_frames(solve: _Solve, camera, T_cam_target, graph, solution, m
     return solve(camera, T_cam_target | {k: T for k, (T, _) in placed.items()})
 
 
+def _best_model(rms: dict[str, float]) -> str:
+    """The model that fits best: of those within ``SAME_FIT`` of the lowest rms, the one with the fewest coefficients
+    (a model that nests another, omni-radtan in omni, fits the same corners a hair better by its extra terms)."""
+    finite = {m: v for m, v in rms.items() if np.isfinite(v)}
+    if not finite:
+        return next(iter(rms))
+    lowest = min(finite.values())
+    close = [m for m, v in finite.items() if v <= lowest * (1 + SAME_FIT)]
+    return min(close, key=lambda m: (DISTORTION_MODELS[m], finite[m]))
+
+
 def _model_warnings(camera, observations, T_cam_target, residuals, compare) -> list[str]:
     """``model_fit.misfit_warnings`` and, where the model does not fit and ``compare`` holds the calibration's
     settings, the other models' fit on the same corners."""
@@ -285,6 +307,6 @@ def _model_warnings(camera, observations, T_cam_target, residuals, compare) -> l
             rms[other] = calibrate_intrinsics(**compare, model=other, compare_models=False).reprojection.rms
         except (CalibrationError, CameraModelError):
             rms[other] = np.nan
-    best = min(rms, key=lambda m: np.inf if np.isnan(rms[m]) else rms[m])
+    best = _best_model(rms)
     listed = ", ".join(f"{m} {v:.3f} px" + (" (used)" if m == camera.distortion else "") for m, v in rms.items())
     return [*misfit, f"{COMPARISON}, reprojection rms: {listed}; {best} fits best"]

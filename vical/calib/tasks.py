@@ -33,7 +33,8 @@ class CalibrationTask:
         name: the task's name (``intrinsic``, ``extrinsic``, ``joint``).
         calibrate: the solve: ``intrinsic``; ``extrinsic`` (intrinsics known: the truth's);
             ``joint`` (one graph); ``two_stage`` (intrinsics first, then the extrinsic).
-        camera_model: lens model estimated: ``radtan``, ``equidistant``, ``ds`` or ``eucm``.
+        camera_model: lens model estimated: one of ``vical.geometry.CAMERA_MODELS`` (``radtan``, ``equidistant``,
+            ``ds``, ``eucm``, ``omni``, ``omni-radtan``).
         estimate_time_offset: estimate the camera-IMU time offset (camera-IMU solves).
         error_metric: the paper's score, ``intrinsic_relative`` or ``extrinsic_relative`` [%].
         asymmetric_distortion: the sensor's distortion centre is drawn away from the principal
