@@ -13,6 +13,7 @@ from vical.calib.plausibility import (
     implausibilities,
     likely_accel_unit,
     likely_gyro_unit,
+    posed_frames,
     wrong_board_scale,
 )
 from vical.calib.result import ResidualStats
@@ -59,9 +60,10 @@ def test_a_sound_result_has_nothing_against_it_and_each_sign_of_failure_is_named
 
 def test_a_gyro_unit_error_shows_as_57_times_the_cameras_rotation(calibrated):
     rec = calibrated[0]
-    in_rad = gyro_scale(rec.frames, rec.imu, rec.target, rec.truth.camera)
+    posed = posed_frames(rec.frames, rec.target, rec.truth.camera)
+    in_rad = gyro_scale(posed, rec.imu)
     in_deg = ImuSamples(rec.imu.t, np.degrees(rec.imu.gyro), rec.imu.accel)
-    as_deg = gyro_scale(rec.frames, in_deg, rec.target, rec.truth.camera)
+    as_deg = gyro_scale(posed, in_deg)
     assert in_rad == pytest.approx(1.0, abs=0.03) and as_deg == pytest.approx(180 / np.pi, rel=0.03)
     assert likely_gyro_unit(in_rad, "rad/s") is None and likely_gyro_unit(as_deg, "rad/s") == "deg/s"
     assert likely_gyro_unit(in_rad * np.pi / 180, "deg/s") == "rad/s" and likely_gyro_unit(None, "rad/s") is None
@@ -84,7 +86,8 @@ def test_the_boards_scale_is_the_cameras_accelerations_over_the_imus(calibrated,
     true = rec.target
     declared = Target.checkerboard(true.rows, true.cols, true.row_spacing * declared_over_true)
     truth = rec.truth
-    scale, sigma = board_scale(rec.frames, rec.imu, declared, truth.camera, truth.T_cam_imu[:3, :3], truth.time_offset)
+    posed = posed_frames(rec.frames, declared, truth.camera)
+    scale, sigma = board_scale(posed, rec.imu, truth.T_cam_imu[:3, :3], truth.time_offset)
     assert scale == pytest.approx(declared_over_true, rel=0.12) and sigma < 0.05  # 6 s of motion: within 12 %
     assert wrong_board_scale((scale, sigma)) == (declared_over_true > 1.5 or declared_over_true < 1 / 1.5)
 

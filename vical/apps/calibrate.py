@@ -81,6 +81,7 @@ from vical.calib.plausibility import (
     implausibilities,
     likely_accel_unit,
     likely_gyro_unit,
+    posed_frames,
     wrong_board_scale,
 )
 from vical.calib.report import summary_table, weak_sigma_text, write_frames_csv, write_report, write_results_text
@@ -550,7 +551,8 @@ def wrong_settings(result: CalibrationResult, frames, rec: Recording, args) -> l
     if result.imu_residuals is None:
         return []
     found = []
-    scale = gyro_scale(frames, rec.imu, rec.target, result.camera)
+    posed = result.frame_poses or posed_frames(frames, rec.target, result.camera)
+    scale = gyro_scale(posed, rec.imu)
     unit = likely_gyro_unit(scale, args.gyro_unit)
     if unit == "deg/s":
         found.append(f"the gyro reads {scale:.1f}x the rotation the camera sees: it logs deg/s; pass --gyro-unit deg/s")
@@ -565,7 +567,7 @@ def wrong_settings(result: CalibrationResult, frames, rec: Recording, args) -> l
     elif unit == "m/s^2":
         found.append(f"the accelerometer reads {accel:.3g} g in the median where gravity alone is 1 g: it logs "
                      "m/s^2; leave out --accel-unit g")  # fmt: skip
-    board = board_scale(frames, rec.imu, rec.target, result.camera, result.T_cam_imu[:3, :3], result.time_offset)
+    board = board_scale(posed, rec.imu, result.T_cam_imu[:3, :3], result.time_offset)
     if wrong_board_scale(board):
         size = rec.target.row_spacing
         found.append(

@@ -18,15 +18,12 @@ import sys
 import warnings
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any, NoReturn
-
-from hydra import compose, initialize_config_dir
-from hydra.core.override_parser.overrides_parser import OverridesParser
-from hydra.errors import HydraException, OverrideParseException
-from omegaconf import DictConfig
-from omegaconf.errors import OmegaConfBaseException
+from typing import TYPE_CHECKING, Any, NoReturn
 
 from vical.config import ConfigError, SettingError
+
+if TYPE_CHECKING:
+    from omegaconf import DictConfig
 
 EXIT_USER_ERROR = 2
 
@@ -107,6 +104,9 @@ def override_value(argv: list[str], key: str) -> str | None:
 
     None when absent, null, empty, a sweep, or malformed (Hydra then reports the syntax error itself).
     """
+    from hydra.core.override_parser.overrides_parser import OverridesParser  # only the Hydra apps pay its import
+    from hydra.errors import HydraException
+
     for arg in argv:
         if arg.lstrip("+").startswith(f"{key}="):
             try:
@@ -126,6 +126,10 @@ def check_composes(conf_dir: str | os.PathLike, config_name: str, argv: list[str
     line. Returns the composed config (without the ``hydra`` node), or None for a command line with Hydra
     flags (``-m``, ``--cfg``, ...): those are left to Hydra.
     """
+    from hydra import compose, initialize_config_dir  # only the Hydra apps pay its import
+    from hydra.errors import HydraException
+    from omegaconf.errors import OmegaConfBaseException
+
     if any(arg.startswith("-") for arg in argv):
         return None
     try:
@@ -137,6 +141,8 @@ def check_composes(conf_dir: str | os.PathLike, config_name: str, argv: list[str
 
 def _hydra_message(err: Exception) -> str:
     """Hydra's message without its search path and links; a list of available options on the same line."""
+    from hydra.errors import OverrideParseException
+
     text = str(err).split("\nConfig search path")[0].split("\nSee https")[0]
     if isinstance(err, OverrideParseException):
         return f"cannot parse the override {err.override!r}: {text}"

@@ -26,7 +26,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from vical.calib.imu_integration import cumulative_angle, interpolate
 from vical.calib.initialization import frame_poses
 from vical.calib.observations import collect_observations
-from vical.calib.result import CalibrationResult
+from vical.calib.result import CalibrationResult, FramePoses
 from vical.calib.time_alignment import rotation_increments
 from vical.data import CameraFrames, ImuSamples, Target, seconds_since
 from vical.geometry import CameraModel
@@ -78,15 +78,18 @@ def implausibilities(
     return found
 
 
-def _posed_frames(frames: CameraFrames, target: Target, camera: CameraModel):
-    """The observations, and the sorted indices and PnP poses (``T_cam_target``) of the frames with a pose."""
+def posed_frames(frames: CameraFrames, target: Target, camera: CameraModel) -> FramePoses:
+    """The PnP poses of ``frames`` (for a result that carries none: ``CalibrationResult.frame_poses``)."""
     observations = collect_observations(frames, target)
     poses = frame_poses(camera, observations)
     keys = sorted(poses)
-    return observations, keys, np.array([poses[k][0] for k in keys]).reshape(-1, 4, 4)
+    return FramePoses(
+        np.array([observations[k].t_ns for k in keys], dtype=np.int64),
+        np.array([poses[k][0] for k in keys]).reshape(-1, 4, 4),
+    )
 
 
-def gyro_scale(frames: CameraFrames, imu: ImuSamples, target: Target, camera: CameraModel) -> float | None:
+def gyro_scale(posed: FramePoses, imu: ImuSamples) -> float | None:
     """How many times the camera's rotation the gyro reads, between frames (ratio of summed angles).
 
     Independent of any solve: the camera's rotation increments come from PnP with ``camera``, the
@@ -94,12 +97,11 @@ def gyro_scale(frames: CameraFrames, imu: ImuSamples, target: Target, camera: Ca
     change sums of magnitudes). About 57.3 (degrees per radian) for a gyro logged in deg/s and read
     as rad/s, about 1/57.3 the other way round, about 1 otherwise; None when too few frames have a pose.
     """
-    observations, keys, T_cam_target = _posed_frames(frames, target, camera)
-    if len(keys) < 2 or len(imu) < 2:
+    if len(posed.t_ns) < 2 or len(imu) < 2:
         return None
     t0 = imu.t[0]
-    times = seconds_since(np.array([observations[k].t_ns for k in keys]), t0)
-    increments = rotation_increments(times, np.transpose(T_cam_target[:, :3, :3], (0, 2, 1)))
+    times = seconds_since(posed.t_ns, t0)
+    increments = rotation_increments(times, np.transpose(posed.T_cam_target[:, :3, :3], (0, 2, 1)))
     t_imu = seconds_since(imu.t, t0)
     inside = (increments.t_start >= t_imu[0]) & (increments.t_end <= t_imu[-1])
     if not inside.any():
@@ -136,10 +138,8 @@ def likely_accel_unit(scale: float | None, declared: str) -> str | None:
 
 
 def board_scale(
-    frames: CameraFrames,
+    posed: FramePoses,
     imu: ImuSamples,
-    target: Target,
-    camera: CameraModel,
     R_cam_imu: np.ndarray,
     time_offset: float,
 ) -> tuple[float, float] | None:
@@ -156,12 +156,11 @@ def board_scale(
     Returns:
         (scale, its standard error), or None with too few evenly spaced posed frames or too little motion.
     """
-    observations, keys, T_cam_target = _posed_frames(frames, target, camera)
-    if len(keys) < 10 or len(imu) < 2:
+    if len(posed.t_ns) < 10 or len(imu) < 2:
         return None
     t0 = imu.t[0]
-    times = seconds_since(np.array([observations[k].t_ns for k in keys]), t0) + time_offset
-    T_target_cam = np.linalg.inv(T_cam_target)
+    times = seconds_since(posed.t_ns, t0) + time_offset
+    T_target_cam = np.linalg.inv(posed.T_cam_target)
     positions = T_target_cam[:, :3, 3]  # the lever arm's rotational accelerations are left out: a few % of the motion's
     rotations = Rotation.from_matrix(T_target_cam[:, :3, :3] @ R_cam_imu)
     t_imu = seconds_since(imu.t, t0)

@@ -11,9 +11,7 @@ import os
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_pdf import PdfPages
 
-from vical.calib import report_figures as figures
 from vical.calib.frame_log import REASONS, FrameLog, short_reason
 from vical.calib.metrics import CalibrationErrors
 from vical.calib.result import CalibrationResult, ResidualStats, WeakParameter
@@ -292,6 +290,8 @@ def report_pages(result: CalibrationResult, errors: CalibrationErrors | None = N
     """The report's pages in order (``matplotlib.figure.Figure``): parameters, reprojection residuals, coverage,
     frames, then for camera-IMU tasks the IMU's measured and predicted rates, its residuals and the time offset,
     and last the notes."""
+    from vical.calib import report_figures as figures
+
     pages = figures.text_pages(f"vical calibration report: {result.task}", _summary_lines(result, errors, failure))
     pages.append(figures.reprojection_page(result))
     if result.reprojection_pixels is not None and len(result.reprojection_pixels) >= 3:
@@ -317,6 +317,11 @@ def write_report(
     failure: str | None = None,
 ) -> list[Path]:
     """``report.pdf`` (``report_pages``) and the residual plots as PNGs in ``directory``; returns the written paths."""
+    # matplotlib takes half a second to import: a run without plots (--no-report, the text outputs) never does
+    from matplotlib.backends.backend_pdf import PdfPages
+
+    from vical.calib import report_figures as figures
+
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     pngs = {"reprojection": figures.reprojection_page(result)}

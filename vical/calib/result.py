@@ -108,6 +108,19 @@ class ImuResiduals:
 
 
 @dataclass(frozen=True)
+class FramePoses:
+    """A camera's frames with a PnP pose: what the camera-IMU solve started from, and what the evidence checks of
+    ``vical.calib.plausibility`` read (so PnP runs once per frame).
+
+    Attributes:
+        t_ns: (F,) int64 [ns] their stamps (camera clock); T_cam_target: (F, 4, 4) their poses.
+    """
+
+    t_ns: np.ndarray
+    T_cam_target: np.ndarray
+
+
+@dataclass(frozen=True)
 class TimeOffsetTrace:
     """The camera's rotation rate against the gyro's, the evidence for the time offset (times [s] since one start).
 
@@ -165,6 +178,7 @@ class CalibrationResult:
         time_offset_trace: the camera's rotation rate against the gyro's, or None (intrinsic task).
         imu_intrinsics: the IMU's scale, misalignment and g-sensitivity (estimated with
             ``imu_model="scale-misalignment"``, else the known ones given), or None.
+        frame_poses: the PnP poses the camera-IMU solve started from, or None (intrinsic task).
     """
 
     task: str
@@ -194,6 +208,7 @@ class CalibrationResult:
     reprojection_pixels: np.ndarray | None = None
     time_offset_trace: TimeOffsetTrace | None = None
     imu_intrinsics: ImuIntrinsics | None = None
+    frame_poses: FramePoses | None = None
 
     @property
     def sigmas(self) -> dict[str, float]:

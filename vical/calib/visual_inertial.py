@@ -42,7 +42,7 @@ from vical.calib.intrinsics import check_model, estimated_pixel_sigma, intrinsic
 from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.observations import FrameObservation, collect_observations
 from vical.calib.outliers import reject_outliers
-from vical.calib.result import CalibrationResult, ImuResiduals, ResidualStats, TimeOffsetTrace
+from vical.calib.result import CalibrationResult, FramePoses, ImuResiduals, ResidualStats, TimeOffsetTrace
 from vical.calib.rig import OtherCamera, initialise_other, pair, prepare_other
 from vical.calib.robust_covariance import sandwich_covariances, widen
 from vical.calib.solver import covariance_or_unobservable, optimize
@@ -508,13 +508,17 @@ def _reweighted_solve(problem: _Problem, g: _Graph, solution, est: _Estimate, jo
 
     Noise-free corners (the corner noise at its floor) leave nothing to weigh: any weights give the
     exact solution, and the IMU's own model error would take over.
+
+    Returns the graph, solution, estimate, iterations and the noise factors measured at that solution
+    (None where the last solve came after the last measurement).
     """
     iterations = 0
     scheme = problem.options.noise_weighting
     if problem.sigma_px <= MIN_PIXEL_SIGMA or scheme == "declared":
-        return g, solution, est, iterations
+        return g, solution, est, iterations, None
+    measured = None
     for _ in range(MAX_REWEIGHTS):
-        s_camera, s_imu = _noise_factors(g, solution.values)
+        s_camera, s_imu = measured = _noise_factors(g, solution.values)
         if not all(np.isfinite([s_camera, s_imu])):
             break
         s_camera = max(s_camera, MIN_PIXEL_SIGMA / problem.sigma_px)  # the corner noise keeps its floor
@@ -535,14 +539,18 @@ def _reweighted_solve(problem: _Problem, g: _Graph, solution, est: _Estimate, jo
         problem.imu_noise_scale *= step
         g, solution, est, more = _solve_rounds(problem, est, joint)
         iterations += more
-    return g, solution, est, iterations
+        measured = None
+    return g, solution, est, iterations, measured
 
 
-def _measured_noise(problem: _Problem, g: _Graph, values: gtsam.Values) -> tuple[float, float]:
-    """(cameras, IMU) noise at the solution over their weights; 1 where it cannot be measured (no redundancy)."""
+def _measured_noise(
+    problem: _Problem, g: _Graph, values: gtsam.Values, measured: tuple[float, float] | None
+) -> tuple[float, float]:
+    """(cameras, IMU) noise at the solution over their weights (``measured`` when already known there); 1 where it
+    cannot be measured (no redundancy)."""
     if problem.sigma_px <= MIN_PIXEL_SIGMA:  # noise-free corners: nothing to measure against
         return 1.0, 1.0
-    factors = _noise_factors(g, values)
+    factors = _noise_factors(g, values) if measured is None else measured
     return tuple(float(f) if np.isfinite(f) and f > 0 else 1.0 for f in factors)
 
 
@@ -793,6 +801,10 @@ def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, i
             problem, problem.frame_times, problem.T_target_cam, est.T_cam_imu, est.tau0, est.gyro_bias
         ),
         imu_intrinsics=_imu_intrinsics(problem.options, est),
+        frame_poses=FramePoses(
+            np.array([problem.observations[k].t_ns for k in problem.frame_ids], dtype=np.int64),
+            np.linalg.inv(problem.T_target_cam),
+        ),
     )
 
 
@@ -853,6 +865,9 @@ def _other_result(
         warnings=notes + unobservable_warnings(names, covariance),
         frame_log=_other_frame_log(problem, other, given, used_frames),
         time_offset_trace=trace,
+        frame_poses=FramePoses(
+            np.array([o.t_ns for o in other.observations], dtype=np.int64), np.linalg.inv(other.T_target_cam)
+        ),
     )
 
 
@@ -924,8 +939,8 @@ def run_visual_inertial(
     problem.others = [_initial_other(problem, est, index, other) for index, other in enumerate(others, start=1)]
     joint = task == "joint"
     g, solution, est, iterations = _solve_rounds(problem, est, joint)
-    g, solution, est, more = _reweighted_solve(problem, g, solution, est, joint)
-    problem.noise_factors = _measured_noise(problem, g, solution.values)
+    g, solution, est, more, measured = _reweighted_solve(problem, g, solution, est, joint)
+    problem.noise_factors = _measured_noise(problem, g, solution.values, measured)
     problem.imu_noise_scale *= problem.noise_factors[1]  # the weight's scale times what remains at the solution
     problem.warnings += _span_warnings(problem, g) + _gap_warnings(g.state_times)
     problem.warnings += _imu_noise_warning(problem.imu_noise_scale, imu_noise, options.noise_weighting)
