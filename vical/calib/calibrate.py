@@ -18,6 +18,18 @@ from vical.calib.visual_inertial import CameraInput, ViOptions, run_visual_inert
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target
 from vical.geometry import CameraModel, invert_transform
 
+JOINT_START_VIEWS = 100  # views (at most, spread over the recording) of the intrinsic stage that starts a joint solve
+
+
+def _start_stride(frames: CameraFrames, opts: ViOptions) -> int:
+    """The frame stride of the intrinsic stage that starts a joint solve.
+
+    That stage only gives the start: a hundred views spread over the recording are plenty (a real 30 s
+    recording has 600, whose own solve and outlier screen took 1.9 s of the joint task's 3.6 s); recordings of
+    up to 199 frames keep every one.
+    """
+    return max(opts.frame_stride, len(frames) // JOINT_START_VIEWS)
+
 
 def calibrate_extrinsics(
     frames: CameraFrames,
@@ -70,7 +82,7 @@ def calibrate_joint(
     opts = options or ViOptions()
     intrinsic = calibrate_intrinsics(
         frames, target, model, image_size_px, initial_camera, opts.pixel_sigma, opts.huber_k,
-        frame_stride=opts.frame_stride, compare_models=False,
+        frame_stride=_start_stride(frames, opts), compare_models=False,
     )  # fmt: skip
     result = run_visual_inertial(
         "joint", frames, imu, target, intrinsic.camera, imu_noise or ImuNoise(), initial_T_cam_imu,
@@ -224,6 +236,7 @@ def _rig_intrinsics(name, frames, target, task, model, image_sizes, cameras, opt
         return None
     size = (image_sizes or {}).get(name)
     initial = known if task == "joint" else None  # the two-stage method calibrates the camera alone
+    stride = _start_stride(frames, opts) if task == "joint" else opts.frame_stride
     return calibrate_intrinsics(
-        frames, target, model, size, initial, opts.pixel_sigma, opts.huber_k, frame_stride=opts.frame_stride
+        frames, target, model, size, initial, opts.pixel_sigma, opts.huber_k, frame_stride=stride
     )

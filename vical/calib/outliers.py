@@ -19,7 +19,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from vical.calib.initialization import pnp
+from vical.calib.initialization import pnp, undistorted
 from vical.calib.observations import FrameObservation
 from vical.geometry import CameraModel
 
@@ -50,11 +50,12 @@ def robust_pose(
     """
     inliers = np.ones(len(obs.ids), dtype=bool)
     max_removed = int(np.floor(MAX_OUTLIER_FRACTION * len(obs.ids)))
+    xy = undistorted(camera, obs.uv)  # once: each round refits on a subset of the same rays
     for _ in range(max_removed + 1):
         if inliers.sum() < min_corners:
             return None
         subset = keep_inliers(obs, inliers)
-        fit = pnp(camera, subset)
+        fit = pnp(camera, subset, xy[inliers])
         if fit is None:
             return None
         T = fit[0]

@@ -631,32 +631,64 @@ def _clusters(g: _Graph, num_factors: int) -> np.ndarray:
     return np.where(states >= 0, g.state_windows[np.maximum(states, 0)], -1)
 
 
+@dataclass
+class _Marginals:
+    """The joint covariances of every camera's variables, the first bias and the IMU intrinsics, computed once for
+    all cameras of a rig (one linearisation, one elimination, one sparse factorisation).
+
+    ``model``: the noise model's (GTSAM's marginals: NaN where the data leave a direction free); ``scaled``: under
+    the measured noise levels (None with a singular information); ``robust``: the cluster-robust one or None.
+    """
+
+    columns: dict[int, np.ndarray]  # each key's rows and columns in the matrices
+    model: np.ndarray
+    scaled: np.ndarray | None
+    robust: np.ndarray | None
+
+    def block(self, keys: list[int]) -> tuple[np.ndarray, np.ndarray | None]:
+        """The keys' covariance (the measured noise levels' where finite, else the model's) and robust one."""
+        index = np.concatenate([self.columns[k] for k in keys])
+        model = self.model[np.ix_(index, index)]
+        if self.scaled is not None and np.all(np.isfinite(model)):
+            model = self.scaled[np.ix_(index, index)]
+        return model, None if self.robust is None else self.robust[np.ix_(index, index)]
+
+
+def _camera_keys(index: int, joint: bool, fixed_offset: bool) -> list[int]:
+    return ([_key("k", index)] if joint else []) + [_key("e", index)] + ([] if fixed_offset else [_key("d", index)])
+
+
+def _marginals(problem: _Problem, g: _Graph, values: gtsam.Values, joint: bool, estimated_imu: bool) -> _Marginals:
+    fixed = not problem.options.estimate_time_offset
+    keys = [k for index in range(len(problem.others) + 1) for k in _camera_keys(index, joint, fixed)]
+    keys += [_key("b", 0)] + ([I_KEY] if estimated_imu else [])
+    linear = g.graph.linearize(values)
+    model = covariance_or_unobservable(linear, values, keys)
+    scale = _variance_scale(problem, g, linear.size())
+    found = sandwich_covariances(linear, values, keys, _clusters(g, linear.size()), scale)
+    sizes = [values.zeroVectors().at(k).size for k in keys]
+    starts = np.cumsum([0, *sizes])
+    columns = {k: np.arange(starts[n], starts[n + 1]) for n, k in enumerate(keys)}
+    return _Marginals(columns, model, None if found is None else found[0], None if found is None else found[1])
+
+
 def _parameter_covariance(
-    g: _Graph,
+    marginals: _Marginals,
     values: gtsam.Values,
     T_cam_imu: np.ndarray,
     joint: bool,
     fixed_offset: bool,
-    variance_scale: np.ndarray,
     index: int = 0,
     imu_theta: np.ndarray | None = None,
 ):
     """(P, P) covariance in the order of the result's parameter names and its widening (P,) over the noise model's.
 
     Of camera ``index``'s variables (0: the first camera's), the first bias and, with ``imu_theta`` (the
-    estimated IMU intrinsics), those. The covariance under the measured noise levels (``variance_scale``, per
-    factor) widened wherever the cluster-robust one (``vical.calib.robust_covariance``) is larger; a fixed time
-    offset gets zero variance.
+    estimated IMU intrinsics), those. The covariance under the measured noise levels widened wherever the
+    cluster-robust one (``vical.calib.robust_covariance``) is larger; a fixed time offset gets zero variance.
     """
-    offset_keys = [] if fixed_offset else [_key("d", index)]
     intrinsic_keys = [] if imu_theta is None else [I_KEY]
-    keys = ([_key("k", index)] if joint else []) + [_key("e", index), *offset_keys, _key("b", 0), *intrinsic_keys]
-    linear = g.graph.linearize(values)
-    model = covariance_or_unobservable(linear, values, keys)
-    found = sandwich_covariances(linear, values, keys, _clusters(g, linear.size()), variance_scale)
-    if found is not None and np.all(np.isfinite(model)):
-        model = found[0]
-    robust = None if found is None else found[1]
+    model, robust = marginals.block([*_camera_keys(index, joint, fixed_offset), _key("b", 0), *intrinsic_keys])
     cov = model if robust is None else widen(model, robust)
     offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
     camera_block = [np.eye(values.atVector(_key("k", index)).size)] if joint else []
@@ -751,13 +783,14 @@ def _imu_residuals(g: _Graph, values: gtsam.Values, gravity_magnitude: float) ->
     return ImuResiduals(a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13])
 
 
-def _result(task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, iterations: int, start: float):
+def _result(
+    task: str, problem: _Problem, g: _Graph, solution, est: _Estimate, iterations: int, start: float, marginals
+):
     joint = task == "joint"
     values = solution.values
     camera = problem.camera
-    scale = _variance_scale(problem, g, g.graph.size())
     covariance, widening = _parameter_covariance(
-        g, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset, scale, imu_theta=est.imu_theta
+        marginals, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset, imu_theta=est.imu_theta
     )
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
     if est.imu_theta is not None:
@@ -822,15 +855,15 @@ def _other_result(
     entry,
     given: CameraInput,
     first: CalibrationResult,
+    marginals: _Marginals,
 ):
     """Another camera's result: its parameters with the shared biases, its residuals, corners, frames and time-offset
     evidence, the shared IMU residuals."""
     other, factors, paired, frame_index = entry
     joint = task == "joint"
     values = solution.values
-    scale = _variance_scale(problem, g, g.graph.size())
     covariance, widening = _parameter_covariance(
-        g, values, other.T_cam_imu, joint, not problem.options.estimate_time_offset, scale, other.index
+        marginals, values, other.T_cam_imu, joint, not problem.options.estimate_time_offset, other.index
     )
     camera = other.camera
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
@@ -944,10 +977,11 @@ def run_visual_inertial(
     problem.imu_noise_scale *= problem.noise_factors[1]  # the weight's scale times what remains at the solution
     problem.warnings += _span_warnings(problem, g) + _gap_warnings(g.state_times)
     problem.warnings += _imu_noise_warning(problem.imu_noise_scale, imu_noise, options.noise_weighting)
-    first = _result(task, problem, g, solution, est, iterations + more, start)
+    marginals = _marginals(problem, g, solution.values, joint, est.imu_theta is not None)
+    first = _result(task, problem, g, solution, est, iterations + more, start, marginals)
     first = replace(first, frame_log=_frame_log(frames, every, problem, g, first.reprojection_frames))
     return [first] + [
-        _other_result(task, problem, g, solution, est, entry, given, first)
+        _other_result(task, problem, g, solution, est, entry, given, first, marginals)
         for entry, given in zip(g.others, others, strict=True)
     ]
 
