@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from scipy.spatial.transform import Rotation
 
 HERE = Path(__file__).resolve().parent
 DATA = HERE.parents[1] / "shared" / "realdata" / "euroc_imu_april_0-36s"
@@ -52,6 +53,9 @@ BASALT_CAM0 = np.array([[0.014883170, 0.999670680, -0.020905090, 0.069273334],
                         [-0.999889070, 0.014892081, 0.000270668, -0.015747675],
                         [0.000581899, 0.020898743, 0.999781428, -0.003687501], [0, 0, 0, 1]])  # fmt: skip
 EUROC_FOCAL = {"cam0": (458.654, 457.296), "cam1": (457.587, 456.134)}
+# The parameters whose 10 s estimates are compared with each other (rotations as the camera-frame rotation
+# vector between two windows' R_cam_imu, the others as estimated).
+CONSISTENCY_PARAMETERS = ("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "time_offset", "fx", "fy")
 
 
 def rotation_deg(R: np.ndarray) -> float:
@@ -116,6 +120,7 @@ def run_one(spec: dict) -> dict:
             "sigma_t_mm": float(1e3 * np.linalg.norm(sigma[[at["t_x"], at["t_y"], at["t_z"]]])),
             "sigma_offset_ms": float(1e3 * sigma[at["time_offset"]]), "solve_time": r.solve_time,
             "noise_scale": r.imu_noise_scale,
+            "sigmas": {n: float(sigma[at[n]]) for n in CONSISTENCY_PARAMETERS if n in at},
         }  # fmt: skip
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return {"cameras": cameras, "command_s": time.time() - start, "extra_mb": peak_mb - base_mb}
@@ -198,6 +203,32 @@ def vical_rows(cameras: tuple[str, ...], task: str, window, found: dict) -> list
     return rows
 
 
+def window_values(camera: dict, reference: np.ndarray) -> dict[str, float]:
+    """One window's estimates by parameter name; rotations relative to ``reference`` (R_cam_imu) [rad]."""
+    T = np.array(camera["T_cam_imu"])
+    rotation = Rotation.from_matrix(T[:3, :3] @ reference.T).as_rotvec()
+    values = dict(zip(("rot_x", "rot_y", "rot_z"), rotation, strict=True))
+    values |= dict(zip(("t_x", "t_y", "t_z"), T[:3, 3], strict=True))
+    return values | {"time_offset": camera["time_offset"], "fx": camera["fx"], "fy": camera["fy"]}
+
+
+def consistency_rows(label: str, windows: list[dict]) -> list[str]:
+    """Do the 10 s windows agree within their own sigmas, and do the sigmas explain their spread?
+
+    Per parameter: the largest difference between two windows over its 1-sigma (sqrt(s_a^2 + s_b^2)), and the
+    windows' mean 1-sigma over the standard deviation of their estimates (honest: near 1; over 2: too wide)."""
+    reference = np.array(windows[0]["T_cam_imu"])[:3, :3]
+    values = [window_values(w, reference) for w in windows]
+    rows = []
+    for name in windows[0]["sigmas"]:
+        x = np.array([v[name] for v in values])
+        s = np.array([w["sigmas"][name] for w in windows])
+        z = max(abs(x[a] - x[b]) / np.hypot(s[a], s[b]) for a in range(len(x)) for b in range(a + 1, len(x)))
+        spread = float(np.std(x, ddof=1))
+        rows.append(f"{label} {name:11} max |diff| / sigma {z:5.2f}   mean sigma / spread {np.mean(s) / spread:5.2f}")
+    return rows
+
+
 HEADER = (
     "cameras   task      window  cam    EuRoC: deg    mm Basalt: deg  mm  dt ms fx %  fy %   1sig deg  mm noise x "
     "solve s  cmd s  +MB"
@@ -224,11 +255,23 @@ def main(argv: list[str] | None = None) -> int:
         (c, t, w) for c in CAMERA_SETS for t in TASKS for w in WINDOWS]  # fmt: skip
     print(f"load average {os.getloadavg()[0]:.2f} (1 min) at the start; {args.data}")
     print(HEADER)
+    found = {}
     for n, (cameras, task, window) in enumerate(plan, start=1):
         spec = {"data": str(args.data), "task": task, "cameras": list(cameras), "window": list(window),
                 "out": str(out / f"run{n}"), **{k: str(v) for k, v in files.items()}}  # fmt: skip
-        for row in vical_rows(cameras, task, window, spawn(spec)):
+        found[cameras, task, window] = spawn(spec)
+        for row in vical_rows(cameras, task, window, found[cameras, task, window]):
             print(row, flush=True)
+    print("\nthe three 10 s windows against each other")
+    for cameras in CAMERA_SETS:
+        for task in TASKS:
+            runs = [found.get((cameras, task, w)) for w in WINDOWS[:3]]
+            if any(r is None or "error" in r for r in runs):
+                continue
+            for name in cameras:
+                label = f"{'+'.join(cameras):9} {task:9} {name:5}"
+                for row in consistency_rows(label, [r["cameras"][name] for r in runs]):
+                    print(row)
     print("\npeers on the same corners and IMU")
     for window in [WINDOWS[0]] if args.quick else WINDOWS:
         rec = window_recording(args.data, files["target"], window)
