@@ -1,6 +1,7 @@
 """Noise settings: bad values refused by key, implausible ones warned about, wrong ones measured and corrected."""
 
 import math
+import re
 
 import gtsam
 import numpy as np
@@ -113,3 +114,20 @@ def test_frame_stride_uses_every_nth_frame():
     errors = calibration_errors(half, rec.truth)
     assert errors.rotation_deg < 0.1 and errors.translation_mm < 3.0
     assert half.sigma("t_x") > full.sigma("t_x")  # fewer frames, less information
+
+
+@pytest.mark.parametrize("declared_over_true", [100.0, 0.01])
+def test_densities_a_hundred_times_off_are_named_with_the_values_the_residuals_show(declared_over_true):
+    rec = recording(seed=6)
+    declared = PAPER.scaled(declared_over_true)
+    result = calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, declared)
+    (warning,) = [w for w in result.warnings if "IMU residuals show a noise" in w]
+    found = re.search(r"gyroscope_noise_density ([\d.e+-]+), accelerometer_noise_density ([\d.e+-]+)", warning)
+    gyro, accel = float(found.group(1)), float(found.group(2))
+    # An inflated file is reweighted to its residuals: the values match the truth. A file below the truth keeps
+    # its weight, and the ratio judged there reads low (vical.calib.variance), as the warning says: the values
+    # still point from the declared a hundredth most of the way to the truth.
+    low = 1.2 if declared_over_true > 1 else 5.0
+    assert PAPER.gyro_noise_density / low < gyro < 1.2 * PAPER.gyro_noise_density
+    assert PAPER.accel_noise_density / low < accel < 1.2 * PAPER.accel_noise_density
+    assert ("a large excess reads low" in warning) == (declared_over_true < 1)

@@ -579,7 +579,8 @@ def _imu_noise_warning(scale: float, declared: ImuNoise, weighting: str) -> list
     match = declared.scaled(scale)
     return [
         f"the IMU residuals show a noise {scale:.3g}x the declared densities ({side}); {how}. imu.yaml values that "
-        f"match the residuals: gyroscope_noise_density {match.gyro_noise_density:.3g}, accelerometer_noise_density "
+        f"match the residuals{' (judged at the declared weights: a large excess reads low)' if kept else ''}: "
+        f"gyroscope_noise_density {match.gyro_noise_density:.3g}, accelerometer_noise_density "
         f"{match.accel_noise_density:.3g}, gyroscope_random_walk {match.gyro_random_walk:.3g}, "
         f"accelerometer_random_walk {match.accel_random_walk:.3g}"
     ]
