@@ -569,10 +569,10 @@ def wrong_settings(result: CalibrationResult, frames, rec: Recording, args) -> l
                      "m/s^2; leave out --accel-unit g")  # fmt: skip
     board = board_scale(posed, rec.imu, result.T_cam_imu[:3, :3], result.time_offset)
     if wrong_board_scale(board):
-        size = rec.target.row_spacing
+        size, scale = rec.target.row_spacing, board.centre[0]
         found.append(
-            f"the camera's accelerations are {board[0]:.2f}x the IMU's: the board is {board[0]:.2f}x smaller than "
-            f"--target says ({size:g} m; the data suggest {size / board[0]:.3g} m); give the board's true size in "
+            f"the camera's accelerations are {scale:.2f}x the IMU's: the board is {scale:.2f}x smaller than "
+            f"--target says ({size:g} m; the data suggest {size / scale:.3g} m); give the board's true size in "
             "--target"
         )
     return found

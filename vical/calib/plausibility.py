@@ -20,6 +20,8 @@ They are a warning (``vical.calib.visual_inertial``), never a failure.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
@@ -37,6 +39,7 @@ NOISE_LIMIT = 5.0  # reprojection rms over the declared (or assumed) corner nois
 SCALE_LIMIT = 1.5
 BOARD_SCALE_SIGMAS = 4.0  # ... and the board's scale must be that many of its standard errors away from 1
 ACCEL_WINDOW = 0.15  # [s] step of the second differences of the camera positions (board scale)
+LEVER_ARM_PRIOR = 0.1  # [m] 1-sigma of each component of the camera-IMU lever arm in the board scale's fit
 # [px] the corner noise assumed when none is declared: sub-pixel corner detectors stay well below it.
 DEFAULT_PIXEL_SIGMA = 1.0
 DEG_PER_RAD = 180.0 / np.pi
@@ -137,54 +140,86 @@ def likely_accel_unit(scale: float | None, declared: str) -> str | None:
     return "m/s^2" if scale > SCALE_LIMIT else None
 
 
-def board_scale(
-    posed: FramePoses,
-    imu: ImuSamples,
-    R_cam_imu: np.ndarray,
-    time_offset: float,
-) -> tuple[float, float] | None:
+@dataclass(frozen=True)
+class BoardScale:
+    """The board's declared size over its true size, measured twice (``board_scale``), each as (scale, sigma), or
+    None where the data do not determine it.
+
+    Attributes:
+        centre: from the camera centre's own accelerations (the lever arm left out: a camera turning about
+            itself, the IMU swinging around it, reads low).
+        lever_arm: with the camera-IMU lever arm fitted too, under a prior of a rig's size (over a few
+            seconds of coupled turning and moving it still trades off against the scale, and reads low).
+    """
+
+    centre: tuple[float, float] | None
+    lever_arm: tuple[float, float] | None
+
+
+def board_scale(posed: FramePoses, imu: ImuSamples, R_cam_imu: np.ndarray, time_offset: float) -> BoardScale | None:
     """How many times the camera's accelerations are the IMU's: the board's declared size over its true size.
 
-    Independent of the solve's weighting and translation (a wrong board size makes the solved lever arm
-    meaningless): the camera's positions come from the PnP poses, their second differences over
-    ``ACCEL_WINDOW`` are compared with the accelerometer's specific force rotated into the board frame and
-    averaged with the same hat-shaped weights, and the scale and gravity are fitted by least squares. A
-    board given 10 % too large makes every camera position, and so every acceleration, 10 % too large.
-    The lever arm's rotational accelerations are left out: they bias the ratio by a few percent (about
-    +2 % on the real dev set, +7 % on the simulator's 10 cm arm), far below a wrong size's.
+    Independent of the solve (a wrong board size makes the solved lever arm meaningless): the camera's
+    positions come from the PnP poses, and their divided second differences over ``ACCEL_WINDOW`` equal the
+    IMU's accelerations averaged with the same hat-shaped weights, less the lever arm's share (the second
+    difference of ``R_target_cam r``), all times the scale: ``a_cam = s (R f + g) - D2[R_target_cam] (s r)``,
+    fitted by linear least squares without the lever arm and with it (``BoardScale``). A board given 10 %
+    too large makes every camera position, and so every acceleration, 10 % too large.
 
     Returns:
-        (scale, its standard error), or None with too few evenly spaced posed frames or too little motion.
+        None with too few evenly spaced posed frames or too little motion.
     """
     if len(posed.t_ns) < 10 or len(imu) < 2:
         return None
     t0 = imu.t[0]
     times = seconds_since(posed.t_ns, t0) + time_offset
     T_target_cam = np.linalg.inv(posed.T_cam_target)
-    positions = T_target_cam[:, :3, 3]  # the lever arm's rotational accelerations are left out: a few % of the motion's
-    rotations = Rotation.from_matrix(T_target_cam[:, :3, :3] @ R_cam_imu)
+    positions, R_target_cam = T_target_cam[:, :3, 3], T_target_cam[:, :3, :3]
     t_imu = seconds_since(imu.t, t0)
     before, centre, after = _difference_triples(times, t_imu)
     if len(centre) < 10:
         return None
-    p0, p1, p2 = positions[before], positions[centre], positions[after]
     t0s, t1s, t2s = times[before], times[centre], times[after]
-    camera_accel = 2 * ((p2 - p1) / (t2s - t1s)[:, None] - (p1 - p0) / (t1s - t0s)[:, None]) / (t2s - t0s)[:, None]
-    imu_accel = _kernel_specific_force(t_imu, imu.accel, Slerp(times, rotations), t0s, t1s, t2s)
-    # camera_accel = scale (imu_accel + gravity): unknowns the scale and scale x gravity (board frame). The camera's
-    # second differences carry the noise (PnP's, amplified); the IMU's averages are the regressor, nearly exact,
-    # so the fit is not attenuated by noise in its regressor.
-    A = np.zeros((3 * len(centre), 4))
-    A[:, 0] = imu_accel.reshape(-1)
-    A[:, 1:] = np.tile(np.eye(3), (len(centre), 1))
-    b = camera_accel.reshape(-1)
+    camera_accel = _second_difference(positions, before, centre, after, t0s, t1s, t2s)
+    rotation_accel = _second_difference(R_target_cam, before, centre, after, t0s, t1s, t2s)  # (C, 3, 3)
+    rotations = Slerp(times, Rotation.from_matrix(R_target_cam @ R_cam_imu))
+    imu_accel = _kernel_specific_force(t_imu, imu.accel, rotations, t0s, t1s, t2s)
+    # The camera's second differences carry the noise (PnP's, amplified); the IMU's averages are the regressor,
+    # nearly exact, so the fit is not attenuated by noise in its regressor.
+    A = np.zeros((len(centre), 3, 7))
+    A[:, :, 0] = imu_accel
+    A[:, :, 1:4] = np.eye(3)
+    A[:, :, 4:] = rotation_accel
+    A, b = A.reshape(-1, 7), camera_accel.reshape(-1)
+    return BoardScale(_scale_fit(A[:, :4], b), _scale_fit(*_lever_arm_prior(A, b)))
+
+
+def _lever_arm_prior(A: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The system with a prior of ``LEVER_ARM_PRIOR`` on each component of the (scaled) lever arm, weighted
+    against the unconstrained fit's residual noise: over a few seconds of coupled turning and moving, the
+    lever arm alone would trade off against the scale."""
+    noise = float(np.sqrt(np.mean((b - A @ np.linalg.lstsq(A, b, rcond=None)[0]) ** 2)))
+    prior = np.zeros((3, A.shape[1]))
+    prior[:, 4:] = np.eye(3) * noise / LEVER_ARM_PRIOR
+    return np.vstack([A, prior]), np.concatenate([b, np.zeros(3)])
+
+
+def _scale_fit(A: np.ndarray, b: np.ndarray) -> tuple[float, float] | None:
+    """The first unknown of ``A x = b`` (least squares) and its standard error; None when it is not positive or
+    not determined to within half of itself."""
     solution, *_ = np.linalg.lstsq(A, b, rcond=None)
     residual = b - A @ solution
-    covariance = np.linalg.pinv(A.T @ A) * float(residual @ residual) / max(len(b) - 4, 1)
+    covariance = np.linalg.pinv(A.T @ A) * float(residual @ residual) / max(len(b) - A.shape[1], 1)
     scale, sigma = float(solution[0]), float(np.sqrt(covariance[0, 0]))
-    if scale <= 0 or sigma > 0.5 * scale:
-        return None
-    return scale, sigma
+    return (scale, sigma) if scale > 0 and sigma < 0.5 * scale else None
+
+
+def _second_difference(x: np.ndarray, before, centre, after, t0: np.ndarray, t1: np.ndarray, t2: np.ndarray):
+    """Divided second differences of ``x`` (F, ...) over the triples ``(before, centre, after)`` at ``t0 < t1 < t2``."""
+    shape = (-1,) + (1,) * (x.ndim - 1)
+    ahead = (x[after] - x[centre]) / (t2 - t1).reshape(shape)
+    behind = (x[centre] - x[before]) / (t1 - t0).reshape(shape)
+    return 2 * (ahead - behind) / (t2 - t0).reshape(shape)
 
 
 def _difference_triples(times: np.ndarray, t_imu: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -218,10 +253,14 @@ def _kernel_specific_force(
     return out
 
 
-def wrong_board_scale(found: tuple[float, float] | None) -> bool:
-    """Whether a ``board_scale`` proves the board's size wrong (far from 1, and many standard errors away)."""
-    if found is None:
+def wrong_board_scale(found: BoardScale | None) -> bool:
+    """Whether a ``board_scale`` proves the board's size wrong: the camera centre's ratio beyond ``SCALE_LIMIT``
+    and ``BOARD_SCALE_SIGMAS`` of its error from 1, and the ratio with the lever arm fitted beyond the limit's
+    square root on the same side (either can read low on honest data, for its own reason; a wrong size moves
+    both)."""
+    if found is None or found.centre is None or found.lever_arm is None:
         return False
-    scale, sigma = found
-    far = max(scale, 1 / scale) > SCALE_LIMIT
-    return far and abs(scale - 1.0) > BOARD_SCALE_SIGMAS * sigma
+    (scale, sigma), (with_arm, _) = found.centre, found.lever_arm
+    side = np.sign(np.log(scale))
+    far = abs(np.log(scale)) > np.log(SCALE_LIMIT) and abs(scale - 1.0) > BOARD_SCALE_SIGMAS * sigma
+    return bool(far and side * np.log(with_arm) > 0.5 * np.log(SCALE_LIMIT))
