@@ -16,9 +16,8 @@ from vical.calib.plausibility import (
     posed_frames,
     wrong_board_scale,
 )
-from vical.calib.result import ResidualStats
-from vical.calib.synthetic import Excitation, make_recording
-from vical.calib.result import FramePoses
+from vical.calib.result import FramePoses, ResidualStats
+from vical.calib.synthetic import make_recording
 from vical.data import ImuNoise, ImuSamples, Target
 from vical.geometry import make_transform, so3_exp
 
