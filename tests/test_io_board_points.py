@@ -70,6 +70,22 @@ def test_a_board_of_another_size_is_named_in_one_line(rig, tmp_path):
         open_recording(path, Target.aprilgrid(tag_size=0.1))
 
 
+@pytest.mark.parametrize(
+    "row, message",
+    [
+        ("1700000000000000000,6,6,0.088,0.3,12.5,abc,0,0,0,0,0", r"1700000000000000000.csv, line 2: could not convert"),
+        ("1700000000000000000,6,6,0.088,0.3,12.5,20.5,0,0,0,0", r"line 2: expected 12 comma-separated fields"),
+        ("1700000000000000001,6,6,0.088,0.3,12.5,20.5,0,0,0,0,0", r"rows are stamped 1700000000000000001 ns, its name"),
+        ("1700000000000000000,6,6,0.088,0.3,12.5,nan,0,0,0,0,0", r"NaN or inf in a corner's pixel"),
+    ],
+)
+def test_a_malformed_frame_file_is_named_with_its_line(tmp_path, row, message):
+    (tmp_path / "cam0").mkdir()
+    (tmp_path / "cam0" / "1700000000000000000.csv").write_text(HEADER + row + "\n")
+    with pytest.raises(CsvFormatError, match=message):
+        open_recording(tmp_path, Target.aprilgrid())
+
+
 def test_a_named_column_corner_csv_reads_like_a_point_id_one(rig, tmp_path):
     target, frames = rig.target, rig.frames
     lines = ["timestamp [ns],u [px],v [px],p_x [m],p_y [m],p_z [m]\n"]

@@ -229,8 +229,11 @@ def _frame_file(path: Path, target: Target) -> tuple[np.ndarray, np.ndarray]:
     stamp = path.stem
     values = None
     if layout.time == 0 and all(line.startswith(stamp + ",") for line in lines):
-        values = np.fromstring(",".join(lines), sep=",")  # the C parser, one pass
-        if values.size != len(lines) * layout.count or not np.isfinite(values).all():
+        try:
+            values = np.fromstring(",".join(lines), sep=",")  # the C parser, one pass
+        except ValueError:  # a field that is no number: the rows say which
+            values = None
+        if values is not None and (values.size != len(lines) * layout.count or not np.isfinite(values).all()):
             values = None
     if values is None:
         return _frame_file_by_rows(path, target, int(stamp))
