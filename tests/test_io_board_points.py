@@ -121,3 +121,27 @@ def test_the_real_dev_set_reads_as_a_stereo_recording_with_its_imu():
     assert len(rec.imu) > 7000 and 190 < 1e9 / np.median(np.diff(rec.imu.t)) < 210
     corners = sum(len(i) for i in rec.frames.ids)
     assert corners > 90_000  # ~130 corners in each of ~700 views
+
+
+def test_a_corner_folder_without_imu_says_where_the_imu_goes(rig, tmp_path, capsys):
+    from vical.apps.calibrate import main
+    from vical.io.kalibr import write_target_yaml
+
+    root = write_yac_folder(rig, tmp_path / "yac")
+    (root / "imu0.csv").unlink()
+    write_target_yaml(tmp_path / "target.yaml", rig.target)
+    argv = [
+        str(root),
+        "--target",
+        str(tmp_path / "target.yaml"),
+        "--image-size",
+        "640",
+        "480",
+        "--out",
+        str(tmp_path / "o"),
+    ]
+    assert main(argv) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert "the joint task needs IMU data, but it holds no imu0.csv (or imu0/data.csv)" in line
+    assert main([*argv[:-1], str(tmp_path / "o2"), "--cameras", "cam2", "--task", "intrinsic"]) == 2
+    assert "has cam0, cam1 (its camN folders of per-frame corner files)" in capsys.readouterr().err

@@ -304,6 +304,7 @@ def _no_imu_message(kind: str, args: argparse.Namespace) -> str:
         "image_folder": "an image folder holds no IMU data",
         "corners_csv": "a corner CSV holds no IMU data: pass the IMU as --imu-csv imu.csv (EuRoC format)",
         "euroc": "its imu0/data.csv is missing or empty",
+        "corner_folder": "it holds no imu0.csv (or imu0/data.csv): put the IMU there or pass it as --imu-csv",
         "bag": f"its topic {args.imu_topic} has no IMU messages: choose the IMU topic with --imu-topic",
         "recording": "the recording holds no IMU samples",
     }

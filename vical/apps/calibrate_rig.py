@@ -35,6 +35,7 @@ FRAMES_CSV = "frames.csv"  # each camera's, in its folder of the outputs
 # Where each source's cameras come from, for the message that lists them.
 CAMERAS_OF = {
     "euroc": "its camN folders",
+    "corner_folder": "its camN folders of per-frame corner files",
     "bag": "one per image topic (--image-topic, or the rostopic of each camera of --intrinsics)",
     "recording": "cam0 and its frames_camN.npz",
     "corners_csv": "a corner CSV holds one camera",
