@@ -16,7 +16,7 @@ import numpy as np
 
 from vical.calib.errors import CalibrationError
 from vical.calib.observations import FrameObservation
-from vical.geometry import CameraModel, make_transform
+from vical.geometry import CameraModel, CameraModelError, make_transform
 from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
 
 MIN_INIT_CORNERS = 12  # frames with fewer corners gave metre-level PnP errors; skip them for initialisation
@@ -115,11 +115,11 @@ def opencv_camera(observations: list[FrameObservation], size: tuple[int, int]) -
         _, K, dist, *_ = cv2.calibrateCamera(objects, pixels, size, None, None, flags=cv2.CALIB_FIX_K3)
     except cv2.error:
         return None
-    fx, fy, cx, cy = K[0, 0], K[1, 1], K[0, 2], K[1, 2]
-    w, h = size
-    if not (np.all(np.isfinite(K)) and fx > 0 and fy > 0 and 0 <= cx < w and 0 <= cy < h):
+    try:
+        camera = CameraModel("radtan", *size, K[0, 0], K[1, 1], K[0, 2], K[1, 2], np.asarray(dist, float).ravel()[:4])
+    except CameraModelError:  # not finite, or a focal length that is not positive
         return None
-    return CameraModel("radtan", w, h, fx, fy, cx, cy, np.asarray(dist, float).ravel()[:4])
+    return camera if camera.principal_point_in_image else None
 
 
 def initial_camera(observations: list[FrameObservation], model: str, size: tuple[int, int]) -> CameraModel:

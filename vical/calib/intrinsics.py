@@ -251,8 +251,7 @@ def _start(observations: list[FrameObservation], model: str, size: tuple[int, in
 
 def _settled(camera: CameraModel, solution) -> bool:
     """A solve that converged to a camera whose principal point lies in its image."""
-    inside = 0 <= camera.cx < camera.width and 0 <= camera.cy < camera.height
-    return solution.status == "converged" and inside
+    return solution.status == "converged" and camera.principal_point_in_image
 
 
 def _from_opencv_start(solve: _Solve, model: str, size: tuple[int, int], min_corners: int):

@@ -63,7 +63,7 @@ def implausibilities(
             "weakly: add views tilted 30-60 deg, near the image's corners, at several distances)"
         )
     camera = result.camera
-    if not (0 <= camera.cx < camera.width and 0 <= camera.cy < camera.height):
+    if not camera.principal_point_in_image:
         found.append(
             f"the principal point ({camera.cx:.1f}, {camera.cy:.1f}) px lies outside the {camera.width} x "
             f"{camera.height} image"

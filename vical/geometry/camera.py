@@ -382,6 +382,12 @@ class CameraModel:
         rays = np.hstack([xy, np.ones((len(xy), 1))])
         return rays / np.linalg.norm(rays, axis=1, keepdims=True), np.all(np.isfinite(rays), axis=1)
 
+    @property
+    def principal_point_in_image(self) -> bool:
+        """Whether the principal point lies in the image (``0 <= cx < width``, ``0 <= cy < height``): a calibration
+        that puts it outside has diverged."""
+        return bool(0 <= self.cx < self.width and 0 <= self.cy < self.height)
+
     def in_image(self, uv: np.ndarray, border: float = 0.0) -> np.ndarray:
         """Mask (N,) of pixels inside the image, at least ``border`` [px] from its edge."""
         uv = np.atleast_2d(uv)
