@@ -10,8 +10,9 @@ much each window pulls on the parameters::
     Sigma_robust = H^-1 (sum_c g_c g_c^T) H^-1 * C / (C - 1),    g_c = A_c^T r_c
 
 with ``A``, ``r`` the whitened Jacobian and residuals of the linearised graph at the solution,
-``H = A^T A``, and ``c`` the ``C`` windows. The covariance a calibration reports is the model's,
-widened along every direction where the robust one is larger (``widen``), never narrowed: with few
+``H = A^T A``, and ``c`` the ``C`` windows. ``sandwich_covariances`` computes it beside the covariance
+under the measured noise levels, from the same factorisation. The covariance a calibration reports is the
+latter, widened along every direction where the robust one is larger (``widen``), never narrowed: with few
 windows the robust estimate is noisy.
 """
 
@@ -116,24 +117,6 @@ def sandwich_covariances(
         return scaled, None
     pulls = gradients.T @ X  # (C, k): each window's pull g_c^T H^-1 on the parameters
     return scaled, C / (C - 1) * (pulls.T @ pulls)
-
-
-def robust_covariance(
-    linear: gtsam.GaussianFactorGraph, values: gtsam.Values, keys: Sequence[int], clusters: np.ndarray
-) -> np.ndarray | None:
-    """Cluster-robust covariance (in the keys' tangent spaces, in order) of the graph linearised at ``values``.
-
-    Args:
-        linear: the graph linearised at the solution (whitened factors).
-        values: the solution.
-        keys: the variables whose joint covariance is wanted.
-        clusters: (F,) the window of each factor of ``linear`` (-1: none, e.g. priors, which are no data).
-
-    Returns:
-        The (k, k) covariance, or None with fewer than two windows or a singular information matrix.
-    """
-    found = sandwich_covariances(linear, values, keys, clusters, np.ones(linear.size()))
-    return None if found is None else found[1]
 
 
 def widen(model: np.ndarray, robust: np.ndarray) -> np.ndarray:

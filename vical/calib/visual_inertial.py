@@ -667,7 +667,8 @@ def _marginals(problem: _Problem, g: _Graph, values: gtsam.Values, joint: bool, 
     model = covariance_or_unobservable(linear, values, keys)
     scale = _variance_scale(problem, g, linear.size())
     found = sandwich_covariances(linear, values, keys, _clusters(g, linear.size()), scale)
-    sizes = [values.zeroVectors().at(k).size for k in keys]
+    zero = values.zeroVectors()
+    sizes = [zero.at(k).size for k in keys]
     starts = np.cumsum([0, *sizes])
     columns = {k: np.arange(starts[n], starts[n + 1]) for n, k in enumerate(keys)}
     return _Marginals(columns, model, None if found is None else found[0], None if found is None else found[1])
