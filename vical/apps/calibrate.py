@@ -86,7 +86,7 @@ from vical.calib.plausibility import (
 )
 from vical.calib.report import summary_table, weak_sigma_text, write_frames_csv, write_report, write_results_text
 from vical.calib.result import CalibrationResult
-from vical.calib.visual_inertial import ViOptions
+from vical.calib.visual_inertial import GRAVITY_MAGNITUDE, ViOptions
 from vical.data import DataError, ImuNoise, Recording, Target
 from vical.data.target import TargetError
 from vical.geometry import CAMERA_MODELS, CameraModel, CameraModelError
@@ -563,8 +563,8 @@ def wrong_settings(result: CalibrationResult, frames, rec: Recording, args) -> l
     accel = accel_scale(rec.imu)
     unit = likely_accel_unit(accel, args.accel_unit)
     if unit == "g":
-        found.append(f"the accelerometer reads {accel * 9.81:.3g} m/s^2 in the median where gravity alone is 9.81: "
-                     "it logs g; pass --accel-unit g")  # fmt: skip
+        found.append(f"the accelerometer reads {accel * GRAVITY_MAGNITUDE:.3g} m/s^2 in the median where gravity "
+                     f"alone is {GRAVITY_MAGNITUDE:g}: it logs g; pass --accel-unit g")  # fmt: skip
     elif unit == "m/s^2":
         found.append(f"the accelerometer reads {accel:.3g} g in the median where gravity alone is 1 g: it logs "
                      "m/s^2; leave out --accel-unit g")  # fmt: skip

@@ -30,6 +30,7 @@ from vical.calib.initialization import frame_poses
 from vical.calib.observations import collect_observations
 from vical.calib.result import CalibrationResult, FramePoses
 from vical.calib.time_alignment import rotation_increments
+from vical.calib.visual_inertial import GRAVITY_MAGNITUDE
 from vical.data import CameraFrames, ImuSamples, Target, seconds_since
 from vical.geometry import CameraModel
 
@@ -123,7 +124,7 @@ def likely_gyro_unit(scale: float | None, declared: str) -> str | None:
     return other if abs(np.log(scale / expected)) < np.log(2.0) else None
 
 
-def accel_scale(imu: ImuSamples, gravity_magnitude: float = 9.81) -> float | None:
+def accel_scale(imu: ImuSamples, gravity_magnitude: float = GRAVITY_MAGNITUDE) -> float | None:
     """The accelerometer's median magnitude over gravity: about 1 in m/s^2, 1/9.81 for readings in g read as
     m/s^2, 9.81 the other way round (hand-held and robot motions average to gravity); None without samples."""
     if len(imu) == 0:
@@ -182,8 +183,10 @@ def board_scale(posed: FramePoses, imu: ImuSamples, R_cam_imu: np.ndarray, time_
     t0s, t1s, t2s = times[before], times[centre], times[after]
     camera_accel = _second_difference(positions, before, centre, after, t0s, t1s, t2s)
     rotation_accel = _second_difference(R_target_cam, before, centre, after, t0s, t1s, t2s)  # (C, 3, 3)
+    spanned = (t_imu > times[0]) & (t_imu < times[-1])  # every kernel's samples lie between the first and last frame
     rotations = Slerp(times, Rotation.from_matrix(R_target_cam @ R_cam_imu))
-    imu_accel = _kernel_specific_force(t_imu, imu.accel, rotations, t0s, t1s, t2s)
+    force = rotations(t_imu[spanned]).apply(imu.accel[spanned])  # the specific force in the board frame
+    imu_accel = _kernel_average(t_imu[spanned], force, t0s, t1s, t2s)
     # The camera's second differences carry the noise (PnP's, amplified); the IMU's averages are the regressor,
     # nearly exact, so the fit is not attenuated by noise in its regressor.
     A = np.zeros((len(centre), 3, 7))
@@ -237,19 +240,16 @@ def _difference_triples(times: np.ndarray, t_imu: np.ndarray) -> tuple[np.ndarra
     return before[keep], centre[keep], after[keep]
 
 
-def _kernel_specific_force(
-    t_imu: np.ndarray, accel: np.ndarray, rotation_at: Slerp, t0: np.ndarray, t1: np.ndarray, t2: np.ndarray
-) -> np.ndarray:
-    """(C, 3) the specific force in the board frame averaged with the kernel of each second difference over the
+def _kernel_average(t: np.ndarray, x: np.ndarray, t0: np.ndarray, t1: np.ndarray, t2: np.ndarray) -> np.ndarray:
+    """(C, 3) samples ``x`` (N, 3) at ``t`` (N,) averaged with the kernel of each second difference over the
     instants ``t0 < t1 < t2`` [s]: a divided second difference of positions is the acceleration weighted by the
     hat function rising from ``t0`` to ``t1`` and falling to ``t2``."""
     out = np.zeros((len(t1), 3))
     for n in range(len(t1)):
-        near = np.flatnonzero((t_imu > t0[n]) & (t_imu < t2[n]))
-        s = t_imu[near]
+        near = np.flatnonzero((t > t0[n]) & (t < t2[n]))
+        s = t[near]
         weights = np.where(s <= t1[n], (s - t0[n]) / (t1[n] - t0[n]), (t2[n] - s) / (t2[n] - t1[n]))
-        f_board = rotation_at(s).apply(accel[near])
-        out[n] = (weights[:, None] * f_board).sum(axis=0) / weights.sum()
+        out[n] = (weights[:, None] * x[near]).sum(axis=0) / weights.sum()
     return out
 
 
