@@ -54,6 +54,12 @@ def has_board_points(header: str) -> bool:
     return set(BOARD_COLUMNS) <= set(column_names(header))
 
 
+def names_board_points(path: str | os.PathLike) -> bool:
+    """Whether the CSV file's header (its first line) names the board coordinates of each corner."""
+    with open(path, encoding="utf-8", errors="replace") as f:
+        return has_board_points(f.readline())
+
+
 class _Layout:
     """Where the timestamp, the pixel and the board point sit in a header's columns."""
 
@@ -187,10 +193,7 @@ def is_corner_folder(path: str | os.PathLike) -> bool:
     """Whether ``path`` is a folder whose ``cam0/`` holds per-frame corner CSVs with board coordinates."""
     cam0 = Path(path) / "cam0"
     first = next(iter(sorted(cam0.glob("*.csv"))), None) if cam0.is_dir() else None
-    if first is None:
-        return False
-    with open(first, encoding="utf-8", errors="replace") as f:
-        return has_board_points(f.readline())
+    return first is not None and names_board_points(first)
 
 
 def corner_folder_imu(root: Path) -> Path | None:

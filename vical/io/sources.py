@@ -28,8 +28,8 @@ from vical.io.bag import read_bag, read_bag_imu
 from vical.io.board_points import (
     camera_folders,
     corner_folder_imu,
-    has_board_points,
     is_corner_folder,
+    names_board_points,
     read_board_point_csv,
     read_camera_folder,
 )
@@ -116,15 +116,10 @@ def open_recording(
         return read_corner_folder(path, target, imu_csv, **units)
     if kind == "corners_csv":
         imu = read_imu_csv(imu_csv, **units) if imu_csv is not None else _no_imu()
-        frames = read_board_point_csv(path, target) if _names_board_points(path) else read_corners_csv(path, target)
+        frames = read_board_point_csv(path, target) if names_board_points(path) else read_corners_csv(path, target)
         return Recording(imu, frames, target, metadata={"source": "corners_csv", "path": str(Path(path).resolve())})
     frames = read_image_folder(path, target, detector, rate_hz, keep_images=keep_images)
     return Recording(_no_imu(), frames, target, metadata={"source": "image_folder", "path": str(Path(path).resolve())})
-
-
-def _names_board_points(path: str | os.PathLike) -> bool:
-    with open(path, encoding="utf-8", errors="replace") as f:
-        return has_board_points(f.readline())
 
 
 def read_corner_folder(
