@@ -411,15 +411,9 @@ class Recording:
         ``path_length`` becomes the path travelled by then (when the profile is known) and
         ``duration`` the time since the recording's start.
         """
-        t_end = int(t_end_ns)
-        trajectory, profile = self.trajectory, self.path_profile
+        t_end, profile = int(t_end_ns), self.path_profile
         return replace(
-            self,
-            imu=self.imu.slice_time(np.iinfo(np.int64).min, t_end),
-            frames=self.frames.select(self.frames.t <= t_end),
-            other_frames={name: f.select(f.t <= t_end) for name, f in self.other_frames.items()},
-            trajectory=None if trajectory is None else trajectory.select(trajectory.t <= t_end),
-            path_profile=None if profile is None else profile.select(profile.t <= t_end),
+            self._stamped_between(np.iinfo(np.int64).min, t_end),
             path_length=self.path_length if profile is None else profile.length_at(t_end),
             duration=min(self.duration, (t_end - self.t0) / NS_PER_S),
         )
@@ -427,7 +421,15 @@ class Recording:
     def window(self, t_start_ns: int, t_end_ns: int) -> Recording:
         """The part of the recording stamped ``t_start_ns <= t <= t_end_ns``: samples, every camera's frames, truth
         states; ``path_length`` and ``duration`` those of the window."""
-        t0, t1 = int(t_start_ns), int(t_end_ns)
+        t0, t1, profile = int(t_start_ns), int(t_end_ns), self.path_profile
+        return replace(
+            self._stamped_between(t0, t1),
+            path_length=self.path_length if profile is None else profile.length_at(t1) - profile.length_at(t0),
+            duration=(min(t1, self.t_end) - max(t0, self.t0)) / NS_PER_S,
+        )
+
+    def _stamped_between(self, t0: int, t1: int) -> Recording:
+        """The samples, every camera's frames and the truth states stamped ``t0 <= t <= t1`` [ns]; the rest as is."""
         trajectory, profile = self.trajectory, self.path_profile
 
         def inside(t: np.ndarray) -> np.ndarray:
@@ -440,8 +442,6 @@ class Recording:
             other_frames={name: f.select(inside(f.t)) for name, f in self.other_frames.items()},
             trajectory=None if trajectory is None else trajectory.select(inside(trajectory.t)),
             path_profile=None if profile is None else profile.select(inside(profile.t)),
-            path_length=self.path_length if profile is None else profile.length_at(t1) - profile.length_at(t0),
-            duration=(min(t1, self.t_end) - max(t0, self.t0)) / NS_PER_S,
         )
 
     def until_path(self, budget_m: float) -> Recording:
