@@ -64,9 +64,7 @@ def _hand_eye_rotation(T_board_cam: np.ndarray, times: np.ndarray, t_imu: np.nda
 def _preintegrate(params, t_imu, gyro, accel, ta: float, tb: float, bias) -> gtsam.PreintegratedCombinedMeasurements:
     """Samples between two frame instants, each held until the next sample (clipped to [ta, tb])."""
     pim = gtsam.PreintegratedCombinedMeasurements(params, bias)
-    inside = np.flatnonzero((t_imu >= ta) & (t_imu < tb))
-    start = max(inside[0] - 1, 0) if len(inside) else np.searchsorted(t_imu, ta) - 1
-    k = start
+    k = max(int(np.searchsorted(t_imu, ta, side="right")) - 1, 0)  # the sample held at ta
     t = ta
     while t < tb and k < len(t_imu):
         t_next = min(t_imu[k + 1] if k + 1 < len(t_imu) else tb, tb)
@@ -114,7 +112,6 @@ def calibrate(
     f_board = np.array([T[:3, :3] @ accel[np.searchsorted(t_imu, t)] for T, t in zip(T_board_imu, times, strict=True)])
     gravity = -f_board.mean(axis=0)
     gravity *= GRAVITY / np.linalg.norm(gravity)
-    result = None
     for _ in range(2):  # the second pass with gravity refined from the first's states
         result, values = _solve(frames, used, times, T_board_imu, t_imu, gyro, accel, K, dist, T_cam_imu_guess,
                                 noise, pixel_sigma, gravity)  # fmt: skip
