@@ -249,9 +249,41 @@ HEADER = (
 )
 
 
+def print_consistency(found: dict) -> None:
+    """The three 10 s windows of each camera set and task against each other (``consistency_rows``)."""
+    print("\nthe three 10 s windows against each other")
+    for cameras in CAMERA_SETS:
+        for task in TASKS:
+            runs = [found.get((cameras, task, w)) for w in WINDOWS[:3]]
+            if any(r is None or "error" in r for r in runs):
+                continue
+            for name in cameras:
+                label = f"{'+'.join(cameras):9} {task:9} {name:5}"
+                for row in consistency_rows(label, [r["cameras"][name] for r in runs]):
+                    print(row)
+
+
+def print_peers(data: Path, files: dict[str, Path], windows, cameras) -> None:
+    """The plain GTSAM graph's extrinsic and OpenCV's intrinsics on the same corners and IMU."""
+    print("\npeers on the same corners and IMU")
+    for window in windows:
+        rec = window_recording(data, files["target"], window)
+        for name in cameras:
+            T, seconds = plain_extrinsic(rec, name, files["intrinsics"], files["imu"])
+            deg, mm = pose_error(T, EUROC[name])
+            basalt = " Basalt {:.3f} deg {:.2f} mm".format(*pose_error(T, BASALT_CAM0)) if name == "cam0" else ""
+            print(f"plain GTSAM {name} {window[0]:.0f}-{window[1]:.0f} s: EuRoC {deg:.3f} deg {mm:.2f} mm{basalt}, "
+                  f"{seconds:.2f} s")  # fmt: skip
+            fx, fy, rms, seconds = opencv_intrinsics(rec.frames_of(name), rec.target)
+            ref = EUROC_FOCAL[name]
+            focal = f"fx {100 * (fx / ref[0] - 1):+.2f} % fy {100 * (fy / ref[1] - 1):+.2f} %"
+            print(f"OpenCV calibrateCamera {name} {window[0]:.0f}-{window[1]:.0f} s: {focal} rms {rms:.3f} px, "
+                  f"{seconds:.2f} s")  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--data", type=Path, default=DATA, help=f"the real recording (default: {DATA})")
+    p.add_argument("--data", type=Path, help=f"the real recording (default: {DATA})")
     p.add_argument("--out", type=Path, help="work folder (default: a temporary one)")
     p.add_argument("--quick", action="store_true", help="cam0, extrinsic, 0-10 s only")
     p.add_argument("--repeats", type=int, default=5, help="runs of each 30 s calibration (medians of the times)")
@@ -260,8 +292,12 @@ def main(argv: list[str] | None = None) -> int:
     if args.one:
         print(json.dumps(run_one(json.loads(args.one))))
         return 0
+    if args.data is None and not DATA.is_dir():  # `make bench` beside a checkout without the dev set
+        print(f"bench_realdata: skipped: the real dev set is not at {DATA}; pass --data <its folder>")
+        return 0
+    args.data = args.data or DATA
     if not args.data.is_dir():
-        print(f"bench_realdata: error: no real recording at {args.data}; pass --data", file=sys.stderr)
+        print(f"bench_realdata: error: no real recording at {args.data}; pass --data <its folder>", file=sys.stderr)
         return 2
     out = args.out or Path(tempfile.mkdtemp(prefix="vical-bench-realdata-"))
     out.mkdir(parents=True, exist_ok=True)
@@ -277,30 +313,10 @@ def main(argv: list[str] | None = None) -> int:
         found[cameras, task, window] = timed(spec, args.repeats if window == WINDOWS[-1] else 1)
         for row in vical_rows(cameras, task, window, found[cameras, task, window]):
             print(row, flush=True)
-    print("\nthe three 10 s windows against each other")
-    for cameras in CAMERA_SETS:
-        for task in TASKS:
-            runs = [found.get((cameras, task, w)) for w in WINDOWS[:3]]
-            if any(r is None or "error" in r for r in runs):
-                continue
-            for name in cameras:
-                label = f"{'+'.join(cameras):9} {task:9} {name:5}"
-                for row in consistency_rows(label, [r["cameras"][name] for r in runs]):
-                    print(row)
-    print("\npeers on the same corners and IMU")
-    for window in [WINDOWS[0]] if args.quick else WINDOWS:
-        rec = window_recording(args.data, files["target"], window)
-        for name in ("cam0",) if args.quick else ("cam0", "cam1"):
-            T, seconds = plain_extrinsic(rec, name, files["intrinsics"], files["imu"])
-            deg, mm = pose_error(T, EUROC[name])
-            basalt = " Basalt {:.3f} deg {:.2f} mm".format(*pose_error(T, BASALT_CAM0)) if name == "cam0" else ""
-            print(f"plain GTSAM {name} {window[0]:.0f}-{window[1]:.0f} s: EuRoC {deg:.3f} deg {mm:.2f} mm{basalt}, "
-                  f"{seconds:.2f} s")  # fmt: skip
-            fx, fy, rms, seconds = opencv_intrinsics(rec.frames_of(name), rec.target)
-            ref = EUROC_FOCAL[name]
-            focal = f"fx {100 * (fx / ref[0] - 1):+.2f} % fy {100 * (fy / ref[1] - 1):+.2f} %"
-            print(f"OpenCV calibrateCamera {name} {window[0]:.0f}-{window[1]:.0f} s: {focal} rms {rms:.3f} px, "
-                  f"{seconds:.2f} s")  # fmt: skip
+    print_consistency(found)
+    print_peers(
+        args.data, files, [WINDOWS[0]] if args.quick else WINDOWS, ("cam0",) if args.quick else ("cam0", "cam1")
+    )
     print(f"load average {os.getloadavg()[0]:.2f} (1 min) at the end; work folder {out}")
     return 0
 
