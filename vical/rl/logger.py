@@ -2,8 +2,8 @@
 
 Tags: ``losses/`` (SAC losses and diagnostics), ``charts/`` (episodic and evaluation returns), ``time/``
 (throughput), and every numeric entry of the env's ``info`` dict whose key starts with one of the
-configured prefixes (``calib/``, ``coverage/`` by default) under its own key, so an env reports new
-terms without any change here.
+configured prefixes (``train.info_prefixes``, by default ``calib/``, ``coverage/``, ``reward/`` and
+``information/``) under its own key, so an env reports new terms without any change here.
 
 Trajectory plots: an env may define ``trajectory_figure(observations, actions) -> matplotlib.figure.Figure``
 on its unwrapped instance; otherwise the generic figure plots each observation and action component
