@@ -124,6 +124,11 @@ def test_unknown_keys_are_refused():
         ParallelConfig.from_config({"workers": 2, "nodes": 4})
 
 
+def test_a_missing_key_is_the_dataclass_default():
+    assert ParallelConfig.from_config(None) == ParallelConfig.from_config({}) == ParallelConfig()
+    assert ParallelConfig.from_config({"workers": 2}) == ParallelConfig(workers=2, backend="local", ray_address=None)
+
+
 def test_an_unreachable_ray_address_is_refused_within_seconds():
     config = ParallelConfig(workers=2, backend="ray", ray_address="127.0.0.1:9")  # the discard port: closed
     start = time.perf_counter()

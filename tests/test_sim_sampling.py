@@ -7,8 +7,10 @@ import pytest
 import yaml
 
 from vical.config import ConfigError
+from vical.data import ImuNoise
 from vical.geometry import R_CAM_BODY, matrix_to_euler
 from vical.sim.sampling import (
+    ImuSampling,
     SensorSampling,
     mean_sensor,
     sample_sensor,
@@ -37,6 +39,11 @@ def test_paper_file_holds_the_paper_values(paper):
     noise = paper.imu.kalibr_noise()
     assert (noise.accel_noise_density, noise.accel_random_walk) == (0.004, 0.006)
     assert (noise.gyro_noise_density, noise.gyro_random_walk) == (0.0003394, 0.000038785)
+
+
+def test_the_simulated_imu_noise_defaults_to_the_data_types(paper):
+    """One home of the paper's IMU noise: ImuNoise's defaults, which the sensor distribution and the file agree with."""
+    assert ImuSampling().kalibr_noise() == ImuNoise() == paper.imu.kalibr_noise()
 
 
 def test_same_seed_same_sensor(paper):

@@ -27,7 +27,7 @@ ERROR_METRICS = ("intrinsic_relative", "extrinsic_relative")
 
 @dataclass(frozen=True)
 class CalibrationTask:
-    """One calibration task (``conf/task/<name>.yaml``).
+    """One calibration task (``conf/task/<name>.yaml``); the defaults are the joint task's (``conf/task/joint.yaml``).
 
     Attributes:
         name: the task's name (``intrinsic``, ``extrinsic``, ``joint``).
@@ -46,7 +46,7 @@ class CalibrationTask:
     camera_model: str = "radtan"
     estimate_time_offset: bool = True
     error_metric: str = "extrinsic_relative"
-    asymmetric_distortion: bool = False
+    asymmetric_distortion: bool = True
 
     def __post_init__(self) -> None:
         require(self.calibrate in SOLVES, "task.calibrate", f"one of {SOLVES}", self.calibrate)

@@ -59,7 +59,8 @@ class ImuNoise:
 
     A white-noise sample at rate ``rate_hz`` has sigma ``noise_density * sqrt(rate_hz)``;
     the bias moves by a random walk whose increment over ``dt`` has sigma
-    ``random_walk * sqrt(dt)``.
+    ``random_walk * sqrt(dt)``. The defaults are the paper's IMU, the one place its numbers are written: the
+    simulator's sensor distribution (``vical.sim.sampling.ImuSampling``, ``conf/sensor/paper.yaml``) defaults to them.
 
     Attributes:
         accel_noise_density: [m/s^2/sqrt(Hz)]

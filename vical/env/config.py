@@ -1,6 +1,8 @@
 """Settings of the calibration MDP (``conf/env/calibration.yaml``), validated at start-up.
 
-Units: m, rad, s; coverage terms are normalised to [0, 1] (``vical.env.coverage``).
+Units: m, rad, s; coverage terms are normalised to [0, 1] (``vical.env.coverage``). The defaults are the
+values the YAML states: ``conf/env/calibration.yaml``'s, the information state's ``conf/env/information.yaml``'s,
+the workspace's and action scale's ``conf/workspace/paper.yaml``'s (``tests/test_config_defaults.py``).
 """
 
 from __future__ import annotations
@@ -207,11 +209,11 @@ class InformationSettings:
     tolerances: Tolerances = field(default_factory=Tolerances)
     confidence: float = 0.9
     pixel_sigma: float | None = 0.25
-    information_weight: float = 10.0
+    information_weight: float = 40.0
     excess_cap: float = 10.0
     excess_floor: float = 1.0
     outside_weight: float = 1.0
-    time_weight: float = 1.0
+    time_weight: float = 2.0
     center_offset_std: float | None = 0.0
     goal_groups: str = "all"
 

@@ -63,7 +63,7 @@ class ParallelConfig:
         require(hasattr(cfg, "get"), "parallel", "a mapping with workers, backend, ray_address", cfg)
         unknown = set(cfg) - {"workers", "backend", "ray_address"}
         require(not unknown, "parallel", "only the keys workers, backend, ray_address", sorted(unknown))
-        return cls(cfg.get("workers", 1), cfg.get("backend", "local"), cfg.get("ray_address"))
+        return cls(**{key: cfg[key] for key in cfg})  # a missing key: the field's default
 
     @property
     def serial(self) -> bool:

@@ -79,7 +79,7 @@ class PolicySpec:
             ok = spec is None or (isinstance(spec, Mapping) and "_target_" in spec)
             require(ok, f"{key}.{task}", "null or a mapping with a _target_ (a policy factory)", spec)
             specs[task] = dict(spec) if spec is not None else None
-        two = cfg.get("paper_two_trajectories", False)
+        two = cfg.get("paper_two_trajectories", cls.paper_two_trajectories)
         require(isinstance(two, bool), f"{key}.paper_two_trajectories", "true or false", two)
         return cls(name, **specs, paper_two_trajectories=two)
 

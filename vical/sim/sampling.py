@@ -40,6 +40,9 @@ IMU_SAMPLING = ("average", "instant")
 CAMERA_BACKENDS = ("project", "render")
 # Redraws of a camera whose distortion folds over inside the image before giving up.
 _MAX_CAMERA_DRAWS = 100
+# The paper's IMU: ImuSampling's noise and rate default to vical.data.ImuNoise's, the one place its numbers are
+# written (conf/sensor/paper.yaml states them too; tests/test_config_defaults.py checks that they agree).
+_PAPER_IMU = ImuNoise()
 
 
 @dataclass(frozen=True)
@@ -165,15 +168,17 @@ class ImuSampling:
             its rotation from the IMU frame [rad].
         g_sensitivity_std: sigma of each entry of the gyro's g-sensitivity [(rad/s)/(m/s^2)].
             All five 0 (the default): exact axes, and nothing is drawn (``vical.data.ImuIntrinsics``).
+
+    The rate and the four noise values default to ``vical.data.ImuNoise``'s (the paper's IMU, continuous units).
     """
 
-    rate_hz: float = 200.0
+    rate_hz: float = _PAPER_IMU.rate_hz
     sampling: str = "average"
     noise_units: str = "continuous"
-    accel_noise: float = 0.004
-    accel_random_walk: float = 0.006
-    gyro_noise: float = 0.0003394
-    gyro_random_walk: float = 0.000038785
+    accel_noise: float = _PAPER_IMU.accel_noise_density
+    accel_random_walk: float = _PAPER_IMU.accel_random_walk
+    gyro_noise: float = _PAPER_IMU.gyro_noise_density
+    gyro_random_walk: float = _PAPER_IMU.gyro_random_walk
     accel_bias_std: float = 0.0
     gyro_bias_std: float = 0.0
     accel_scale_std: float = 0.0
