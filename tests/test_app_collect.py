@@ -192,6 +192,7 @@ def _default_sigint() -> None:
 KILL_ARGS = ["policy=random_moving", "limits.max_steps=40", "calibrate=false", "seed=2"]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT])
 def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, sig):
     out = tmp_path / "out"

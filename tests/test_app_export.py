@@ -182,6 +182,7 @@ def test_a_rig_that_cannot_be_written_whole_is_refused_before_anything_is_writte
     assert not out.exists()
 
 
+@pytest.mark.integration
 def test_an_export_killed_mid_write_leaves_nothing_that_blocks_the_next_one(tmp_path):
     rec = make_recording(n_frames=150)
     rng = np.random.default_rng(0)

@@ -125,6 +125,7 @@ def test_a_recording_with_too_few_board_views_warns_what_to_change(tmp_path, ove
     assert load_recording(tmp_path / "rec").frames.num_detections.max() == 0  # written all the same
 
 
+@pytest.mark.integration
 def test_a_recording_killed_while_written_leaves_nothing_that_blocks_the_next_one(tmp_path):
     out = tmp_path / "rec"
     command = [str(Path(sys.executable).parent / "vical-record"), f"out={out}", "images=true", "progress=false"]

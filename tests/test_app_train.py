@@ -78,6 +78,7 @@ def kill_after_first_checkpoint(proc: subprocess.Popen, checkpoint: Path, timeou
     proc.wait()
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("num_envs, total_steps", [(1, 600), (2, 300)])
 def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_path, num_envs, total_steps):
     """SIGKILL of vical-train itself (with 2 envs its worker processes lose their parent mid-episode)."""
@@ -108,6 +109,7 @@ def test_killed_run_resumes_to_the_same_parameters_as_an_uninterrupted_run(tmp_p
         assert torch.equal(final[key], value), key
 
 
+@pytest.mark.integration
 def test_an_env_that_raises_in_its_reset_is_one_error_line_naming_its_seed_and_the_checkpoint(tmp_path):
     fragile = ["~env.id", "env._target_=test_rl_vector.FragilePendulum"]  # 50-step episodes of its own
     tiny = [a for a in TINY if not a.startswith(("+env.", "train.checkpoint_every"))]
@@ -130,6 +132,7 @@ def test_an_env_that_raises_in_its_reset_is_one_error_line_naming_its_seed_and_t
     assert load_checkpoint(run / CHECKPOINT)["counters"]["step"] == 50
 
 
+@pytest.mark.integration
 def test_a_bad_value_is_one_error_line_and_exit_status_2(tmp_path):
     proc = run_app("train.total_steps=0", f"hydra.run.dir={tmp_path / 'run'}", cwd=tmp_path)
     out = proc.communicate(timeout=120)[0]
@@ -137,6 +140,7 @@ def test_a_bad_value_is_one_error_line_and_exit_status_2(tmp_path):
     assert out == "vical-train: error: train.total_steps must be a number in [1, inf), got 0\n"
 
 
+@pytest.mark.integration
 def test_resume_of_a_missing_directory_is_refused_creating_nothing(tmp_path):
     proc = run_app("resume=runs/typo", cwd=tmp_path)
     out = proc.communicate(timeout=120)[0]
@@ -194,6 +198,7 @@ def test_resume_lists_every_refused_override(saved_run):
     assert all(name in str(err.value) for name in ("agent=sac_authors (", "~train.total_steps (", "+foo=1 ("))
 
 
+@pytest.mark.integration
 def test_ctrl_c_says_where_the_last_checkpoint_is_and_how_to_resume(tmp_path):
     run = tmp_path / "run"
     proc = run_app(*TINY, "train.total_steps=100000", f"run_dir={run}", cwd=tmp_path)
@@ -233,6 +238,7 @@ def test_a_finished_run_resumed_at_its_length_is_complete_and_never_shortened(fi
     assert (finished_run / AGENT).read_bytes() == agent
 
 
+@pytest.mark.integration
 def test_a_finished_run_resumed_longer_equals_a_run_of_that_length(finished_run, tmp_path):
     longer = tmp_path / "longer"
     shutil.copytree(finished_run, longer)

@@ -342,6 +342,7 @@ SUBPROCESS_CASES = [
 ]
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     "case", SUBPROCESS_CASES, ids=[f"{c.app}:{c.argv.replace('{inputs}/', '')}" for c in SUBPROCESS_CASES]
 )

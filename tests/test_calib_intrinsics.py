@@ -60,7 +60,7 @@ def test_noisy_errors_within_3_sigma_fast():
     assert _coverage(5, "radtan") >= 0.9
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize("model", ["radtan", "equidistant"])
 def test_noisy_errors_within_3_sigma_40_trials(model):
     assert _coverage(40, model) >= 0.95

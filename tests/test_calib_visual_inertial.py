@@ -102,7 +102,7 @@ def test_noisy_errors_within_3_sigma_fast(joint):
     assert _coverage(3, joint, duration=8.0) >= 0.9
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 @pytest.mark.parametrize("joint", [False, True])
 def test_noisy_errors_within_3_sigma_40_trials(joint):
     assert _coverage(40, joint, duration=10.0) >= 0.95

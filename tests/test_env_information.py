@@ -331,6 +331,7 @@ def test_predicted_sigmas_of_a_double_sphere_camera_are_the_calibrators():
     assert predicted["principal_point"] == pytest.approx(np.sqrt(0.5 * (sig["cx"] ** 2 + sig["cy"] ** 2)), rel=0.15)
 
 
+@pytest.mark.integration
 def test_honesty_script_runs_the_shipped_policy_to_its_stop_and_judges_it(tmp_path):
     """experiments/information_honesty.py with a learned policy: its own stop, the final errors within a few
     predicted sigma, and the stop judged by the evaluation's scored groups."""

@@ -81,6 +81,7 @@ WRITER_LOOP = textwrap.dedent(
 )
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("wait", [0.6, 1.3])
 def test_a_kill_at_any_moment_leaves_a_readable_folder(tmp_path, wait):
     path = tmp_path / "rec"

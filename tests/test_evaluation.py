@@ -137,6 +137,7 @@ def _without_wall_time(rows: list[EpisodeRow]) -> list[dict]:
     return [{k: v for k, v in vars(r).items() if k != "calib_time_s"} for r in rows]
 
 
+@pytest.mark.integration
 def test_parallel_evaluation_gives_the_serial_rows():
     """Episodes on two worker processes: the same rows in the same order (all but the wall time of the solves)."""
     specs, env, seeds = [HANDCRAFTED_SHORT, RANDOM_SHORT], env_config("intrinsic", "paper"), [0, 1, 2]
@@ -147,6 +148,8 @@ def test_parallel_evaluation_gives_the_serial_rows():
     assert any(r.budget_m == 0.3 for r in serial[0].rows)  # budget rows too
 
 
+@pytest.mark.integration
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
 def test_evaluation_on_a_local_ray_instance_gives_the_serial_rows():
     """The episodes as Ray tasks (a local instance of 2 CPUs): the serial rows and numbers, in the same order."""
     import ray  # a dev dependency: `make test` installs it, so this test never skips

@@ -78,7 +78,7 @@ def test_the_short_joint_trajectory_runs_without_clamping_or_swings_and_sees_the
     assert 4.0 < recording.path_length < 7.0 and 40.0 < recording.duration < 70.0
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 def test_the_long_joint_trajectory_reaches_every_view_within_a_centimetre(env):
     policy = expert_policy("joint", "long")
     visited, ratios, clamped = run_episode(env, policy, seed=22)

@@ -146,6 +146,8 @@ def local_ray():
     ray.shutdown()
 
 
+@pytest.mark.integration
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
 def test_tasks_run_on_a_local_ray_instance_in_order(local_ray):
     tasks = [(k, 0.2 if k < 2 else 0.0) for k in range(6)]
     results = list(imap_ordered(square_after, tasks, local_ray))
@@ -153,11 +155,15 @@ def test_tasks_run_on_a_local_ray_instance_in_order(local_ray):
     assert os.getpid() not in {pid for _, _, pid in results}
 
 
+@pytest.mark.integration
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
 def test_a_task_error_on_ray_reaches_the_caller(local_ray):
     with pytest.raises(ValueError, match="task 3 cannot be done"):
         list(imap_ordered(fail_on_three, range(6), local_ray))
 
 
+@pytest.mark.integration
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
 def test_errors_while_other_tasks_finish_leave_the_caller_running(local_ray):
     # Tasks that finish as the error reaches the caller: cancelling them could abort this process inside Ray.
     for _ in range(12):

@@ -137,6 +137,7 @@ def test_bad_results_files_and_tolerances_are_named(tmp_path):
         assess(learned, learned, "joint", TOLERANCES, ShipRule())
 
 
+@pytest.mark.integration
 def test_choose_seed_script_ships_from_files(tmp_path):
     """experiments/choose_seed.py end to end: run configs, results files, the table and the choice."""
     base = {t: write(tmp_path / f"base_{t}.csv", expert_rows()) for t in ("joint", "intrinsic")}
@@ -163,6 +164,7 @@ def test_choose_seed_script_ships_from_files(tmp_path):
     assert bad.returncode != 0 and "config.yaml is missing: pass the run_dir of a vical-train run" in bad.stderr
 
 
+@pytest.mark.integration
 def test_compare_results_script_prints_every_budget(tmp_path):
     """experiments/compare_results.py end to end: one row per budget the file holds, end last."""
     rows = expert_rows() + [joint_end(LEARNED, s, 0.02 * s, path=0.4) for s in range(4)]

@@ -52,6 +52,7 @@ def assert_same_parameters(a: dict, b: dict) -> None:
         assert torch.equal(a[key], b[key]), key
 
 
+@pytest.mark.integration
 def test_same_seed_gives_identical_parameters_and_another_seed_does_not(tmp_path):
     first = train(tiny_config(tmp_path / "a"))
     second = train(tiny_config(tmp_path / "b"))
@@ -73,6 +74,7 @@ def scalars(run_dir: Path, tag: str) -> list[tuple[int, float]]:
     return [(e.step, e.value) for e in events.Scalars(tag)]
 
 
+@pytest.mark.integration
 def test_resumed_run_continues_exactly_as_the_uninterrupted_run(tmp_path):
     full = train(tiny_config(tmp_path / "full"))
     # checkpoints at steps 150 and 300; the run goes on to 400, logging past its last checkpoint (a killed run)
@@ -269,7 +271,7 @@ def test_resume_of_a_directory_without_checkpoint_says_what_to_do(tmp_path):
         train(tiny_config(tmp_path) | {"resume": str(tmp_path / "nothing")})
 
 
-@pytest.mark.slow
+@pytest.mark.integration
 def test_default_agent_learns_pendulum_swing_up(tmp_path):
     cfg = tiny_config(tmp_path, env={"_target_": "gymnasium.make", "id": "Pendulum-v1"}, total_steps=6000)
     cfg["agent"] = {}

@@ -63,6 +63,7 @@ def vector_config(run_dir, env: dict = FRAGILE, **train_settings) -> dict:
     return tiny_config(run_dir, env=env, **{"num_envs": 2, "eval_every": 0, **train_settings})
 
 
+@pytest.mark.integration
 def test_same_seed_and_num_envs_give_identical_parameters(tmp_path):
     first = train(vector_config(tmp_path / "a"))
     second = train(vector_config(tmp_path / "b"))
@@ -76,6 +77,7 @@ def test_same_seed_and_num_envs_give_identical_parameters(tmp_path):
     )
 
 
+@pytest.mark.integration
 def test_the_order_in_which_the_envs_answer_changes_no_number(tmp_path):
     """Steps of random length (the envs run ahead of each other by up to policy_lag - 1 rounds): the same run."""
     first = train(vector_config(tmp_path / "a", env=JITTERY, total_steps=300, policy_lag=3))
@@ -85,6 +87,7 @@ def test_the_order_in_which_the_envs_answer_changes_no_number(tmp_path):
     assert_same_parameters(parameters(first.agent), parameters(steady.agent))
 
 
+@pytest.mark.integration
 def test_a_run_resumed_from_a_mid_episode_checkpoint_equals_the_uninterrupted_run(tmp_path):
     full = train(vector_config(tmp_path / "full", env=JITTERY, checkpoint_every=130))
     # checkpoints at 130, 260 and 390 transitions (195 steps per env: 45 into their 4th episodes; an env may have run
@@ -100,6 +103,7 @@ def test_a_run_resumed_from_a_mid_episode_checkpoint_equals_the_uninterrupted_ru
     assert_same_parameters(parameters(full.agent), parameters(resumed.agent))
 
 
+@pytest.mark.integration
 def test_a_killed_worker_stops_the_run_with_a_resumable_checkpoint_and_the_resume_is_exact(tmp_path, monkeypatch):
     full = train(vector_config(tmp_path / "full", checkpoint_every=150))
     monkeypatch.setenv(KILL_AFTER, "120")  # each worker dies at its 121st step: after the checkpoint at 150 + 90
@@ -111,6 +115,7 @@ def test_a_killed_worker_stops_the_run_with_a_resumable_checkpoint_and_the_resum
     assert_same_parameters(parameters(full.agent), parameters(resumed.agent))
 
 
+@pytest.mark.integration
 def test_an_env_that_raises_ends_its_episode_with_a_warning_naming_the_seed_and_training_goes_on(tmp_path, caplog):
     env = {**FRAGILE, "fail_on_step": 30}
     with caplog.at_level(logging.WARNING, logger="vical.rl.vector_trainer"):
@@ -124,6 +129,7 @@ def test_an_env_that_raises_ends_its_episode_with_a_warning_naming_the_seed_and_
     ]
 
 
+@pytest.mark.integration
 def test_an_env_that_raises_in_its_reset_stops_the_run_naming_the_seed_and_the_checkpoint(tmp_path, monkeypatch):
     seed = reset_seed(env=1, episode=1)  # env 1's second episode: after the checkpoint at step 50 (round 24)
     monkeypatch.setenv(FAIL_RESET, str(seed))
@@ -139,6 +145,8 @@ def test_an_env_that_raises_in_its_reset_stops_the_run_naming_the_seed_and_the_c
     assert (resumed.resumed_from, resumed.steps) == (50, 200)
 
 
+@pytest.mark.integration
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
 def test_ray_actors_give_the_local_processes_parameters(tmp_path):
     """The same run with its env workers as Ray actors (a local Ray instance of 2 CPUs): the same numbers."""
     import ray  # a dev dependency: `make test` installs it, so this test never skips
@@ -156,6 +164,8 @@ def test_ray_actors_give_the_local_processes_parameters(tmp_path):
 RAY = {"parallel": {"workers": 2, "backend": "ray"}}
 
 
+@pytest.mark.integration
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
 @pytest.mark.timeout(180)  # a regression hangs: each env actor waits for a CPU
 def test_more_envs_than_workers_get_a_cpu_each_on_a_local_ray_instance(tmp_path):
     """parallel.workers=2 and train.num_envs=3: the local Ray instance starts with 3 CPUs and the run finishes."""
@@ -181,6 +191,8 @@ def ray_of_two_cpus():
     ray.shutdown()
 
 
+@pytest.mark.integration
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
 def test_more_envs_than_the_ray_cluster_has_cpus_are_refused_at_once(tmp_path, ray_of_two_cpus):
     start = time.perf_counter()
     with pytest.raises(ConfigError, match=r"^train\.num_envs=3 needs 3 CPUs of the Ray cluster .* has 2: lower"):
@@ -195,6 +207,8 @@ class Holder:
         return True
 
 
+@pytest.mark.integration
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time
 def test_env_workers_that_find_no_free_cpu_stop_the_run_after_a_timeout(tmp_path, ray_of_two_cpus, monkeypatch):
     ray = ray_of_two_cpus
     holder = ray.remote(num_cpus=1)(Holder).remote()

@@ -5,9 +5,12 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 import torch
 
 from vical.rl.trainer import AGENT
+
+pytestmark = pytest.mark.integration  # every test starts console scripts in subprocesses
 
 BIN = Path(sys.executable).parent
 SHORT = [

@@ -114,6 +114,7 @@ def outputs(tmp_path_factory) -> dict[str, list[tuple[Example, list[str]]]]:
     return {page: [(e, run(e.command, cwd).splitlines()) for e in examples(page)] for page in PAGES}
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("page", PAGES)
 def test_the_tutorial_prints_what_its_page_shows(outputs, page):
     ran = outputs[page]
