@@ -42,38 +42,32 @@ import argparse
 import math
 import os
 import sys
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from vical.apps.calibrate_outputs import one_camera_layout, write_outputs
 from vical.apps.calibrate_rig import (
     camera_list,
     check_chain_topics,
     image_topics,
-    rig_chain,
     rig_image_size,
     rig_problems,
     select_cameras,
     topic_list,
-    write_imu_output,
-    write_rig_outputs,
 )
-from vical.apps.cli import ArgumentParser, OutputError, argparse_main, cannot_write
+from vical.apps.cli import ArgumentParser, OutputError, argparse_main
 from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
 from vical.calib.board_size import MAX_SAMPLE, board_size_hint
-from vical.calib.calibrate import (
-    RigCalibration,
-    calibrate_extrinsics,
-    calibrate_joint,
-    calibrate_rig,
-    calibrate_two_stage,
-)
 from vical.calib.detection import detect_checkerboard
 from vical.calib.errors import CalibrationError
-from vical.calib.intrinsics import MIN_VIEWS, calibrate_intrinsics
-from vical.calib.metrics import calibration_errors
+from vical.calib.intrinsics import MIN_VIEWS
 from vical.calib.nominal import nominal_T_cam_imu
+from vical.calib.pipeline import (
+    RigCalibration,
+    calibrate_rig,
+)
 from vical.calib.plausibility import (
     accel_scale,
     board_scale,
@@ -84,22 +78,20 @@ from vical.calib.plausibility import (
     posed_frames,
     wrong_board_scale,
 )
-from vical.calib.report import summary_table, weak_sigma_text, write_frames_csv, write_report, write_results_text
 from vical.calib.result import CalibrationResult
 from vical.calib.visual_inertial import GRAVITY_MAGNITUDE, ViOptions
 from vical.data import DataError, ImuNoise, Recording, Target
 from vical.data.target import TargetError
 from vical.geometry import CAMERA_MODELS, CameraModel, CameraModelError
-from vical.io.atomic import atomic_directory, remove_stale_temporaries
+from vical.io.atomic import remove_stale_temporaries
 from vical.io.errors import FormatError, KalibrFormatError
 from vical.io.kalibr import (
     read_camchain,
     read_imu_intrinsics,
     read_imu_yaml,
     read_target_yaml,
-    write_camchain_imucam,
 )
-from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain, write_chain
+from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain
 from vical.io.sources import detect_source, open_recording
 from vical.io.yamlfile import load_mapping
 
@@ -402,8 +394,8 @@ def check_out(out: Path, overwrite: bool, inputs: list[str | None]) -> None:
 def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     """Calibrate as the parsed arguments say, write the outputs and print the summary.
 
-    Raises ``CalibrationFailed`` after writing the outputs (marked as failed) when the data do not
-    support the result.
+    Returns the camera's result for a one-camera calibration (``one_camera_layout``), else the rig's. Raises
+    ``CalibrationFailed`` after writing the outputs (marked as failed) when the data do not support the result.
     """
     if args.g_sensitivity and args.imu_model == "calibrated":
         raise CalibrationError("--g-sensitivity needs --imu-model scale-misalignment")
@@ -424,34 +416,79 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     rec, detector = load_source(args, chain)
     hint = _board_size_hint(args, rec, detector)
     names = select_cameras(rec, args.cameras, args.recording, detect_source(args.recording))
-    if names != ["cam0"] or (chain is not None and len(chain.cameras) > 1):
-        return run_rig(args, rec, names, chain, options, out, hint)
-    camera, T_guess, shift = _known_intrinsics(args)
-    size = _image_size(args, rec, camera, None if detector is None else detector.size)
-    common = {"initial_T_cam_imu": T_guess, "initial_time_offset": shift or 0.0, "options": options}
-    noise = None
-    if args.task == "intrinsic":
-        result = calibrate_intrinsics(
-            rec.frames, rec.target, args.model, size, camera, huber_k=args.huber, frame_stride=args.frame_stride
-        )
-    elif args.task == "extrinsic" and camera is None:
-        raise CalibrationError("the extrinsic task needs the intrinsics: pass --intrinsics camchain.yaml")
-    else:
-        noise = _imu_noise(args, rec)
-        if args.task == "extrinsic":
-            result = calibrate_extrinsics(rec.frames, rec.imu, rec.target, camera, noise, **common)
-        elif args.task == "joint":
-            result = calibrate_joint(rec.frames, rec.imu, rec.target, args.model, size, noise, **common)
-        else:
-            result = calibrate_two_stage(rec.frames, rec.imu, rec.target, args.model, size, noise, **common)
-    if hint:
-        result = replace(result, warnings=[hint, *result.warnings])
-    failure = _failure(implausibilities(result, nominal_T_cam_imu() if T_guess is None else T_guess),
-                       wrong_settings(result, rec.frames, rec, args))  # fmt: skip
-    _write_outputs(out, result, rec, args, noise, failure, chain)
+    one = one_camera_layout(names, chain)
+    setup = _one_camera_setup(args, rec, detector) if one else _rig_setup(args, rec, names, chain)
+    _check_known_intrinsics(args, names, chain, setup, one)
+    noise = None if args.task == "intrinsic" else _imu_noise(args, rec)
+    known = {n: s.camera for n, s in setup.items() if s.camera is not None}
+    guesses = {n: s.T_cam_imu for n, s in setup.items() if s.T_cam_imu is not None}
+    offsets = {n: s.time_shift for n, s in setup.items() if s.time_shift is not None}
+    results = calibrate_rig(
+        {n: rec.frames_of(n) for n in names}, rec.imu, rec.target, args.task, args.model,
+        {n: s.size for n, s in setup.items()}, noise, known if args.task in ("intrinsic", "extrinsic") else None,
+        guesses, offsets, options,
+    ).results  # fmt: skip
+    if hint:  # the board size the images suggest: said once, with the first camera's warnings
+        results[names[0]] = replace(results[names[0]], warnings=[hint, *results[names[0]].warnings])
+    failure = _failure_line(results, guesses, rec, args, one)
+    write_outputs(out, results, rec, args, noise, chain, failure)
     if failure:
         raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
-    return result
+    return results["cam0"] if one else RigCalibration(results)
+
+
+@dataclass(frozen=True)
+class _CameraSetup:
+    """What the command line and ``--intrinsics`` say about one camera: its intrinsics, ``T_cam_imu`` and time
+    shift (each None where not given) and its images' size."""
+
+    camera: CameraModel | None
+    T_cam_imu: np.ndarray | None
+    time_shift: float | None
+    size: tuple[int, int] | None
+
+
+def _one_camera_setup(args, rec: Recording, detector: SizedDetector | None) -> dict[str, _CameraSetup]:
+    """``cam0``'s setup from a one-camera ``--intrinsics`` file (EuRoC's ``sensor.yaml``, a camchain of one)."""
+    camera, T_guess, shift = _known_intrinsics(args)
+    size = _image_size(args, rec, camera, None if detector is None else detector.size)
+    return {"cam0": _CameraSetup(camera, T_guess, shift, size)}
+
+
+def _rig_setup(args, rec: Recording, names: list[str], chain: CameraChain | None) -> dict[str, _CameraSetup]:
+    """Each camera's setup from the ``--intrinsics`` camchain ``chain``, which must fit the recording (its cameras,
+    their resolutions)."""
+    if args.intrinsics and chain is None:
+        raise CalibrationError(
+            f"--intrinsics {args.intrinsics} describes one camera without a camN section; calibrating "
+            f"{', '.join(names)} needs a Kalibr camchain with a section per camera (cam0, cam1, ...)"
+        )
+    if chain is not None:
+        check_chain_fits(chain, args.intrinsics, rec)
+    known = {n: chain[n] for n in names if chain is not None and n in chain.names}
+    setup = {}
+    for n in names:
+        given = known.get(n)
+        size = rig_image_size(args, rec, n, given)
+        if given is None:
+            setup[n] = _CameraSetup(None, None, None, size)
+        else:
+            setup[n] = _CameraSetup(given.camera, given.T_cam_imu, given.timeshift_cam_imu, size)
+    return setup
+
+
+def _check_known_intrinsics(args, names: list[str], chain, setup: dict[str, _CameraSetup], one: bool) -> None:
+    """The extrinsic task needs every camera's intrinsics."""
+    unknown = [n for n in names if setup[n].camera is None]
+    if args.task != "extrinsic" or not unknown:
+        return
+    if one:
+        raise CalibrationError("the extrinsic task needs the intrinsics: pass --intrinsics camchain.yaml")
+    where = f"--intrinsics {args.intrinsics} has no {unknown[0]}" if chain else "no --intrinsics given"
+    raise CalibrationError(
+        f"the extrinsic task needs the intrinsics of every camera it calibrates ({', '.join(names)}), but "
+        f"{where}; pass a camchain with a section per camera, or choose the cameras with --cameras"
+    )
 
 
 def _board_size_hint(args, rec: Recording, detector: SizedDetector | None) -> str | None:
@@ -467,70 +504,13 @@ def _board_size_hint(args, rec: Recording, detector: SizedDetector | None) -> st
     return message
 
 
-def run_rig(
-    args,
-    rec: Recording,
-    names: list[str],
-    chain: CameraChain | None,
-    options: ViOptions,
-    out: Path,
-    hint: str | None = None,
-) -> RigCalibration:
-    """Calibrate the cameras ``names`` of ``rec`` (the first one's frames set the IMU states), write the outputs.
-
-    The ``--intrinsics`` camchain ``chain`` must fit the recording (its cameras, their resolutions); it
-    gives the extrinsic task's intrinsics and every task's initial ``T_cam_imu`` and time offset.
-    """
-    if args.intrinsics and chain is None:
-        raise CalibrationError(
-            f"--intrinsics {args.intrinsics} describes one camera without a camN section; calibrating "
-            f"{', '.join(names)} needs a Kalibr camchain with a section per camera (cam0, cam1, ...)"
-        )
-    if chain is not None:
-        check_chain_fits(chain, args.intrinsics, rec)
-    known = {n: chain[n] for n in names if chain is not None and n in chain.names}
-    sizes = {n: rig_image_size(args, rec, n, known.get(n)) for n in names}
-    frames = {n: rec.frames_of(n) for n in names}
-    guesses = {n: c.T_cam_imu for n, c in known.items() if c.T_cam_imu is not None}
-    noise = None
-    if args.task == "intrinsic":
-        initial = {n: c.camera for n, c in known.items()}
-        results = {n: _intrinsics(frames[n], rec, args, sizes[n], initial.get(n)) for n in names}
-    else:
-        unknown = [n for n in names if n not in known]
-        if args.task == "extrinsic" and unknown:
-            where = f"--intrinsics {args.intrinsics} has no {unknown[0]}" if chain else "no --intrinsics given"
-            raise CalibrationError(
-                f"the extrinsic task needs the intrinsics of every camera it calibrates ({', '.join(names)}), but "
-                f"{where}; pass a camchain with a section per camera, or choose the cameras with --cameras"
-            )
-        noise = _imu_noise(args, rec)
-        offsets = {n: c.timeshift_cam_imu for n, c in known.items() if c.timeshift_cam_imu is not None}
-        cameras = {n: c.camera for n, c in known.items()} if args.task == "extrinsic" else None
-        results = calibrate_rig(
-            frames, rec.imu, rec.target, args.task, args.model, sizes, noise, cameras, guesses, offsets, options
-        ).results
-    if hint:  # the board size the images suggest: said once, with the first camera's warnings
-        first = names[0]
-        results[first] = replace(results[first], warnings=[hint, *results[first].warnings])
-    failure = _rig_failure(results, guesses, rec, args)
-    write_rig_outputs(out, results, rec, args, noise, chain, failure)
-    if failure:
-        raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
-    return RigCalibration(results)
-
-
-def _intrinsics(frames, rec: Recording, args, size, initial: CameraModel | None) -> CalibrationResult:
-    """One camera's intrinsic calibration, as the one-camera intrinsic task does it."""
-    return calibrate_intrinsics(
-        frames, rec.target, args.model, size, initial, huber_k=args.huber, frame_stride=args.frame_stride
-    )
-
-
-def _rig_failure(results: dict[str, CalibrationResult], guesses: dict, rec: Recording, args) -> str | None:
-    """Why the rig's calibration failed (the cameras that show it, and the likely cause), or None."""
+def _failure_line(results: dict[str, CalibrationResult], guesses: dict, rec: Recording, args, one: bool) -> str | None:
+    """Why the calibration failed, or None: what the data prove wrong in the settings, and what makes a result
+    untrustworthy (``implausibilities``; in a rig, each problem with the cameras that show it)."""
     first = next(iter(results))
     proven = wrong_settings(results[first], rec.frames_of(first), rec, args)
+    if one:
+        return _failure(implausibilities(results[first], guesses.get(first, nominal_T_cam_imu())), proven)
     found = rig_problems(results, guesses)
     return _failure([] if found is None else [found[0]], proven)
 
@@ -577,48 +557,6 @@ def wrong_settings(result: CalibrationResult, frames, rec: Recording, args) -> l
             "--target"
         )
     return found
-
-
-def _write_outputs(
-    out: Path,
-    result: CalibrationResult,
-    rec: Recording,
-    args,
-    noise: ImuNoise | None,
-    failure: str | None,
-    given: CameraChain | None = None,
-) -> None:
-    """Write every output into ``out`` at once (replacing it whole), then print the summary.
-
-    With an ``--intrinsics`` camchain ``given``, the written camchain keeps its other keys and spelling.
-    """
-    errors = calibration_errors(result, rec.truth) if rec.truth is not None else None
-    name = "camchain.yaml" if noise is None else "camchain-imucam.yaml"
-    if failure:  # kept for diagnosis under a name no tool reads as a result
-        name = name.replace(".yaml", ".failed.yaml")
-    try:
-        with atomic_directory(out, overwrite=out.exists()) as tmp:
-            if given is not None:
-                write_chain(tmp / name, rig_chain({"cam0": result}, rec, given))
-            elif noise is None:
-                write_camchain_imucam(tmp / name, result.camera, None, None)
-            if noise is not None:
-                if given is None:
-                    write_camchain_imucam(tmp / name, result.camera, result.T_cam_imu, result.time_offset)
-                write_imu_output(tmp / "imu.yaml", args.imu_yaml, noise, result.imu_intrinsics)
-            write_results_text(tmp / "results.txt", result, errors, failure)
-            write_frames_csv(tmp / "frames.csv", result.frame_log)
-            if not args.no_report:
-                write_report(tmp, result, errors, failure)
-    except OSError as err:
-        raise OutputError(cannot_write("--out", out, err)) from None
-    print(summary_table(result, errors))
-    print(f"frames: {result.frame_log.summary()} (every frame with its reason: {out / 'frames.csv'})")
-    for w in result.warnings:
-        print(f"warning: {w}")
-    for w in result.weak_parameters[:3]:
-        print(f"weak: {w.name} ({weak_sigma_text(w)}): {w.hint}")
-    print(f"outputs written to {out}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -27,7 +27,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from vical.apps.calibrate_rig import view_overlaps
+from vical.apps.calibrate_outputs import view_overlaps
 from vical.apps.cli import ArgumentParser, cannot_write, one_line_warnings, report_error
 from vical.data import DataError, ImuNoise, Recording
 from vical.geometry.transforms import invert_transform

@@ -135,6 +135,8 @@ def calibrate_intrinsics(
     max_iterations: int = 50,
     frame_stride: int = 1,
     compare_models: bool = True,
+    observations: list[FrameObservation] | None = None,
+    coverage_warnings: bool = True,
 ) -> CalibrationResult:
     """Calibrate the camera's intrinsics and distortion from target observations.
 
@@ -154,12 +156,16 @@ def calibrate_intrinsics(
         max_iterations: Levenberg-Marquardt iterations.
         frame_stride: use every ``frame_stride``-th frame with a target view (1: all).
         compare_models: calibrate the other models when this one does not fit.
+        observations: the frames' detections (``collect_observations(frames, target)``), when the caller has
+            them already.
+        coverage_warnings: warn about image regions without corners (a joint solve judges them on all its
+            views instead).
     """
     start = time.perf_counter()
     check_model(model)
     if not (isinstance(frame_stride, int) and frame_stride >= 1):
         raise CalibrationError(f"frame_stride must be an integer >= 1, got {frame_stride!r}")
-    every = collect_observations(frames, target)
+    every = collect_observations(frames, target) if observations is None else observations
     observations = every[::frame_stride]
     if image_size_px is None and initial_camera_guess is not None:
         image_size_px = (initial_camera_guess.width, initial_camera_guess.height)
@@ -228,7 +234,7 @@ def calibrate_intrinsics(
         status=solution.status,
         num_frames=len(poses),
         warnings=rejection.warnings
-        + image_coverage_warnings(observations, size)
+        + (image_coverage_warnings(observations, size) if coverage_warnings else [])
         + correlation_warnings(found)
         + unobservable_warnings(names, covariance)
         + _model_warnings(camera, observations, T_cam_target, residuals, comparison),

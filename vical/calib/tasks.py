@@ -12,9 +12,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
-from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import CalibrationErrors, calibration_errors
+from vical.calib.pipeline import calibrate_rig
 from vical.calib.result import CalibrationResult
 from vical.calib.visual_inertial import ViOptions
 from vical.config import ConfigError, from_mapping, require
@@ -100,20 +99,16 @@ def calibrate_task(
         ConfigError: the solve needs the truth or IMU data that the recording lacks.
     """
     opts = replace(options or ViOptions(), estimate_time_offset=task.estimate_time_offset)
-    size = (recording.truth.camera.width, recording.truth.camera.height) if recording.truth else None
-    if task.calibrate == "intrinsic":
-        return calibrate_intrinsics(recording.frames, recording.target, task.camera_model, size)
-    if recording.truth is None:
+    truth = recording.truth
+    size = (truth.camera.width, truth.camera.height) if truth else None
+    if task.calibrate != "intrinsic" and truth is None:
         raise ConfigError(f"task {task.name}: the recording carries no sensor truth (known intrinsics, IMU noise)")
-    noise = recording.truth.imu_noise
-    frames, imu, target = recording.frames, recording.imu, recording.target
-    if task.calibrate == "extrinsic":
-        return calibrate_extrinsics(frames, imu, target, recording.truth.camera, noise, options=opts)
-    if task.calibrate == "joint":
-        return calibrate_joint(frames, imu, target, task.camera_model, size, noise, options=opts)
-    return calibrate_two_stage(
-        frames, imu, target, task.camera_model, size, noise, options=opts, intrinsic_frames=intrinsic_frames
-    )
+    known = {"cam0": truth.camera} if task.calibrate == "extrinsic" else None
+    return calibrate_rig(
+        {"cam0": recording.frames}, recording.imu, recording.target, task.calibrate, task.camera_model,
+        {"cam0": size}, truth.imu_noise if truth else None, known, options=opts,
+        intrinsic_frames=None if intrinsic_frames is None else {"cam0": intrinsic_frames},
+    ).results["cam0"]  # fmt: skip
 
 
 def task_score(task: CalibrationTask, errors: CalibrationErrors) -> float:

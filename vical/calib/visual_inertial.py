@@ -40,7 +40,7 @@ from vical.calib.imu_intrinsics import check_model as check_imu_model
 from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses
 from vical.calib.intrinsics import check_model, estimated_pixel_sigma, intrinsic_names
 from vical.calib.nominal import nominal_T_cam_imu
-from vical.calib.observations import FrameObservation, collect_observations
+from vical.calib.observations import FrameObservation
 from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, FramePoses, ImuResiduals, ResidualStats, TimeOffsetTrace
 from vical.calib.rig import OtherCamera, initialise_other, pair, prepare_other
@@ -927,7 +927,8 @@ class CameraInput:
         observations: its frames' detections; camera: its model (the intrinsic stage's, or known).
         initial_T_cam_imu: (4, 4) guess whose translation is used, or None (from the first camera's).
         initial_time_offset: [s] centre of its time-offset scan.
-        frames: its input frames (``observations`` were collected from them), for its frame log; None: no log.
+        frames: its input frames (``observations`` were collected from them), for its frame log; None: no log
+            (the first camera always has them).
     """
 
     name: str
@@ -940,31 +941,30 @@ class CameraInput:
 
 def run_visual_inertial(
     task: str,
-    frames: CameraFrames,
+    first: CameraInput,
     imu: ImuSamples,
     target: Target,
-    camera: CameraModel,
     imu_noise: ImuNoise,
-    initial_T_cam_imu: np.ndarray | None,
-    initial_time_offset: float,
     options: ViOptions,
     start: float,
     others: list[CameraInput] | None = None,
 ) -> list[CalibrationResult]:
-    """Shared pipeline of the extrinsic (``task="extrinsic"``) and joint (``task="joint"``) solves.
+    """The camera-IMU graph of the extrinsic (``task="extrinsic"``) and joint (``task="joint"``) solves
+    (``vical.calib.pipeline.calibrate_rig`` calls it).
 
     Returns the first camera's result, then one per camera of ``others`` (a rig in one graph).
     """
     others = others or []
+    camera, frames, initial_time_offset = first.camera, first.frames, first.initial_time_offset
     for c in [camera] + [o.camera for o in others]:
         check_model(c.distortion)
         if c.distortion_center_offset.any():
             raise CalibrationError("the calibrator's camera models have the distortion centre at the principal point")
-    T_guess = nominal_T_cam_imu() if initial_T_cam_imu is None else np.asarray(initial_T_cam_imu, float)
+    T_guess = nominal_T_cam_imu() if first.initial_T_cam_imu is None else np.asarray(first.initial_T_cam_imu, float)
     if T_guess.shape != (4, 4):
         raise CalibrationError(f"initial_T_cam_imu must be a 4 x 4 transform, got shape {T_guess.shape}")
     noise_warnings = check_imu_noise(imu_noise)
-    every = collect_observations(frames, target)
+    every = first.observations
     observations = every[:: options.frame_stride]
     views = observations + [f for o in others for f in o.observations[:: options.frame_stride]]
     check_memory(len(views), sum(len(v.ids) for v in views), options.memory_limit_mb, options.frame_stride)
@@ -980,10 +980,10 @@ def run_visual_inertial(
     problem.warnings += _span_warnings(problem, g) + _gap_warnings(g.state_times)
     problem.warnings += _imu_noise_warning(problem.imu_noise_scale, imu_noise, options.noise_weighting)
     marginals = _marginals(problem, g, solution.values, joint, est.imu_theta is not None)
-    first = _result(task, problem, g, solution, est, iterations + more, start, marginals)
-    first = replace(first, frame_log=_frame_log(frames, every, problem, g, first.reprojection_frames))
-    return [first] + [
-        _other_result(task, problem, g, solution, est, entry, given, first, marginals)
+    result = _result(task, problem, g, solution, est, iterations + more, start, marginals)
+    result = replace(result, frame_log=_frame_log(frames, every, problem, g, result.reprojection_frames))
+    return [result] + [
+        _other_result(task, problem, g, solution, est, entry, given, result, marginals)
         for entry, given in zip(g.others, others, strict=True)
     ]
 
