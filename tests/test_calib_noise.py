@@ -7,14 +7,16 @@ import gtsam
 import numpy as np
 import pytest
 
-from vical.calib import visual_inertial as vi
 from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
 from vical.calib.checks import check_imu_noise, check_memory, estimated_memory_mb
 from vical.calib.errors import CalibrationError
 from vical.calib.metrics import calibration_errors
+from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.observations import collect_observations
 from vical.calib.synthetic import make_recording
 from vical.calib.variance import used_dof
+from vical.calib.vi_graph import solve_rounds
+from vical.calib.vi_problem import ViOptions, initial_estimate, prepare_problem
 from vical.data import ImuNoise, Target
 
 BIASES = {"gyro_bias": [0.01, -0.02, 0.005], "accel_bias": [0.05, -0.1, 0.08]}  # [rad/s], [m/s^2]
@@ -81,8 +83,8 @@ def test_redundancies_add_up_to_the_number_of_parameters():
     """The degrees of freedom each sensor spends sum to the parameters: camera + IMU + bias prior = P."""
     rec = recording()
     obs = collect_observations(rec.frames, rec.target)
-    problem = vi._prepare(obs, rec.imu, rec.truth.camera, rec.target, PAPER, vi.ViOptions(), 0.0)
-    g, solution, _, _ = vi._solve_rounds(problem, vi._initial_estimate(problem, vi.nominal_T_cam_imu(), 0.0), False)
+    problem = prepare_problem(obs, rec.imu, rec.truth.camera, rec.target, PAPER, ViOptions(), 0.0)
+    g, solution, _, _ = solve_rounds(problem, initial_estimate(problem, nominal_T_cam_imu(), 0.0), False)
     linear = g.graph.linearize(solution.values)
     ordering = gtsam.Ordering.ColamdGaussianFactorGraph(linear)
     imu = used_dof(linear, range(len(g.imu_factors)), ordering)
@@ -99,7 +101,7 @@ def test_memory_bound_is_checked_before_solving_and_names_the_stride():
         check_memory(12_000, 1_500_000, limit_mb=1500.0, stride=1)
     assert estimated_memory_mb(600, 80_000) < 300  # a real 30 s recording: far below the default limit
     rec = recording()
-    options = vi.ViOptions(memory_limit_mb=10.0)
+    options = ViOptions(memory_limit_mb=10.0)
     with pytest.raises(CalibrationError, match="more than the limit of 10 MB"):
         calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, PAPER, options=options)
 
@@ -108,7 +110,7 @@ def test_frame_stride_uses_every_nth_frame():
     rec = recording()
     full = calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, PAPER)
     half = calibrate_extrinsics(
-        rec.frames, rec.imu, rec.target, rec.truth.camera, PAPER, options=vi.ViOptions(frame_stride=2)
+        rec.frames, rec.imu, rec.target, rec.truth.camera, PAPER, options=ViOptions(frame_stride=2)
     )
     assert half.num_frames == pytest.approx(full.num_frames / 2, abs=1)
     errors = calibration_errors(half, rec.truth)

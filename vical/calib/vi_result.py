@@ -1,0 +1,237 @@
+"""The camera-IMU solve's ``CalibrationResult``: each camera's parameters, covariance, residuals, frame log and
+time-offset evidence.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import gtsam
+import numpy as np
+
+from vical.calib.frame_log import FrameLog, build_frame_log, left_out
+from vical.calib.imu_intrinsics import IntrinsicImuFactor
+from vical.calib.initialization import MIN_INIT_CORNERS
+from vical.calib.intrinsics import intrinsic_names
+from vical.calib.observations import FrameObservation
+from vical.calib.result import CalibrationResult, FramePoses, ImuResiduals, ResidualStats, TimeOffsetTrace
+from vical.calib.rig import OtherCamera
+from vical.calib.time_alignment import increment_mismatch, rotation_increments
+from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
+from vical.calib.vi_covariance import ViMarginals, parameter_covariance, widening_warning
+from vical.calib.vi_graph import ViGraph
+from vical.calib.vi_problem import (
+    BIAS_NAMES,
+    EXTRINSIC_NAMES,
+    G_KEY,
+    TRACE_HALF_WIDTH,
+    TRACE_POINTS,
+    CameraInput,
+    ViEstimate,
+    ViOptions,
+    ViProblem,
+    state_key,
+)
+from vical.data import CameraFrames
+from vical.data.imu_model import ImuIntrinsics
+
+
+def _reprojection(problem: ViProblem, g: ViGraph, values: gtsam.Values) -> tuple[np.ndarray, np.ndarray]:
+    """Corner residuals (N, 2) [px] and the recording frame index (N,) of each corner."""
+    frames = np.array([problem.observations[problem.frame_ids[k]].index for k in g.states])
+    return g.corners.residuals(values), frames[g.corners.frame_of]
+
+
+def first_frame_log(
+    frames: CameraFrames, every: list[FrameObservation], problem: ViProblem, g: ViGraph, used: np.ndarray
+) -> FrameLog:
+    """Every input frame: its corners found and used, and why a frame was left out (``vical.calib.frame_log``)."""
+    inside = {problem.frame_ids[k] for k in g.states}
+    outside = [problem.observations[k].index for k in problem.frame_ids if k not in inside]
+    decided = left_out(every, problem.observations, problem.outliers) | {k: "outside_imu" for k in outside}
+    return build_frame_log(frames, used, min(MIN_INIT_CORNERS, problem.target.num_points), decided)
+
+
+def _time_offset_trace(
+    problem: ViProblem,
+    frame_times: np.ndarray,
+    T_target_cam: np.ndarray,
+    T_cam_imu: np.ndarray,
+    tau0: float,
+    gyro_bias: np.ndarray,
+) -> TimeOffsetTrace:
+    """One camera's PnP rotation rates against the bias-corrected gyro, and the mismatch around its offset.
+
+    Args:
+        frame_times: (F,) [s] the camera's frames with a target pose (camera clock, since the recording start).
+        T_target_cam: (F, 4, 4) their PnP poses; T_cam_imu: (4, 4) and tau0 [s]: the camera's estimates.
+        gyro_bias: (3,) [rad/s] the estimated gyro bias.
+    """
+    inc = rotation_increments(frame_times, T_target_cam[:, :3, :3])
+    dt = inc.t_end - inc.t_start
+    R_imu_cam = T_cam_imu[:3, :3].T
+    shifts = tau0 + np.linspace(-TRACE_HALF_WIDTH, TRACE_HALF_WIDTH, TRACE_POINTS)
+    mismatch = increment_mismatch(problem.t_imu, problem.gyro, inc, T_cam_imu[:3, :3], gyro_bias, shifts)
+    return TimeOffsetTrace(
+        t_camera=0.5 * (inc.t_start + inc.t_end),
+        omega_camera=(inc.theta_cam / dt[:, None]) @ R_imu_cam.T,
+        t_imu=problem.t_imu,
+        gyro=problem.gyro - gyro_bias,
+        shifts=shifts,
+        mismatch=mismatch,
+    )
+
+
+def _imu_residuals(g: ViGraph, values: gtsam.Values, gravity_magnitude: float) -> ImuResiduals:
+    """Mean rates per IMU factor: measured (preintegrated, bias-corrected to first order) vs from the states."""
+    gravity = np.asarray(values.atUnit3(G_KEY).point3()) * gravity_magnitude
+    rows = []
+    for n, f, dt in g.imu_factors:
+        pim = f.measurement(values) if isinstance(f, IntrinsicImuFactor) else f.preintegratedMeasurements()
+        bias_hat, bias = pim.biasHat(), values.atConstantBias(state_key("b", n))
+        X0, X1 = values.atPose3(state_key("x", n)), values.atPose3(state_key("x", n + 1))
+        v0, v1 = values.atVector(state_key("v", n)), values.atVector(state_key("v", n + 1))
+        R0 = X0.rotation().matrix()
+        d_bg = np.asarray(bias.gyroscope()) - np.asarray(bias_hat.gyroscope())
+        d_ba = np.asarray(bias.accelerometer()) - np.asarray(bias_hat.accelerometer())
+        gyro_meas = gtsam.Rot3.Logmap(pim.deltaRij()) / dt - d_bg
+        gyro_pred = gtsam.Rot3.Logmap(X0.rotation().between(X1.rotation())) / dt
+        accel_meas = np.asarray(pim.deltaVij()) / dt - d_ba
+        accel_pred = R0.T @ (v1 - v0 - gravity * dt) / dt
+        rows.append(np.concatenate([[g.state_times[n] + 0.5 * dt], gyro_meas, gyro_pred, accel_meas, accel_pred]))
+    a = np.array(rows).reshape(-1, 13)
+    return ImuResiduals(a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13])
+
+
+def first_camera_result(
+    task: str, problem: ViProblem, g: ViGraph, solution, est: ViEstimate, iterations: int, start: float, marginals
+):
+    joint = task == "joint"
+    values = solution.values
+    camera = problem.camera
+    covariance, widening = parameter_covariance(
+        marginals, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset, imu_theta=est.imu_theta
+    )
+    names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
+    if est.imu_theta is not None:
+        names += ImuIntrinsics.parameter_names(problem.options.g_sensitivity)
+    found = correlations(names, covariance)
+    problem.warnings += widening_warning(names, widening) + correlation_warnings(found)
+    problem.warnings += unobservable_warnings(names, covariance)
+    estimate = np.concatenate(
+        ([camera.intrinsics, camera.dist] if joint else [])
+        + [np.zeros(3), est.T_cam_imu[:3, 3], [est.tau0], est.accel_bias, est.gyro_bias]
+        + ([] if est.imu_theta is None else [est.imu_theta])
+    )
+    residuals, frame_index = _reprojection(problem, g, values)
+    gravity = np.asarray(values.atUnit3(G_KEY).point3()) * problem.options.gravity_magnitude
+    return CalibrationResult(
+        task=task,
+        camera=camera,
+        T_cam_imu=est.T_cam_imu,
+        time_offset=est.tau0,
+        gyro_bias=est.gyro_bias,
+        accel_bias=est.accel_bias,
+        gravity_target=gravity,
+        parameter_names=names,
+        estimate=estimate,
+        covariance=covariance,
+        weak_parameters=weak_parameters(names, covariance, camera),
+        correlations=found,
+        reprojection=ResidualStats.of(residuals),
+        reprojection_residuals=residuals,
+        reprojection_frames=frame_index,
+        imu_residuals=_imu_residuals(g, values, problem.options.gravity_magnitude),
+        pixel_sigma=problem.sigma_px,
+        iterations=iterations,
+        solve_time=time.perf_counter() - start,
+        status=solution.status,
+        num_frames=len(g.states),
+        warnings=problem.warnings,
+        imu_noise_scale=problem.imu_noise_scale,
+        reprojection_pixels=g.corners.measured,
+        time_offset_trace=_time_offset_trace(
+            problem, problem.frame_times, problem.T_target_cam, est.T_cam_imu, est.tau0, est.gyro_bias
+        ),
+        imu_intrinsics=_imu_intrinsics(problem.options, est),
+        frame_poses=FramePoses(
+            np.array([problem.observations[k].t_ns for k in problem.frame_ids], dtype=np.int64),
+            np.linalg.inv(problem.T_target_cam),
+        ),
+    )
+
+
+def _imu_intrinsics(options: ViOptions, est: ViEstimate) -> ImuIntrinsics | None:
+    """The estimated intrinsics, the given ones when they were kept fixed, or None."""
+    return options.imu_intrinsics if est.imu_theta is None else ImuIntrinsics.from_vector(est.imu_theta)
+
+
+def other_camera_result(
+    task: str,
+    problem: ViProblem,
+    g: ViGraph,
+    solution,
+    est: ViEstimate,
+    entry,
+    given: CameraInput,
+    first: CalibrationResult,
+    marginals: ViMarginals,
+):
+    """Another camera's result: its parameters with the shared biases, its residuals, corners, frames and time-offset
+    evidence, the shared IMU residuals."""
+    other, factors, paired, frame_index = entry
+    joint = task == "joint"
+    values = solution.values
+    covariance, widening = parameter_covariance(
+        marginals, values, other.T_cam_imu, joint, not problem.options.estimate_time_offset, other.index
+    )
+    camera = other.camera
+    names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
+    found = correlations(names, covariance)
+    notes = other.warnings + widening_warning(names, widening) + correlation_warnings(found)
+    dropped = len(other.observations) - len(paired)
+    if dropped:
+        notes.append(f"{other.name}: {dropped} views without a simultaneous view of the first camera were not used")
+    estimate = np.concatenate(
+        ([camera.intrinsics, camera.dist] if joint else [])
+        + [np.zeros(3), other.T_cam_imu[:3, 3], [other.tau0], est.accel_bias, est.gyro_bias]
+    )
+    residuals = factors.residuals(values)
+    used_frames = frame_index[factors.frame_of]
+    trace = _time_offset_trace(problem, other.frame_times, other.T_target_cam, other.T_cam_imu, other.tau0,
+                               est.gyro_bias)  # fmt: skip
+    return replace(
+        first,
+        camera=camera,
+        T_cam_imu=other.T_cam_imu,
+        time_offset=other.tau0,
+        estimate=estimate,
+        covariance=covariance,
+        weak_parameters=weak_parameters(names, covariance, camera),
+        correlations=found,
+        reprojection=ResidualStats.of(residuals),
+        reprojection_residuals=residuals,
+        reprojection_frames=used_frames,
+        reprojection_pixels=factors.measured,
+        pixel_sigma=other.sigma_px,
+        num_frames=len(paired),
+        warnings=notes + unobservable_warnings(names, covariance),
+        frame_log=_other_frame_log(problem, other, given, used_frames),
+        time_offset_trace=trace,
+        frame_poses=FramePoses(
+            np.array([o.t_ns for o in other.observations], dtype=np.int64), np.linalg.inv(other.T_target_cam)
+        ),
+    )
+
+
+def _other_frame_log(problem: ViProblem, other: OtherCamera, given: CameraInput, used_frames: np.ndarray):
+    """Another camera's ``FrameLog`` over its own frames (None without them): its views with a target pose that no
+    first-camera state took are ``unpaired``."""
+    if given.frames is None:
+        return None
+    paired = set(used_frames.tolist())
+    unpaired = {o.index: "unpaired" for o in other.observations if o.index not in paired}
+    strided = given.observations[:: problem.options.frame_stride]
+    decided = left_out(given.observations, strided, other.outliers) | unpaired
+    return build_frame_log(given.frames, used_frames, min(MIN_INIT_CORNERS, problem.target.num_points), decided)
