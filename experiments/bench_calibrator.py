@@ -32,11 +32,11 @@ import time
 import cv2
 import numpy as np
 
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
-from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
+from vical.calib.solve.visual_inertial import ViOptions
 from vical.calib.synthetic import make_recording
-from vical.calib.visual_inertial import ViOptions
 from vical.data import ImuNoise, Recording, Target
 from vical.geometry import so3_log
 

@@ -26,7 +26,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import mujoco
 import numpy as np
 
-from vical.calib.detection import detect_checkerboard
+from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.data import ImuNoise
 from vical.geometry import euler_to_matrix, make_transform
 from vical.sim import PandaSim, camera_pose_cv

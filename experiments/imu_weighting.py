@@ -7,7 +7,7 @@ whose true IMU noise is ``factor`` x the declared (below 1: an inflated imu.yaml
 random walks scaled) or
 vibration-like (the declared white noise plus sinusoids at 15-90 Hz and low-passed noise, together ``factor``
 x the declared density in power). Every recording is calibrated (extrinsic task, known intrinsics) with the
-declared densities under each weighting scheme (``vical.calib.visual_inertial.NOISE_WEIGHTINGS``), and the table
+declared densities under each weighting scheme (``vical.calib.solve.visual_inertial.NOISE_WEIGHTINGS``), and the table
 gives the median errors against the truth and how often the truth lies within 1 and 3 reported sigma.
 
 Fitting seeds only (1000 + n); evaluation seeds are never used here. Output: a table on stdout, the raw rows
@@ -25,10 +25,10 @@ import time
 
 import numpy as np
 
-from vical.calib.calibrate import calibrate_extrinsics
 from vical.calib.errors import CalibrationError
+from vical.calib.solve.pipeline import calibrate_extrinsics
+from vical.calib.solve.visual_inertial import NOISE_WEIGHTINGS, ViOptions
 from vical.calib.synthetic import Excitation, make_recording
-from vical.calib.visual_inertial import NOISE_WEIGHTINGS, ViOptions
 from vical.data import ImuNoise, ImuSamples, Recording, Target
 from vical.geometry import CameraModel, make_transform, so3_exp, so3_log
 

@@ -10,8 +10,8 @@ import yaml
 from test_io_kalibr_chain import OPENVINS_IMU_CHAIN
 
 from vical.apps.calibrate import main
-from vical.calib.checks import check_memory
 from vical.calib.errors import CalibrationSettingError
+from vical.calib.solve.checks import check_memory
 from vical.calib.synthetic import Excitation, make_recording
 from vical.data import ImuIntrinsics, ImuNoise, ImuSamples, Target
 from vical.geometry import CameraModel, transform_error

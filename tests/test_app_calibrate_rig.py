@@ -20,8 +20,8 @@ from test_calib_report import pdf_pages_and_text
 
 from vical.apps.calibrate import main
 from vical.apps.calibrate_rig import camera_list, image_topics, topic_list
-from vical.calib.calibrate import calibrate_rig
-from vical.calib.nominal import nominal_T_cam_imu
+from vical.calib.solve.nominal import nominal_T_cam_imu
+from vical.calib.solve.pipeline import calibrate_rig
 from vical.calib.synthetic import Excitation, RigCamera, default_camera, make_recording
 from vical.data import CameraFrames, ImuNoise, ImuSamples
 from vical.geometry import euler_to_matrix, make_transform, transform_error

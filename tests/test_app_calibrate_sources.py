@@ -18,9 +18,9 @@ import pytest
 from test_sim_calib_integration import excitation
 
 from vical.apps.calibrate import main
-from vical.calib.calibrate import calibrate_joint
-from vical.calib.detection import detect_checkerboard
-from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.detection.checkerboard import detect_checkerboard
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.pipeline import calibrate_joint
 from vical.geometry import transform_error
 from vical.io import (
     open_recording,

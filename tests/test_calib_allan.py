@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from imu_streams import NOISE, RATE, static_stream, truths
 
-from vical.calib.allan import (
+from vical.calib.noise.allan import (
     AXES,
     NoiseIdentificationError,
     allan_deviation,

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from vical.calib.aprilgrid import detect_aprilgrid
+from vical.calib.detection.aprilgrid import detect_aprilgrid
 from vical.calib.errors import CalibrationError
 from vical.data import Target
 

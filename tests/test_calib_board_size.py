@@ -10,8 +10,8 @@ import pytest
 from test_calib_detection import K, _homography, _render
 
 from vical.apps.calibrate import main
-from vical.calib.board_size import board_size_hint
-from vical.calib.detection import detect_checkerboard
+from vical.calib.detection.board_size import board_size_hint
+from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.data import Target
 from vical.io.kalibr import write_target_yaml
 

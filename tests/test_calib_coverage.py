@@ -2,10 +2,10 @@
 
 import numpy as np
 
-from vical.calib.calibrate import calibrate_joint
-from vical.calib.checks import image_coverage_warnings
-from vical.calib.intrinsics import calibrate_intrinsics
-from vical.calib.observations import FrameObservation, collect_observations
+from vical.calib.solve.checks import image_coverage_warnings
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.observations import FrameObservation, collect_observations
+from vical.calib.solve.pipeline import calibrate_joint
 from vical.calib.synthetic import make_recording
 from vical.data import CameraFrames, ImuNoise
 

@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from vical.calib.detection import detect_checkerboard
+from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.errors import CalibrationError
 from vical.data import Target
 

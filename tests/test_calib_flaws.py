@@ -17,9 +17,9 @@ import pytest
 from test_sim_calib_integration import record
 
 from vical.apps.calibrate import main
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
-from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint
 from vical.data import NS_PER_S, CameraFrames, ImuSamples, Recording
 from vical.io import save_recording
 from vical.sim.sampling import SensorSampling, sample_sensor

@@ -3,9 +3,9 @@
 import numpy as np
 
 from vical.calib.frame_log import REASONS, build_frame_log
-from vical.calib.intrinsics import calibrate_intrinsics
-from vical.calib.observations import collect_observations
-from vical.calib.outliers import rejection_warnings
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.observations import collect_observations
+from vical.calib.solve.outliers import rejection_warnings
 from vical.calib.synthetic import make_recording
 from vical.data import CameraFrames, Target
 

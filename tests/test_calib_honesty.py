@@ -10,7 +10,7 @@ The render backend's detector noise is checked in tests/test_sim_calib_integrati
 import numpy as np
 import pytest
 
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
+from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint
 from vical.calib.synthetic import make_recording
 from vical.data import ImuNoise, Target
 from vical.geometry import so3_log

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from vical.calib.errors import CalibrationError
-from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.synthetic import default_camera, make_recording
 from vical.data import CameraFrames, Target
 

@@ -7,16 +7,16 @@ import gtsam
 import numpy as np
 import pytest
 
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
-from vical.calib.checks import check_imu_noise, check_memory, estimated_memory_mb
 from vical.calib.errors import CalibrationError
 from vical.calib.metrics import calibration_errors
-from vical.calib.nominal import nominal_T_cam_imu
-from vical.calib.observations import collect_observations
+from vical.calib.solve.checks import check_imu_noise, check_memory, estimated_memory_mb
+from vical.calib.solve.nominal import nominal_T_cam_imu
+from vical.calib.solve.observations import collect_observations
+from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint
+from vical.calib.solve.variance import used_dof
+from vical.calib.solve.vi_graph import solve_rounds
+from vical.calib.solve.vi_problem import ViOptions, initial_estimate, prepare_problem
 from vical.calib.synthetic import make_recording
-from vical.calib.variance import used_dof
-from vical.calib.vi_graph import solve_rounds
-from vical.calib.vi_problem import ViOptions, initial_estimate, prepare_problem
 from vical.data import ImuNoise, Target
 
 BIASES = {"gyro_bias": [0.01, -0.02, 0.005], "accel_bias": [0.05, -0.1, 0.08]}  # [rad/s], [m/s^2]
@@ -127,7 +127,7 @@ def test_densities_a_hundred_times_off_are_named_with_the_values_the_residuals_s
     found = re.search(r"gyroscope_noise_density ([\d.e+-]+), accelerometer_noise_density ([\d.e+-]+)", warning)
     gyro, accel = float(found.group(1)), float(found.group(2))
     # An inflated file is reweighted to its residuals: the values match the truth. A file below the truth keeps
-    # its weight, and the ratio judged there reads low (vical.calib.variance), as the warning says: the values
+    # its weight, and the ratio judged there reads low (vical.calib.solve.variance), as the warning says: the values
     # still point from the declared a hundredth most of the way to the truth.
     low = 1.2 if declared_over_true > 1 else 5.0
     assert PAPER.gyro_noise_density / low < gyro < 1.2 * PAPER.gyro_noise_density

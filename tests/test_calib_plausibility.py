@@ -1,4 +1,4 @@
-"""vical.calib.plausibility: what gives away a result the data do not support, and a gyro unit error."""
+"""vical.calib.solve.plausibility: what gives away a result the data do not support, and a gyro unit error."""
 
 from dataclasses import replace
 
@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from vical.calib import calibrate_joint, nominal_T_cam_imu
-from vical.calib.plausibility import (
+from vical.calib.result import FramePoses, ResidualStats
+from vical.calib.solve.plausibility import (
     accel_scale,
     board_scale,
     gyro_scale,
@@ -16,7 +17,6 @@ from vical.calib.plausibility import (
     posed_frames,
     wrong_board_scale,
 )
-from vical.calib.result import FramePoses, ResidualStats
 from vical.calib.synthetic import make_recording
 from vical.data import ImuNoise, ImuSamples, Target
 from vical.geometry import make_transform, so3_exp
@@ -138,7 +138,7 @@ def test_a_camera_turning_about_itself_is_no_evidence_of_a_wrong_board(declared_
 def test_an_intrinsic_solve_stopped_far_from_its_minimum_is_named_a_failure():
     """A start three times the true focal length with two iterations allowed: the solve stops unconverged, and
     that alone fails the result."""
-    from vical.calib.intrinsics import calibrate_intrinsics
+    from vical.calib.solve.intrinsics import calibrate_intrinsics
 
     rec = make_recording(duration=4.0, pixel_sigma=0.3, seed=2)
     truth = rec.truth.camera

@@ -1,4 +1,5 @@
-"""PnP of one view (``vical.calib.initialization.pnp``): a pose where OpenCV's IPPE fails, never a non-finite one."""
+"""PnP of one view (``vical.calib.solve.initialization.pnp``): a pose where OpenCV's IPPE fails, never a
+non-finite one."""
 
 from pathlib import Path
 
@@ -6,8 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from vical.calib.initialization import pnp, undistorted
-from vical.calib.observations import FrameObservation
+from vical.calib.solve.initialization import pnp, undistorted
+from vical.calib.solve.observations import FrameObservation
 from vical.data import Target
 from vical.geometry import CameraModel
 

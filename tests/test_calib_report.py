@@ -6,11 +6,11 @@ import zlib
 import numpy as np
 import pytest
 
-from vical.calib import report_figures as figures
-from vical.calib.calibrate import calibrate_joint
-from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
-from vical.calib.report import results_text, summary_table, write_report
+from vical.calib.report import figures
+from vical.calib.report.writers import results_text, summary_table, write_report
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.pipeline import calibrate_joint
 from vical.calib.synthetic import Excitation, make_recording
 from vical.data import ImuNoise
 

@@ -7,10 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from vical.calib.calibrate import calibrate_rig
 from vical.calib.errors import CalibrationError
-from vical.calib.intrinsics import calibrate_intrinsics
-from vical.calib.nominal import nominal_T_cam_imu
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.nominal import nominal_T_cam_imu
+from vical.calib.solve.pipeline import calibrate_rig
 from vical.calib.synthetic import RigCamera, default_camera, make_recording
 from vical.data import CameraFrames, ImuNoise
 from vical.geometry import euler_to_matrix, invert_transform, make_transform

@@ -4,11 +4,11 @@ import gtsam
 import numpy as np
 import pytest
 
-from vical.calib import intrinsics
 from vical.calib.errors import CalibrationError
-from vical.calib.initialization import frame_poses, initial_camera
-from vical.calib.observations import collect_observations
-from vical.calib.solver import covariance_or_unobservable, linear_covariance, optimize
+from vical.calib.solve import intrinsics
+from vical.calib.solve.initialization import frame_poses, initial_camera
+from vical.calib.solve.observations import collect_observations
+from vical.calib.solve.solver import covariance_or_unobservable, linear_covariance, optimize
 from vical.calib.synthetic import make_recording
 
 
@@ -61,9 +61,9 @@ def test_a_result_with_unobservable_parameters_keeps_its_estimates_and_writes_ev
     """What a singular information leaves (NaN rows for the free parameters, a warning naming them) is written."""
     from dataclasses import replace
 
-    from vical.calib.calibrate import calibrate_joint
-    from vical.calib.report import summary_table, write_report, write_results_text
-    from vical.calib.uncertainty import unobservable_warnings
+    from vical.calib.report.writers import summary_table, write_report, write_results_text
+    from vical.calib.solve.pipeline import calibrate_joint
+    from vical.calib.solve.uncertainty import unobservable_warnings
     from vical.data import ImuNoise
     from vical.io.kalibr import read_camchain, write_camchain_imucam
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from vical.calib.nominal import nominal_T_cam_imu
+from vical.calib.solve.nominal import nominal_T_cam_imu
 from vical.calib.synthetic import GRAVITY, Excitation, euler_body_rates, imu_kinematics, make_recording
 from vical.data import NS_PER_S, Target
 from vical.geometry import R_CAM_BODY, euler_to_matrix, so3_log

@@ -5,8 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import extrinsic_relative_error, intrinsic_relative_error
+from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.synthetic import make_recording
 from vical.calib.tasks import CalibrationTask, calibrate_task, run_task
 from vical.config import ConfigError

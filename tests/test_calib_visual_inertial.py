@@ -3,12 +3,12 @@
 import numpy as np
 import pytest
 
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
 from vical.calib.errors import CalibrationError
 from vical.calib.metrics import calibration_errors
-from vical.calib.nominal import nominal_T_cam_imu
+from vical.calib.solve.nominal import nominal_T_cam_imu
+from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
+from vical.calib.solve.visual_inertial import ViOptions
 from vical.calib.synthetic import R_WORLD_TARGET, Excitation, default_camera, make_recording
-from vical.calib.visual_inertial import ViOptions
 from vical.data import ImuNoise, ImuSamples
 from vical.geometry import make_transform, so3_exp, so3_log, transform_error
 

@@ -5,10 +5,10 @@ import pytest
 import yaml
 
 from vical.apps.calibrate import main
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
-from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import calibration_errors, image_differences_px
-from vical.calib.report import results_text
+from vical.calib.report.writers import results_text
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint
 from vical.calib.synthetic import Excitation, default_camera, make_recording, scattered_views, wide_angle_camera
 from vical.data import ImuNoise, Target
 from vical.geometry import COEFFICIENT_NAMES

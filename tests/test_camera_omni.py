@@ -16,9 +16,9 @@ import pytest
 import yaml
 
 from vical.apps.calibrate import main as calibrate_main
-from vical.calib.calibrate import calibrate_joint
-from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import calibration_errors, image_differences_px
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.pipeline import calibrate_joint
 from vical.calib.synthetic import Excitation, make_recording, scattered_views
 from vical.data import ImuNoise, Target
 from vical.geometry import CameraModel, CameraModelError

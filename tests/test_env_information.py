@@ -12,9 +12,9 @@ import pytest
 from configs import composed
 from hydra.errors import InstantiationException
 
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
-from vical.calib.intrinsics import calibrate_intrinsics
-from vical.calib.observations import collect_observations
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.observations import collect_observations
+from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint
 from vical.calib.synthetic import make_recording, scattered_views, wide_angle_camera
 from vical.config import ConfigError
 from vical.data import ImuNoise, ImuSamples, Target

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from configs import env_config
 
-from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.tasks import run_task
 from vical.config import ConfigError
 from vical.parallel import ParallelConfig

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from configs import env_parts
 
-from vical.calib.aprilgrid import detect_aprilgrid
+from vical.calib.detection.aprilgrid import detect_aprilgrid
 from vical.data import NS_PER_S
 from vical.env.calibration import CalibrationEnv
 from vical.geometry import transform_error, transform_points

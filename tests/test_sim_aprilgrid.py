@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from test_sim_calib_integration import excitation
 
-from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
-from vical.calib.calibrate import calibrate_joint
-from vical.calib.intrinsics import calibrate_intrinsics
+from vical.calib.detection.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
 from vical.calib.metrics import calibration_errors
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.pipeline import calibrate_joint
 from vical.config import ConfigError
 from vical.geometry import euler_to_matrix, make_transform
 from vical.sim import PandaSim, SimConfig

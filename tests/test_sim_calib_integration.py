@@ -10,9 +10,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
-from vical.calib.detection import detect_checkerboard
+from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.metrics import calibration_errors
+from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint
 from vical.data import ImuNoise
 from vical.geometry import euler_to_matrix, make_transform, so3_log
 from vical.sim import PandaSim

@@ -7,7 +7,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import numpy as np
 import pytest
 
-from vical.calib.detection import detect_checkerboard
+from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.synthetic import wide_angle_camera
 from vical.config import ConfigError
 from vical.geometry import (

@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 import pytest
 
-from vical.calib.detection import detect_checkerboard
+from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.config import ConfigError
 from vical.geometry import (
     CameraModel,

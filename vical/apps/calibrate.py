@@ -30,7 +30,7 @@ replaces it whole). A summary table goes to the terminal, with the errors agains
 the recording carries it.
 
 A result the data do not support (residuals far above the declared noise, a solve that never left
-its initial guess: ``vical.calib.plausibility``) fails with its likely cause; its files are kept
+its initial guess: ``vical.calib.solve.plausibility``) fails with its likely cause; its files are kept
 for diagnosis, marked as failed (``results.txt`` starts with ``FAILED:``, the camchain is named
 ``*.failed.yaml``). User errors and failed calibrations print one line ``vical-calibrate: error:
 ...`` and exit with status 2.
@@ -58,17 +58,18 @@ from vical.apps.calibrate_rig import (
     topic_list,
 )
 from vical.apps.cli import ArgumentParser, OutputError, argparse_main
-from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
-from vical.calib.board_size import MAX_SAMPLE, board_size_hint
-from vical.calib.detection import detect_checkerboard
+from vical.calib.detection.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
+from vical.calib.detection.board_size import MAX_SAMPLE, board_size_hint
+from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.errors import CalibrationError
-from vical.calib.intrinsics import MIN_VIEWS
-from vical.calib.nominal import nominal_T_cam_imu
-from vical.calib.pipeline import (
+from vical.calib.result import CalibrationResult
+from vical.calib.solve.intrinsics import MIN_VIEWS
+from vical.calib.solve.nominal import nominal_T_cam_imu
+from vical.calib.solve.pipeline import (
     RigCalibration,
     calibrate_rig,
 )
-from vical.calib.plausibility import (
+from vical.calib.solve.plausibility import (
     accel_scale,
     board_scale,
     gyro_scale,
@@ -78,8 +79,7 @@ from vical.calib.plausibility import (
     posed_frames,
     wrong_board_scale,
 )
-from vical.calib.result import CalibrationResult
-from vical.calib.visual_inertial import GRAVITY_MAGNITUDE, ViOptions
+from vical.calib.solve.visual_inertial import GRAVITY_MAGNITUDE, ViOptions
 from vical.data import DataError, ImuNoise, Recording, Target
 from vical.data.target import TargetError
 from vical.geometry import CAMERA_MODELS, CameraModel, CameraModelError
@@ -528,7 +528,7 @@ def _failure(problems: list[str], proven: list[str]) -> str | None:
 
 def wrong_settings(result: CalibrationResult, frames, rec: Recording, args) -> list[str]:
     """What the data prove wrong in the settings of a camera-IMU calibration of the camera of ``frames``, each with
-    the option that fixes it (``vical.calib.plausibility``); empty for a camera-only result."""
+    the option that fixes it (``vical.calib.solve.plausibility``); empty for a camera-only result."""
     if result.imu_residuals is None:
         return []
     found = []

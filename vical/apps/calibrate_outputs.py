@@ -17,7 +17,7 @@ import numpy as np
 from vical.apps.calibrate_rig import camera_index
 from vical.apps.cli import OutputError, cannot_write
 from vical.calib.metrics import CalibrationErrors, calibration_errors
-from vical.calib.report import (
+from vical.calib.report.writers import (
     results_text,
     summary_table,
     weak_sigma_text,
@@ -26,7 +26,7 @@ from vical.calib.report import (
     write_results_text,
 )
 from vical.calib.result import CalibrationResult
-from vical.calib.rig import pair
+from vical.calib.solve.rig import pair
 from vical.data import CameraFrames, ImuIntrinsics, ImuNoise, Recording, seconds_since
 from vical.geometry import invert_transform, matrix_to_euler, transform_error
 from vical.io.atomic import atomic_directory, write_text_atomic

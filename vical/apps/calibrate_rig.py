@@ -16,9 +16,9 @@ import re
 import numpy as np
 
 from vical.calib.errors import CalibrationError
-from vical.calib.nominal import nominal_T_cam_imu
-from vical.calib.plausibility import implausibilities
 from vical.calib.result import CalibrationResult
+from vical.calib.solve.nominal import nominal_T_cam_imu
+from vical.calib.solve.plausibility import implausibilities
 from vical.data import Recording
 from vical.io.bag import bag_image_topics
 from vical.io.kalibr_chain import CameraChain, ChainCamera

@@ -8,7 +8,7 @@ Examples::
 
 Record the IMU lying still (on a table, away from fans and footsteps) for hours: the random walk is
 read from the rise of the Allan deviation at long averaging times, and a recording too short to show
-it is refused with the duration it needs. The method and its accuracy: ``vical.calib.allan`` and
+it is refused with the duration it needs. The method and its accuracy: ``vical.calib.noise.allan`` and
 ``docs/sensors.md``.
 
 Outputs in ``--out``, written as one directory atomically (an ``--out`` that holds files is refused
@@ -35,7 +35,7 @@ from tqdm import tqdm
 
 from vical.apps.calibrate import _number, check_out
 from vical.apps.cli import ArgumentParser, OutputError, argparse_main, cannot_write
-from vical.calib.allan import (
+from vical.calib.noise.allan import (
     AXES,
     AxisNoise,
     NoiseIdentification,
@@ -45,7 +45,7 @@ from vical.calib.allan import (
     inflate,
     sample_rate,
 )
-from vical.calib.allan_plot import write_allan_png
+from vical.calib.noise.allan_plot import write_allan_png
 from vical.data import NS_PER_S, DataError, ImuNoise, ImuSamples
 from vical.io.atomic import atomic_directory
 from vical.io.errors import FormatError

@@ -25,9 +25,9 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from vical.apps.cli import check_then_run, fail
-from vical.calib.aprilgrid import detect_aprilgrid
-from vical.calib.detection import detect_checkerboard
-from vical.calib.intrinsics import MIN_VIEWS
+from vical.calib.detection.aprilgrid import detect_aprilgrid
+from vical.calib.detection.checkerboard import detect_checkerboard
+from vical.calib.solve.intrinsics import MIN_VIEWS
 from vical.config import ConfigError, require, require_range
 from vical.data import CameraFrames, Recording
 from vical.geometry import CameraModel, matrix_to_euler, step_pose

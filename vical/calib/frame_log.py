@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vical.calib.observations import FrameObservation
+from vical.calib.solve.observations import FrameObservation
 from vical.data import CameraFrames
 
 # Reason codes (the ``reason`` column of frames.csv) and what they mean, in the order a reader meets them.

@@ -110,7 +110,7 @@ class ImuResiduals:
 @dataclass(frozen=True)
 class FramePoses:
     """A camera's frames with a PnP pose: what the camera-IMU solve started from, and what the evidence checks of
-    ``vical.calib.plausibility`` read (so PnP runs once per frame).
+    ``vical.calib.solve.plausibility`` read (so PnP runs once per frame).
 
     Attributes:
         t_ns: (F,) int64 [ns] their stamps (camera clock); T_cam_target: (F, 4, 4) their poses.
@@ -170,7 +170,7 @@ class CalibrationResult:
         num_frames: frames that entered the graph.
         warnings: plain-language notes about the data (dropped frames, estimated noise).
         imu_noise_scale: the IMU's noise measured from its residuals over the declared densities
-            (``vical.calib.variance``; the solve weighted the IMU by it), or None (intrinsic task).
+            (``vical.calib.solve.variance``; the solve weighted the IMU by it), or None (intrinsic task).
         correlations: the strongest correlations between parameter groups, strongest first.
         frame_log: every input frame's detected and used corners, and why a frame was not used (the
             final solve's frames: the extrinsic stage's in the two-stage task).

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vical.calib.nominal import nominal_T_cam_imu
+from vical.calib.solve.nominal import nominal_T_cam_imu
 from vical.data import (
     NS_PER_S,
     CameraFrames,

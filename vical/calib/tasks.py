@@ -13,9 +13,9 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 from vical.calib.metrics import CalibrationErrors, calibration_errors
-from vical.calib.pipeline import calibrate_rig
 from vical.calib.result import CalibrationResult
-from vical.calib.visual_inertial import ViOptions
+from vical.calib.solve.pipeline import calibrate_rig
+from vical.calib.solve.visual_inertial import ViOptions
 from vical.config import ConfigError, from_mapping, require
 from vical.data import CameraFrames, Recording
 from vical.geometry import CAMERA_MODELS

@@ -26,8 +26,8 @@ import gymnasium as gym
 import numpy as np
 from matplotlib.figure import Figure
 
-from vical.calib.aprilgrid import detect_aprilgrid
-from vical.calib.detection import detect_checkerboard
+from vical.calib.detection.aprilgrid import detect_aprilgrid
+from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask, run_task
 from vical.config import ConfigError

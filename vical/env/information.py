@@ -4,7 +4,7 @@
 and keeps the information matrix of the task's calibration problem, linearised at an initial guess
 of the sensor (a datasheet's, or the sensor distribution's means in the simulator): never at the
 simulator's truth, so a real robot computes the same. It uses the calibrator's own factors
-(``vical.calib.corner_factors`` per frame, GTSAM's preintegrated ``CombinedImuFactor`` between
+(``vical.calib.solve.corner_factors`` per frame, GTSAM's preintegrated ``CombinedImuFactor`` between
 frames), so its prediction is the calibration's covariance at that point.
 
 Per frame with a target pose (PnP with the guessed camera), as an information filter:
@@ -47,12 +47,12 @@ import gtsam
 import numpy as np
 from scipy.stats import chi2
 
-from vical.calib.corner_factors import CornerFactors, CornerKeys
-from vical.calib.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
-from vical.calib.initialization import MIN_INIT_CORNERS, pnp
 from vical.calib.metrics import corner_ray
-from vical.calib.observations import FrameObservation
-from vical.calib.outliers import robust_sigma_of_norms
+from vical.calib.solve.corner_factors import CornerFactors, CornerKeys
+from vical.calib.solve.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
+from vical.calib.solve.initialization import MIN_INIT_CORNERS, pnp
+from vical.calib.solve.observations import FrameObservation
+from vical.calib.solve.outliers import robust_sigma_of_norms
 from vical.data import ImuNoise, ImuSamples, Target
 from vical.geometry import CameraModel, invert_transform
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vical.calib.observations import FrameObservation
+from vical.calib.solve.observations import FrameObservation
 from vical.data import ImuSamples, Target
 from vical.env.config import MdpConfig
 from vical.env.coverage import Coverage, view_features

@@ -2,7 +2,7 @@
 
 A detector is any callable ``detector(image) -> (corners (K, 2) float [px], ids (K,) int)`` taking
 a (H, W) uint8 grey image and returning the target points it found, ids numbered as
-``vical.data.Target`` (Kalibr) numbers them; ``vical.calib.detection.detect_checkerboard`` bound to
+``vical.data.Target`` (Kalibr) numbers them; ``vical.calib.detection.checkerboard.detect_checkerboard`` bound to
 a target is one.
 """
 

@@ -31,10 +31,10 @@ from dataclasses import dataclass, field
 import gymnasium as gym
 import numpy as np
 
-from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
-from vical.calib.detection import detect_checkerboard
-from vical.calib.initialization import pnp
-from vical.calib.observations import FrameObservation
+from vical.calib.detection.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
+from vical.calib.detection.checkerboard import detect_checkerboard
+from vical.calib.solve.initialization import pnp
+from vical.calib.solve.observations import FrameObservation
 from vical.data import NS_PER_S, ImuSamples, Target
 from vical.env.actions import action_to_step
 from vical.env.config import MdpConfig

@@ -355,7 +355,7 @@ class RenderBackend:
     Args:
         model: the compiled scene (``mujoco.MjModel``) whose offscreen buffer holds ``render_size``.
         target: the target the detector looks for.
-        detector: corner detector (e.g. ``vical.calib.detection.detect_checkerboard``).
+        detector: corner detector (e.g. ``vical.calib.detection.checkerboard.detect_checkerboard``).
         render_size: (W, H) [px] of the undistorted render; larger than the camera image so that
             the warp has the rays beyond the pinhole's field of view that barrel distortion pulls in.
         camera_name: the rig's MuJoCo camera (its headlight lights the scene).

@@ -71,7 +71,7 @@ class SensorRecorder:
     ) -> None:
         if sampling.backend == "render" and detector is None:
             raise ValueError(
-                "sensor.backend=render needs a corner detector (vical.calib.detection.detect_checkerboard)"
+                "sensor.backend=render needs a corner detector (vical.calib.detection.checkerboard.detect_checkerboard)"
             )
         self.sim = sim
         self.target = target

@@ -1,5 +1,5 @@
 """The camera-IMU factor graph: its states, IMU, corner and prior factors, the solve in rounds and the sensors'
-reweighting by their measured noise (``vical.calib.variance``).
+reweighting by their measured noise (``vical.calib.solve.variance``).
 """
 
 from __future__ import annotations
@@ -9,14 +9,14 @@ from dataclasses import dataclass, field
 import gtsam
 import numpy as np
 
-from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError
-from vical.calib.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
-from vical.calib.imu_intrinsics import IntervalReadings, IntrinsicImuFactor, prior_sigmas
-from vical.calib.rig import OtherCamera, pair
-from vical.calib.solver import optimize
-from vical.calib.variance import used_dof, variance_factor
-from vical.calib.vi_problem import (
+from vical.calib.solve.corner_factors import CornerFactors, CornerKeys
+from vical.calib.solve.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
+from vical.calib.solve.imu_intrinsics import IntervalReadings, IntrinsicImuFactor, prior_sigmas
+from vical.calib.solve.rig import OtherCamera, pair
+from vical.calib.solve.solver import optimize
+from vical.calib.solve.variance import used_dof, variance_factor
+from vical.calib.solve.vi_problem import (
     ACCEL_BIAS_PRIOR_SIGMA,
     CLUSTER_NS,
     D_KEY,
@@ -132,7 +132,7 @@ def _add_intrinsic_imu_factors(graph, problem: ViProblem, times: np.ndarray, par
 
 
 def _corner_factors(problem: ViProblem, states: list[int], times: np.ndarray, est: ViEstimate, joint: bool):
-    """The corner factors of the states' frames (``vical.calib.corner_factors``)."""
+    """The corner factors of the states' frames (``vical.calib.solve.corner_factors``)."""
     with_offset = problem.options.estimate_time_offset
     keys = CornerKeys(
         poses=[state_key("x", n) for n in range(len(states))],

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 
 from vical.calib.errors import CalibrationError, CalibrationSettingError
-from vical.calib.observations import FrameObservation
+from vical.calib.solve.observations import FrameObservation
 from vical.data import ImuNoise
 
 # Kalibr's imu.yaml keys of the noise settings, and the paper's IMU (a typical MEMS unit) for scale.
@@ -47,7 +47,7 @@ def check_imu_noise(noise: ImuNoise) -> list[str]:
 
     Returns:
         Plain-language warnings (the solve still runs: each sensor is weighted by the noise its
-        residuals show, ``vical.calib.variance``).
+        residuals show, ``vical.calib.solve.variance``).
 
     Raises:
         CalibrationError: naming the imu.yaml key of a value that cannot be a noise density.

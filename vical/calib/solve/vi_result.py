@@ -11,17 +11,17 @@ import gtsam
 import numpy as np
 
 from vical.calib.frame_log import FrameLog, build_frame_log, left_out
-from vical.calib.imu_intrinsics import IntrinsicImuFactor
-from vical.calib.initialization import MIN_INIT_CORNERS
-from vical.calib.intrinsics import intrinsic_names
-from vical.calib.observations import FrameObservation
 from vical.calib.result import CalibrationResult, FramePoses, ImuResiduals, ResidualStats, TimeOffsetTrace
-from vical.calib.rig import OtherCamera
-from vical.calib.time_alignment import increment_mismatch, rotation_increments
-from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
-from vical.calib.vi_covariance import ViMarginals, parameter_covariance, widening_warning
-from vical.calib.vi_graph import ViGraph
-from vical.calib.vi_problem import (
+from vical.calib.solve.imu_intrinsics import IntrinsicImuFactor
+from vical.calib.solve.initialization import MIN_INIT_CORNERS
+from vical.calib.solve.intrinsics import intrinsic_names
+from vical.calib.solve.observations import FrameObservation
+from vical.calib.solve.rig import OtherCamera
+from vical.calib.solve.time_alignment import increment_mismatch, rotation_increments
+from vical.calib.solve.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
+from vical.calib.solve.vi_covariance import ViMarginals, parameter_covariance, widening_warning
+from vical.calib.solve.vi_graph import ViGraph
+from vical.calib.solve.vi_problem import (
     BIAS_NAMES,
     EXTRINSIC_NAMES,
     G_KEY,

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from vical.calib.initialization import pnp, undistorted
-from vical.calib.observations import FrameObservation
+from vical.calib.solve.initialization import pnp, undistorted
+from vical.calib.solve.observations import FrameObservation
 from vical.geometry import CameraModel
 
 OUTLIER_SIGMAS = 5.0  # a Gaussian corner exceeds 5 sigma per axis about once in 3e5 corners

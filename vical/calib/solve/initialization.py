@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from vical.calib.errors import CalibrationError
-from vical.calib.observations import FrameObservation
+from vical.calib.solve.observations import FrameObservation
 from vical.geometry import CameraModel, CameraModelError, make_transform
 from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
 

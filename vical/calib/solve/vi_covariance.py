@@ -1,5 +1,5 @@
 """The camera-IMU solve's uncertainty: the marginal covariance of its parameters, widened by the cluster-robust
-one (``vical.calib.robust_covariance``), and the warnings about the noise, the span and the gaps of the data.
+one (``vical.calib.solve.robust_covariance``), and the warnings about the noise, the span and the gaps of the data.
 """
 
 from __future__ import annotations
@@ -9,10 +9,10 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from vical.calib.robust_covariance import sandwich_covariances, widen
-from vical.calib.solver import covariance_or_unobservable
-from vical.calib.vi_graph import ViGraph, variance_scale
-from vical.calib.vi_problem import (
+from vical.calib.solve.robust_covariance import sandwich_covariances, widen
+from vical.calib.solve.solver import covariance_or_unobservable
+from vical.calib.solve.vi_graph import ViGraph, variance_scale
+from vical.calib.solve.vi_problem import (
     GAP_WARNING_FACTOR,
     I_KEY,
     IMU_NOISE_WARNING,
@@ -154,7 +154,7 @@ def parameter_covariance(
 
     Of camera ``index``'s variables (0: the first camera's), the first bias and, with ``imu_theta`` (the
     estimated IMU intrinsics), those. The covariance under the measured noise levels widened wherever the
-    cluster-robust one (``vical.calib.robust_covariance``) is larger; a fixed time offset gets zero variance.
+    cluster-robust one (``vical.calib.solve.robust_covariance``) is larger; a fixed time offset gets zero variance.
     """
     intrinsic_keys = [] if imu_theta is None else [I_KEY]
     model, robust = marginals.block([*_camera_keys(index, joint, fixed_offset), state_key("b", 0), *intrinsic_keys])

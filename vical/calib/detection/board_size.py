@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from vical.calib.detection import FIND_FLAGS
+from vical.calib.detection.checkerboard import FIND_FLAGS
 from vical.data import Target
 
 MAX_SAMPLE = 8  # images searched, about 25 ms each at 640 x 480

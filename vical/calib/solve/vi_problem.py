@@ -1,5 +1,5 @@
 """The camera-IMU graph's settings (``ViOptions``), constants, and its problem: the views, PnP poses, outlier
-screen and closed-form initial estimate it is built from (``vical.calib.visual_inertial``).
+screen and closed-form initial estimate it is built from (``vical.calib.solve.visual_inertial``).
 """
 
 from __future__ import annotations
@@ -10,14 +10,14 @@ import gtsam
 import numpy as np
 
 from vical.calib.errors import CalibrationError, CalibrationSettingError
-from vical.calib.imu_intrinsics import check_excitation
-from vical.calib.imu_intrinsics import check_model as check_imu_model
-from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses
-from vical.calib.intrinsics import estimated_pixel_sigma
-from vical.calib.observations import FrameObservation
-from vical.calib.outliers import reject_outliers
-from vical.calib.rig import OtherCamera
-from vical.calib.time_alignment import align, rotation_increments
+from vical.calib.solve.imu_intrinsics import check_excitation
+from vical.calib.solve.imu_intrinsics import check_model as check_imu_model
+from vical.calib.solve.initialization import MIN_INIT_CORNERS, frame_poses
+from vical.calib.solve.intrinsics import estimated_pixel_sigma
+from vical.calib.solve.observations import FrameObservation
+from vical.calib.solve.outliers import reject_outliers
+from vical.calib.solve.rig import OtherCamera
+from vical.calib.solve.time_alignment import align, rotation_increments
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target, seconds_since
 from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel, invert_transform, make_transform
@@ -28,7 +28,7 @@ ACCEL_BIAS_PRIOR_SIGMA = 1.0  # [m/s^2] weak prior on the first accelerometer bi
 MIN_PIXEL_SIGMA = 0.01  # [px] floor of the estimated corner noise (noise-free data would weight pixels infinitely)
 RECENTRE_OFFSET = 1e-3  # [s] re-linearise the states at the new offset when the in-graph correction exceeds this
 MAX_ROUNDS = 3
-# Noise levels (vical.calib.variance): a sensor whose residuals say its noise is off by more than this
+# Noise levels (vical.calib.solve.variance): a sensor whose residuals say its noise is off by more than this
 # factor is reweighted and the problem solved again, at most MAX_REWEIGHTS times.
 REWEIGHT_TOLERANCE = 1.15
 MAX_REWEIGHTS = 3
@@ -71,7 +71,7 @@ class ViOptions:
         frame_stride: use every ``frame_stride``-th frame with a target view (1: all); thins long or
             high-rate recordings (the accuracy cost is measured in docs/calibration.md).
         memory_limit_mb: [MB] a recording whose solve would need more is refused before solving,
-            with the stride that fits (``vical.calib.checks``).
+            with the stride that fits (``vical.calib.solve.checks``).
         imu_model: ``calibrated`` (the readings, corrected by ``imu_intrinsics`` when given, are
             exact up to noise and bias) or ``scale-misalignment`` (estimate the IMU intrinsics,
             starting from ``imu_intrinsics``; Kalibr's model of that name).

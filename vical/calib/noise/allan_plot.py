@@ -7,7 +7,7 @@ import os
 import numpy as np
 from matplotlib.figure import Figure  # no pyplot: no global backend state, no display needed
 
-from vical.calib.allan import BIAS_INSTABILITY_FACTOR, NoiseIdentification
+from vical.calib.noise.allan import BIAS_INSTABILITY_FACTOR, NoiseIdentification
 from vical.io.atomic import atomic_file
 
 COLORS = ("tab:red", "tab:green", "tab:blue")

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vical.calib.errors import CalibrationError, CalibrationSettingError
-from vical.calib.imu_integration import cumulative_angle, interpolate
+from vical.calib.solve.imu_integration import cumulative_angle, interpolate
 from vical.geometry import so3_log
 
 MAX_INCREMENT_GAP = 0.35  # [s] frame pairs further apart are not used (rotation may exceed pi, PnP gaps)

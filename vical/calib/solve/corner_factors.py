@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from vical.calib.observations import FrameObservation
+from vical.calib.solve.observations import FrameObservation
 from vical.geometry import CameraModel, CameraModelError, skew
 
 

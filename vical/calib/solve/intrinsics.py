@@ -3,7 +3,7 @@ radtan) from target observations.
 
 Graph: one ``Pose3`` per frame (the camera pose in the target frame, ``T_target_cam``), the camera
 parameters ``[fx, fy, cx, cy, *coefficients]`` (4 + the model's coefficients, no skew, as Kalibr's models) and
-one corner factor per frame (``vical.calib.corner_factors``: the target points are constants).
+one corner factor per frame (``vical.calib.solve.corner_factors``: the target points are constants).
 Initialisation: Zhang's focal lengths from plane homographies (principal point at the image centre,
 no distortion; wide-angle models from the focal length that best straightens the views), then PnP
 per frame. A radtan solve that this start leaves unconverged or with its principal point outside the
@@ -19,17 +19,23 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from vical.calib.checks import image_coverage_warnings
-from vical.calib.corner_factors import CornerFactors, CornerKeys
 from vical.calib.errors import CalibrationError
 from vical.calib.frame_log import build_frame_log, left_out
-from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses, initial_camera, opencv_camera, starting_camera
-from vical.calib.model_fit import COMPARISON, misfit_warnings
-from vical.calib.observations import FrameObservation, collect_observations, image_size
-from vical.calib.outliers import reject_outliers
 from vical.calib.result import CalibrationResult, ResidualStats
-from vical.calib.solver import covariance_or_unobservable, optimize
-from vical.calib.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
+from vical.calib.solve.checks import image_coverage_warnings
+from vical.calib.solve.corner_factors import CornerFactors, CornerKeys
+from vical.calib.solve.initialization import (
+    MIN_INIT_CORNERS,
+    frame_poses,
+    initial_camera,
+    opencv_camera,
+    starting_camera,
+)
+from vical.calib.solve.model_fit import COMPARISON, misfit_warnings
+from vical.calib.solve.observations import FrameObservation, collect_observations, image_size
+from vical.calib.solve.outliers import reject_outliers
+from vical.calib.solve.solver import covariance_or_unobservable, optimize
+from vical.calib.solve.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
 from vical.data import CameraFrames, Target
 from vical.geometry import (
     CAMERA_MODELS,
@@ -140,7 +146,7 @@ def calibrate_intrinsics(
 ) -> CalibrationResult:
     """Calibrate the camera's intrinsics and distortion from target observations.
 
-    When the residuals show that the model does not fit the lens (``vical.calib.model_fit``), the
+    When the residuals show that the model does not fit the lens (``vical.calib.solve.model_fit``), the
     result warns, and (``compare_models``) the other models are calibrated on the same corners and
     their fit is listed in the warnings.
 

@@ -1,7 +1,7 @@
 """The calibration pipeline: every task, one camera or a rig, through one dispatcher (``calibrate_rig``).
 
 Each camera's detections are collected once; the intrinsic stage (the intrinsic task, the joint task's start,
-the two-stage task's first stage) and the camera-IMU graph (``vical.calib.visual_inertial``) work on them. A
+the two-stage task's first stage) and the camera-IMU graph (``vical.calib.solve.visual_inertial``) work on them. A
 one-camera calibration is a rig of one: ``calibrate_extrinsics``, ``calibrate_joint`` and ``calibrate_two_stage``
 are ``calibrate_rig`` on ``{"cam0": frames}``, and ``vical-calibrate``, the tasks of the environment and the
 evaluation (``vical.calib.tasks``) and ``vical-collect`` all call it.
@@ -14,14 +14,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from vical.calib.checks import image_coverage_warnings
 from vical.calib.errors import CalibrationError
-from vical.calib.intrinsics import calibrate_intrinsics
-from vical.calib.model_fit import is_model_warning
-from vical.calib.observations import FrameObservation, collect_observations
 from vical.calib.result import CalibrationResult
-from vical.calib.uncertainty import correlations, weak_parameters
-from vical.calib.visual_inertial import CameraInput, ViOptions, run_visual_inertial
+from vical.calib.solve.checks import image_coverage_warnings
+from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.model_fit import is_model_warning
+from vical.calib.solve.observations import FrameObservation, collect_observations
+from vical.calib.solve.uncertainty import correlations, weak_parameters
+from vical.calib.solve.visual_inertial import CameraInput, ViOptions, run_visual_inertial
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target
 from vical.geometry import CameraModel, invert_transform
 

@@ -7,14 +7,14 @@ Layout (navigation frame = target frame, so no gauge prior is needed):
 - shared: ``E`` = ``T_imu_cam`` (``Pose3``), gravity direction ``G`` (``Unit3``, target frame),
   time-offset correction ``D`` [s] (``tau = tau0 + D``), and in the joint task the camera
   parameters ``K`` (``CameraModel.parameters``, 8 or 6);
-- a rig's other cameras ``c`` (``vical.calib.rig``): their own ``E_c``, ``D_c`` (and ``K_c``); their frames
+- a rig's other cameras ``c`` (``vical.calib.solve.rig``): their own ``E_c``, ``D_c`` (and ``K_c``); their frames
   join the states of the first camera's simultaneous frames;
 - factors: one corner factor per frame on ``(X_i, V_i, E, D[, K])``, which projects the known
   target points from the pose at the exposure instant ``X_i Exp([omega_i; R_i^T V_i] D) E``
-  (``vical.calib.corner_factors``), ``CombinedImuFactorWithGravityDirection`` between consecutive
+  (``vical.calib.solve.corner_factors``), ``CombinedImuFactorWithGravityDirection`` between consecutive
   states (rotation-compensated midpoint preintegration), a weak prior on the first bias;
 - with ``imu_model="scale-misalignment"`` the IMU intrinsics ``I`` (scale, misalignment, optionally
-  the gyro's g-sensitivity) are a variable of every IMU factor (``vical.calib.imu_intrinsics``), with
+  the gyro's g-sensitivity) are a variable of every IMU factor (``vical.calib.solve.imu_intrinsics``), with
   a weak prior; known intrinsics (``ViOptions.imu_intrinsics``) otherwise correct the readings.
 
 Initialisation: PnP poses with the (known or intrinsically calibrated) camera; time offset,
@@ -28,15 +28,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from vical.calib.checks import check_imu_noise, check_memory
 from vical.calib.errors import CalibrationError
-from vical.calib.intrinsics import check_model
-from vical.calib.nominal import nominal_T_cam_imu
 from vical.calib.result import CalibrationResult
-from vical.calib.rig import OtherCamera, initialise_other, prepare_other
-from vical.calib.vi_covariance import gap_warnings, imu_noise_warning, solution_marginals, span_warnings
-from vical.calib.vi_graph import measured_noise, reweighted_solve, solve_rounds
-from vical.calib.vi_problem import (  # noqa: F401 (GRAVITY_MAGNITUDE, NOISE_WEIGHTINGS: the public names' home)
+from vical.calib.solve.checks import check_imu_noise, check_memory
+from vical.calib.solve.intrinsics import check_model
+from vical.calib.solve.nominal import nominal_T_cam_imu
+from vical.calib.solve.rig import OtherCamera, initialise_other, prepare_other
+from vical.calib.solve.vi_covariance import gap_warnings, imu_noise_warning, solution_marginals, span_warnings
+from vical.calib.solve.vi_graph import measured_noise, reweighted_solve, solve_rounds
+from vical.calib.solve.vi_problem import (  # noqa: F401 (GRAVITY_MAGNITUDE, NOISE_WEIGHTINGS: the public names' home)
     GRAVITY_MAGNITUDE,
     NOISE_WEIGHTINGS,
     CameraInput,
@@ -46,7 +46,7 @@ from vical.calib.vi_problem import (  # noqa: F401 (GRAVITY_MAGNITUDE, NOISE_WEI
     initial_estimate,
     prepare_problem,
 )
-from vical.calib.vi_result import first_camera_result, first_frame_log, other_camera_result
+from vical.calib.solve.vi_result import first_camera_result, first_frame_log, other_camera_result
 from vical.data import ImuNoise, ImuSamples, Target
 
 
@@ -61,7 +61,7 @@ def run_visual_inertial(
     others: list[CameraInput] | None = None,
 ) -> list[CalibrationResult]:
     """The camera-IMU graph of the extrinsic (``task="extrinsic"``) and joint (``task="joint"``) solves
-    (``vical.calib.pipeline.calibrate_rig`` calls it).
+    (``vical.calib.solve.pipeline.calibrate_rig`` calls it).
 
     Returns the first camera's result, then one per camera of ``others`` (a rig in one graph).
     """
@@ -100,7 +100,7 @@ def run_visual_inertial(
 
 
 def _initial_other(problem: ViProblem, est: ViEstimate, index: int, given: CameraInput) -> OtherCamera:
-    """Another camera's views, PnP poses and closed-form guesses (``vical.calib.rig``)."""
+    """Another camera's views, PnP poses and closed-form guesses (``vical.calib.solve.rig``)."""
     opts = problem.options
     other = prepare_other(
         given.name, index, given.observations[:: opts.frame_stride], given.camera, problem.target,

@@ -15,7 +15,7 @@ import numpy as np
 from vical.calib.frame_log import REASONS, FrameLog, short_reason
 from vical.calib.metrics import CalibrationErrors
 from vical.calib.result import CalibrationResult, ResidualStats, WeakParameter
-from vical.calib.uncertainty import IMU_INTRINSIC_THRESHOLDS
+from vical.calib.solve.uncertainty import IMU_INTRINSIC_THRESHOLDS
 from vical.geometry import matrix_to_euler
 from vical.io.atomic import atomic_file, write_text_atomic
 
@@ -290,7 +290,7 @@ def report_pages(result: CalibrationResult, errors: CalibrationErrors | None = N
     """The report's pages in order (``matplotlib.figure.Figure``): parameters, reprojection residuals, coverage,
     frames, then for camera-IMU tasks the IMU's measured and predicted rates, its residuals and the time offset,
     and last the notes."""
-    from vical.calib import report_figures as figures
+    from vical.calib.report import figures
 
     pages = figures.text_pages(f"vical calibration report: {result.task}", _summary_lines(result, errors, failure))
     pages.append(figures.reprojection_page(result))
@@ -320,7 +320,7 @@ def write_report(
     # matplotlib takes half a second to import: a run without plots (--no-report, the text outputs) never does
     from matplotlib.backends.backend_pdf import PdfPages
 
-    from vical.calib import report_figures as figures
+    from vical.calib.report import figures
 
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)

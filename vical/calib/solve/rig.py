@@ -4,7 +4,7 @@ The first camera (``cam0``) sets the IMU states (one per frame with a target pos
 camera's frame joins the state of the first camera's frame taken within ``PAIR_TOLERANCE`` of it
 (cameras on one trigger: the same instant up to their time offsets); its corner factor projects
 from the pose at its own exposure instant, ``shift + delta_c`` after the state
-(``vical.calib.corner_factors``, ``shift`` the known part). Frames without such a partner are not
+(``vical.calib.solve.corner_factors``, ``shift`` the known part). Frames without such a partner are not
 used (a warning counts them). Each camera has its own ``T_cam_imu``, time offset and, in the joint
 task, intrinsics; the relative poses ``T_cn_cnm1`` follow from the ``T_cam_imu``.
 """
@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vical.calib.errors import CalibrationError
-from vical.calib.initialization import MIN_INIT_CORNERS, frame_poses
-from vical.calib.intrinsics import estimated_pixel_sigma
-from vical.calib.observations import FrameObservation
-from vical.calib.outliers import reject_outliers
-from vical.calib.time_alignment import align, rotation_increments
+from vical.calib.solve.initialization import MIN_INIT_CORNERS, frame_poses
+from vical.calib.solve.intrinsics import estimated_pixel_sigma
+from vical.calib.solve.observations import FrameObservation
+from vical.calib.solve.outliers import reject_outliers
+from vical.calib.solve.time_alignment import align, rotation_increments
 from vical.data import Target, seconds_since
 from vical.geometry import CameraModel, invert_transform, make_transform
 

@@ -92,7 +92,7 @@ def sandwich_covariances(
 
     A solve that weighs its factors by a noise whose true variance is ``s_k`` times the declared one has the
     covariance ``H^-1 (sum_k s_k H_k) H^-1`` (``H_k = A_k^T A_k``): exact for white noise of the measured
-    levels (``vical.calib.variance``). The cluster-robust one measures it from the residuals themselves.
+    levels (``vical.calib.solve.variance``). The cluster-robust one measures it from the residuals themselves.
 
     Args:
         linear: the graph linearised at the solution (whitened factors).

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vical.calib.observations import FrameObservation
+from vical.calib.solve.observations import FrameObservation
 from vical.geometry import CAMERA_MODELS, CameraModel
 
 GRID = (8, 6)  # cells across and down the image

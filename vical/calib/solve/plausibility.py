@@ -15,7 +15,7 @@ weighting:
 
 IMU residuals above the declared noise are no such evidence: real IMUs routinely show 5-15x their
 datasheet densities (vibration, unmodelled effects), and calibrators take the declared values as given.
-They are a warning (``vical.calib.visual_inertial``), never a failure.
+They are a warning (``vical.calib.solve.visual_inertial``), never a failure.
 """
 
 from __future__ import annotations
@@ -25,12 +25,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
-from vical.calib.imu_integration import cumulative_angle, interpolate
-from vical.calib.initialization import frame_poses
-from vical.calib.observations import collect_observations
 from vical.calib.result import CalibrationResult, FramePoses
-from vical.calib.time_alignment import rotation_increments
-from vical.calib.visual_inertial import GRAVITY_MAGNITUDE
+from vical.calib.solve.imu_integration import cumulative_angle, interpolate
+from vical.calib.solve.initialization import frame_poses
+from vical.calib.solve.observations import collect_observations
+from vical.calib.solve.time_alignment import rotation_increments
+from vical.calib.solve.visual_inertial import GRAVITY_MAGNITUDE
 from vical.data import CameraFrames, ImuSamples, Target, seconds_since
 from vical.geometry import CameraModel
 

@@ -18,7 +18,7 @@ import gtsam
 import numpy as np
 
 from vical.calib.errors import CalibrationError, CalibrationSettingError
-from vical.calib.imu_integration import interpolate, knot_segments, preintegrate
+from vical.calib.solve.imu_integration import interpolate, knot_segments, preintegrate
 from vical.data.imu_model import ImuIntrinsics
 
 IMU_MODELS = ("calibrated", "scale-misalignment")
