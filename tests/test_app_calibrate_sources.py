@@ -143,3 +143,37 @@ def test_sources_without_imu_or_target_fail_with_the_fix(exports, tmp_path, caps
     assert main([str(root / "euroc"), "--out", str(tmp_path / "d")]) == 2
     assert "give the calibration target as --target target.yaml (a Kalibr target YAML)" in capsys.readouterr().err
     assert not (tmp_path / "a").exists() and not (tmp_path / "d").exists()
+
+
+def test_a_joint_calibration_detects_poses_and_screens_each_frame_once(exports, tmp_path, monkeypatch):
+    """From images to the joint result: the detector, PnP and the outlier screen each run once per frame (the joint
+    graph starts from the poses its intrinsic start solved, and screens every view once)."""
+    from vical.apps import calibrate as app
+    from vical.calib.solve import initialization, intrinsics, rig, vi_problem
+
+    rec, root = exports
+    detected, posed, screened = [], [], []
+
+    def detector(image, target):
+        detected.append(id(image))
+        return detect_checkerboard(image, target)
+
+    def pnp(camera, obs, *args, **kwargs):
+        posed.append(obs.t_ns)
+        return real_pnp(camera, obs, *args, **kwargs)
+
+    def screen(camera, observations, *args, **kwargs):
+        screened.extend(o.t_ns for o in observations)
+        return real_screen(camera, observations, *args, **kwargs)
+
+    real_pnp, real_screen = initialization.pnp, vi_problem.reject_outliers
+    monkeypatch.setattr(app, "detect_checkerboard", detector)
+    monkeypatch.setattr(initialization, "pnp", pnp)  # the poses' PnP (the screen's refits are its own)
+    for module in (intrinsics, vi_problem, rig):
+        monkeypatch.setattr(module, "reject_outliers", screen)
+    argv = [str(root / "euroc"), "--target", str(root / "target.yaml"), "--imu-yaml", str(root / "imu.yaml")]
+    _calibrate([*argv, "--task", "joint"], tmp_path)
+    views = int(np.count_nonzero(rec.frames.num_detections))
+    assert len(detected) == len(rec.frames) == 49
+    assert len(posed) == len(set(posed)) == views
+    assert len(screened) == len(set(screened)) == views

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from vical.calib.errors import CalibrationError
+from vical.calib.result import FramePoses
 from vical.calib.solve.observations import FrameObservation
 from vical.geometry import CameraModel, CameraModelError, make_transform
 from vical.geometry.wide_angle import WIDE_ANGLE_MODELS
@@ -249,3 +250,21 @@ def frame_poses(
         if result is not None and result[1] < MAX_PNP_RMS_PX:
             poses[k] = result
     return poses
+
+
+def starting_poses(
+    camera: CameraModel, observations: list[FrameObservation], min_corners: int, known: FramePoses | None = None
+) -> dict[int, np.ndarray]:
+    """``{observation index: T_cam_target}`` to start a solve from: the ``known`` poses of the frames that have
+    one (a joint solve's intrinsic start posed them with this camera), PnP for the others, so each frame is posed
+    once; a pose that reprojects worse than ``MAX_PNP_RMS_PX`` is left out either way."""
+    given = {} if known is None else {int(t): T for t, T in zip(known.t_ns, known.T_cam_target, strict=True)}
+    poses = {}
+    for k, obs in enumerate(observations):
+        T = given.get(obs.t_ns)
+        if T is not None and len(obs.ids) >= min_corners:
+            rms = float(np.sqrt(np.mean(np.sum(obs.residuals(camera, T) ** 2, axis=1))))
+            if rms < MAX_PNP_RMS_PX:
+                poses[k] = T
+    missing = [k for k in range(len(observations)) if observations[k].t_ns not in given]
+    return poses | {k: T for k, (T, _) in frame_poses(camera, observations, min_corners, only=missing).items()}

@@ -21,7 +21,7 @@ import numpy as np
 
 from vical.calib.errors import CalibrationError
 from vical.calib.frame_log import build_frame_log, left_out
-from vical.calib.result import CalibrationResult, ResidualStats
+from vical.calib.result import CalibrationResult, FramePoses, ResidualStats
 from vical.calib.solve.checks import image_coverage_warnings
 from vical.calib.solve.corner_factors import CornerFactors, CornerKeys
 from vical.calib.solve.initialization import (
@@ -33,7 +33,7 @@ from vical.calib.solve.initialization import (
 )
 from vical.calib.solve.model_fit import COMPARISON, misfit_warnings
 from vical.calib.solve.observations import FrameObservation, collect_observations, image_size
-from vical.calib.solve.outliers import reject_outliers
+from vical.calib.solve.outliers import Rejection, reject_outliers
 from vical.calib.solve.solver import covariance_or_unobservable, optimize
 from vical.calib.solve.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
 from vical.data import CameraFrames, Target
@@ -142,7 +142,7 @@ def calibrate_intrinsics(
     frame_stride: int = 1,
     compare_models: bool = True,
     observations: list[FrameObservation] | None = None,
-    coverage_warnings: bool = True,
+    joint_start: bool = False,
 ) -> CalibrationResult:
     """Calibrate the camera's intrinsics and distortion from target observations.
 
@@ -164,8 +164,8 @@ def calibrate_intrinsics(
         compare_models: calibrate the other models when this one does not fit.
         observations: the frames' detections (``collect_observations(frames, target)``), when the caller has
             them already.
-        coverage_warnings: warn about image regions without corners (a joint solve judges them on all its
-            views instead).
+        joint_start: only the start of a joint solve, which screens every view for outliers once and judges the image
+            coverage on all of them: no outlier screen and no coverage warnings here, no other models fitted.
     """
     start = time.perf_counter()
     check_model(model)
@@ -196,7 +196,7 @@ def calibrate_intrinsics(
         if found is not None and _better(found[3], solution):
             camera, T_cam_target, graph, solution = found
     # Wrong detections pull the least-squares fit: drop them and solve again from this solution.
-    rejection = reject_outliers(camera, observations, T_cam_target, min(MIN_INIT_CORNERS, target.num_points))
+    rejection = _screen(camera, observations, T_cam_target, min(MIN_INIT_CORNERS, target.num_points), joint_start)
     if rejection.changed:
         solve.observations = observations = rejection.observations
         camera, T_cam_target, graph, solution = solve(camera, rejection.poses)
@@ -213,7 +213,7 @@ def calibrate_intrinsics(
     decided = left_out(every, observations, rejection.dropped)
     min_corners = min(MIN_INIT_CORNERS, target.num_points)
     comparison = None
-    if compare_models:
+    if compare_models and not joint_start:
         comparison = {"frames": frames, "target": target, "image_size_px": size, "pixel_sigma": pixel_sigma,
                       "huber_k": huber_k, "max_iterations": max_iterations, "frame_stride": frame_stride}  # fmt: skip
     estimate = np.concatenate([camera.intrinsics, camera.dist])
@@ -240,13 +240,24 @@ def calibrate_intrinsics(
         status=solution.status,
         num_frames=len(poses),
         warnings=rejection.warnings
-        + (image_coverage_warnings(observations, size) if coverage_warnings else [])
+        + ([] if joint_start else image_coverage_warnings(observations, size))
         + correlation_warnings(found)
         + unobservable_warnings(names, covariance)
         + _model_warnings(camera, observations, T_cam_target, residuals, comparison),
         frame_log=build_frame_log(frames, frame_index, min_corners, decided),
         reprojection_pixels=pixels,
+        frame_poses=FramePoses(
+            np.array([observations[k].t_ns for k in T_cam_target], dtype=np.int64),
+            np.array(list(T_cam_target.values())),
+        ),
     )
+
+
+def _screen(camera, observations: list[FrameObservation], T_cam_target: dict, min_corners: int, joint_start: bool):
+    """The outlier screen (``reject_outliers``); for a joint solve's start, none: the joint graph screens every view."""
+    if joint_start:
+        return Rejection(list(observations), dict(T_cam_target), [], 0.0)
+    return reject_outliers(camera, observations, T_cam_target, min_corners)
 
 
 def _start(observations: list[FrameObservation], model: str, size: tuple[int, int]) -> CameraModel:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from vical.calib.errors import CalibrationError
-from vical.calib.result import CalibrationResult
+from vical.calib.result import CalibrationResult, FramePoses
 from vical.calib.solve.checks import image_coverage_warnings
 from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.solve.model_fit import is_model_warning
@@ -104,8 +104,10 @@ def calibrate_rig(
         return RigCalibration(stage)
     models = {n: known[n] if r is None else r.camera for n, r in stage.items()}
     guesses, offsets = initial_T_cam_imu or {}, initial_time_offsets or {}
+    posed = {n: _start_poses(stage[n], task) for n in frames}
     inputs = [
-        CameraInput(n, observations[n], models[n], guesses.get(n), offsets.get(n, 0.0), frames[n]) for n in frames
+        CameraInput(n, observations[n], models[n], guesses.get(n), offsets.get(n, 0.0), frames[n], posed[n])
+        for n in frames
     ]
     solved = run_visual_inertial(
         "joint" if task == "joint" else "extrinsic", inputs[0], imu, target, imu_noise or ImuNoise(), opts, start,
@@ -150,13 +152,20 @@ def _intrinsic_stage(
             observations=observations,
         )  # fmt: skip
     # The joint task's start: a hundred views spread over the recording are plenty (a real 30 s recording has
-    # 600, whose own solve and outlier screen took 1.9 s of the joint task's 3.6 s); its coverage is judged on
-    # every view by the joint result, and the other models are not fitted for it.
+    # 600, whose own solve and outlier screen took 1.9 s of the joint task's 3.6 s). The joint graph starts from
+    # the poses it solves (each view posed once), screens every view for outliers once and judges the image
+    # coverage on all of them; the other models are not fitted for it.
     stride = max(opts.frame_stride, len(frames) // JOINT_START_VIEWS)
     return calibrate_intrinsics(
         frames, target, model, size, known, opts.pixel_sigma, opts.huber_k, frame_stride=stride,
-        compare_models=False, observations=observations, coverage_warnings=False,
+        observations=observations, joint_start=True,
     )  # fmt: skip
+
+
+def _start_poses(stage: CalibrationResult | None, task: str) -> FramePoses | None:
+    """The joint task's intrinsic start posed its views with the camera the joint graph starts from: the graph
+    starts from those poses instead of posing the views again."""
+    return stage.frame_poses if task == "joint" and stage is not None else None
 
 
 def _with_joint_warnings(

@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vical.calib.errors import CalibrationError
-from vical.calib.solve.initialization import MIN_INIT_CORNERS, frame_poses
+from vical.calib.result import FramePoses
+from vical.calib.solve.initialization import MIN_INIT_CORNERS, starting_poses
 from vical.calib.solve.intrinsics import estimated_pixel_sigma
 from vical.calib.solve.observations import FrameObservation
 from vical.calib.solve.outliers import reject_outliers
@@ -65,10 +66,11 @@ def prepare_other(
     t0_ns: int,
     pixel_sigma: float | None,
     initial_T_cam_imu: np.ndarray | None,
+    start_poses: FramePoses | None = None,
 ) -> OtherCamera:
-    """PnP poses (outliers rejected) and the corner noise of another camera's frames."""
+    """Starting poses (``starting_poses``; outliers rejected) and the corner noise of another camera's frames."""
     min_corners = min(MIN_INIT_CORNERS, target.num_points)
-    initial = {k: T for k, (T, _) in frame_poses(camera, observations, min_corners).items()}
+    initial = starting_poses(camera, observations, min_corners, start_poses)
     rejection = reject_outliers(camera, observations, initial, min_corners)
     poses = rejection.poses
     if len(poses) < 3:

@@ -10,9 +10,10 @@ import gtsam
 import numpy as np
 
 from vical.calib.errors import CalibrationError, CalibrationSettingError
+from vical.calib.result import FramePoses
 from vical.calib.solve.imu_intrinsics import check_excitation
 from vical.calib.solve.imu_intrinsics import check_model as check_imu_model
-from vical.calib.solve.initialization import MIN_INIT_CORNERS, frame_poses
+from vical.calib.solve.initialization import MIN_INIT_CORNERS, starting_poses
 from vical.calib.solve.intrinsics import estimated_pixel_sigma
 from vical.calib.solve.observations import FrameObservation
 from vical.calib.solve.outliers import reject_outliers
@@ -190,12 +191,13 @@ def prepare_problem(
     noise: ImuNoise,
     options: ViOptions,
     offset_guess: float,
+    start_poses: FramePoses | None = None,
 ) -> ViProblem:
     frame_t_ns = np.array([o.t_ns for o in frames_obs], dtype=np.int64)
     t0_ns = int(min(imu.t[0], frame_t_ns.min())) if len(imu) else int(frame_t_ns.min())
     _check_overlap(imu, frame_t_ns, t0_ns, offset_guess)
     min_corners = min(MIN_INIT_CORNERS, target.num_points)
-    initial = {k: T for k, (T, _) in frame_poses(camera, frames_obs, min_corners).items()}
+    initial = starting_poses(camera, frames_obs, min_corners, start_poses)
     rejection = reject_outliers(camera, frames_obs, initial, min_corners)
     frames_obs, poses = rejection.observations, rejection.poses
     if len(poses) < 3:
@@ -254,6 +256,7 @@ class CameraInput:
         initial_time_offset: [s] centre of its time-offset scan.
         frames: its input frames (``observations`` were collected from them), for its frame log; None: no log
             (the first camera always has them).
+        start_poses: its frames' poses from the joint task's intrinsic start (PnP poses the others).
     """
 
     name: str
@@ -262,3 +265,4 @@ class CameraInput:
     initial_T_cam_imu: np.ndarray | None = None
     initial_time_offset: float = 0.0
     frames: CameraFrames | None = None
+    start_poses: FramePoses | None = None

@@ -79,7 +79,9 @@ def run_visual_inertial(
     observations = every[:: options.frame_stride]
     views = observations + [f for o in others for f in o.observations[:: options.frame_stride]]
     check_memory(len(views), sum(len(v.ids) for v in views), options.memory_limit_mb, options.frame_stride)
-    problem = prepare_problem(observations, imu, camera, target, imu_noise, options, float(initial_time_offset))
+    problem = prepare_problem(
+        observations, imu, camera, target, imu_noise, options, float(initial_time_offset), first.start_poses
+    )
     problem.warnings += noise_warnings
     est = initial_estimate(problem, T_guess, float(initial_time_offset))
     problem.others = [_initial_other(problem, est, index, other) for index, other in enumerate(others, start=1)]
@@ -104,7 +106,7 @@ def _initial_other(problem: ViProblem, est: ViEstimate, index: int, given: Camer
     opts = problem.options
     other = prepare_other(
         given.name, index, given.observations[:: opts.frame_stride], given.camera, problem.target,
-        problem.t0_ns, opts.pixel_sigma, given.initial_T_cam_imu,
+        problem.t0_ns, opts.pixel_sigma, given.initial_T_cam_imu, given.start_poses,
     )  # fmt: skip
     initialise_other(
         other, problem.frame_times, problem.T_target_cam, est.T_cam_imu, (problem.t_imu, problem.gyro),
