@@ -28,8 +28,8 @@ from omegaconf import OmegaConf
 from vical.apps.collect import FAULTS, build_collector, check_settings, mdp_config, nominal_sensor
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask, run_task
+from vical.evaluation.harness import build_env, instantiate_policy, run_trajectory
 from vical.io.euroc import read_euroc
-from vical.policies.evaluation import build_env, instantiate_policy, run_trajectory
 from vical.sim.adapters import RigFaults, SimRig
 from vical.sim.config import SimConfig
 from vical.sim.sampling import SensorSampling

@@ -25,9 +25,9 @@ import yaml
 
 from vical.calib.tasks import CalibrationTask
 from vical.env.config import MdpConfig, Workspace
+from vical.evaluation.harness import PolicySpec
 from vical.parallel import ParallelConfig
 from vical.policies.collect import Alignment, Limits
-from vical.policies.evaluation import PolicySpec
 from vical.policies.learned import learned_policy
 from vical.rl.sac import SACConfig
 from vical.rl.trainer import TrainConfig

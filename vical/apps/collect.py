@@ -34,6 +34,7 @@ from vical.data import SensorTruth
 from vical.env.calibration import declared_lens_spread
 from vical.env.config import MdpConfig
 from vical.env.information import Guess, LensSpread
+from vical.evaluation.harness import instantiate_policy, policy_mdp
 from vical.io.bag import write_bag
 from vical.io.errors import FormatError
 from vical.io.euroc import EurocStreamWriter, read_euroc
@@ -41,7 +42,6 @@ from vical.io.kalibr import read_camchain, read_imu_yaml, write_imu_yaml, write_
 from vical.io.yamlfile import dump_yaml
 from vical.policies.base import Policy
 from vical.policies.collect import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
-from vical.policies.evaluation import instantiate_policy, policy_mdp
 from vical.robot import MotionRefused, SensorStreamError
 from vical.sim.config import SimConfig
 from vical.sim.sampling import SensorSampling
