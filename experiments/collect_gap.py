@@ -2,7 +2,7 @@
 
 For each sensor (reset seeds ``--seed``.., used by no fit, training or evaluation) the policy runs
 (a) one episode of the evaluation's env (projected corners with pixel noise, the simulator's own
-start pose) and (b) one collection of ``vical.policies.collect.Collector`` on the simulated rig
+start pose) and (b) one collection of ``vical.collection.runner.Collector`` on the simulated rig
 (``vical.sim.adapters``: rendered images through the real detector, the alignment from live
 detections with the nominal camera, ``--latency`` of command latency and ``--tracking-mm`` of
 pose-tracking noise), whose EuRoC recording is read back as a user would. Both recordings are

@@ -24,10 +24,10 @@ import pytest
 import yaml
 
 from vical.calib.tasks import CalibrationTask
+from vical.collection.runner import Alignment, Limits
 from vical.env.config import MdpConfig, Workspace
 from vical.evaluation.harness import PolicySpec
 from vical.parallel import ParallelConfig
-from vical.policies.collect import Alignment, Limits
 from vical.policies.learned import learned_policy
 from vical.rl.sac import SACConfig
 from vical.rl.trainer import TrainConfig

@@ -15,6 +15,7 @@ MOVED = {
     "vical.policies.statistics": ("vical.evaluation.intervals",),
     "vical.policies.yardstick": ("vical.evaluation.yardstick",),
     "vical.policies.results": ("vical.evaluation.results_file", "vical.evaluation.seed_choice"),
+    "vical.policies.collect": ("vical.collection.runner",),
 }
 
 
