@@ -29,8 +29,8 @@ from vical.env.config import MdpConfig, Workspace
 from vical.evaluation.harness import PolicySpec
 from vical.parallel import ParallelConfig
 from vical.policies.learned import learned_policy
+from vical.rl.run_settings import TrainConfig
 from vical.rl.sac import SACConfig
-from vical.rl.trainer import TrainConfig
 from vical.robot.franka import FrankaArm
 from vical.robot.realsense import RealSenseSensor
 from vical.robot.rigs import ros

@@ -32,7 +32,7 @@ from vical.env.information import (
     quantile_factor,
 )
 from vical.geometry import CameraModel
-from vical.rl.trainer import make_env
+from vical.rl.envs import make_env
 
 BIASES = {"gyro_bias": [0.01, -0.02, 0.005], "accel_bias": [0.05, -0.1, 0.08]}  # [rad/s], [m/s^2]
 
