@@ -16,6 +16,7 @@ MOVED = {
     "vical.policies.yardstick": ("vical.evaluation.yardstick",),
     "vical.policies.results": ("vical.evaluation.results_file", "vical.evaluation.seed_choice"),
     "vical.policies.collect": ("vical.collection.runner",),
+    "vical.sim.robot": ("vical.sim.panda",),
 }
 
 

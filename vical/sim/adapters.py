@@ -33,8 +33,8 @@ from vical.robot.interfaces import (
     check_pose,
 )
 from vical.sim.config import SimConfig
+from vical.sim.panda import PandaSim
 from vical.sim.recorder import SensorRecorder
-from vical.sim.robot import PandaSim
 from vical.sim.sampling import SensorSampling, mean_sensor, sample_sensor
 
 # The Panda's documented Cartesian limits (translation [m/s], rotation [rad/s], acceleration [m/s^2]);
