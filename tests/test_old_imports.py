@@ -17,6 +17,7 @@ MOVED = {
     "vical.policies.results": ("vical.evaluation.results_file", "vical.evaluation.seed_choice"),
     "vical.policies.collect": ("vical.collection.runner",),
     "vical.sim.robot": ("vical.sim.panda",),
+    "vical.io.checks": ("vical.io.sample_checks",),
 }
 
 
@@ -28,7 +29,8 @@ def defined_names(module: str) -> set[str]:
         if isinstance(node, ast.FunctionDef | ast.ClassDef):
             names.add(node.name)
         elif isinstance(node, ast.Assign):
-            names |= {t.id for t in node.targets if isinstance(t, ast.Name)}
+            targets = [e for t in node.targets for e in (t.elts if isinstance(t, ast.Tuple) else [t])]
+            names |= {t.id for t in targets if isinstance(t, ast.Name)}
         elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
             names.add(node.target.id)
     return {n for n in names if not n.startswith("_")}
