@@ -18,6 +18,15 @@ MOVED = {
     "vical.policies.collect": ("vical.collection.runner",),
     "vical.sim.robot": ("vical.sim.panda",),
     "vical.io.checks": ("vical.io.sample_checks",),
+    "vical.data.types": (
+        "vical.data.errors",
+        "vical.data.sample_arrays",
+        "vical.data.imu",
+        "vical.data.camera_frames",
+        "vical.data.sensor_truth",
+        "vical.data.trajectory",
+        "vical.data.sensor_recording",
+    ),
 }
 
 
