@@ -35,7 +35,7 @@ from omegaconf import OmegaConf
 
 from vical.calib import CalibrationError
 from vical.calib.tasks import run_task
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.information import TASK_GROUPS
 from vical.evaluation.harness import EpisodeRow, build_env, fill_outcome, instantiate_policy, run_trajectory
 from vical.evaluation.intervals import Interval, proportion

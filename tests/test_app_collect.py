@@ -17,7 +17,7 @@ from vical.apps.collect import CONF_DIR, build_collector, check_settings, collec
 from vical.calib.metrics import parameter_errors
 from vical.calib.tasks import CalibrationTask, run_task, task_score
 from vical.collection.runner import CollectionStopped, Collector
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.actions import step_to_action
 from vical.evaluation.harness import build_env, run_trajectory
 from vical.io.bag import read_bag

@@ -20,7 +20,7 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 from vical.apps.record import ClampedStepWarning, FewViewsWarning, record, square_px
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.io.recording import load_recording
 from vical.sim.config import BoardConfig
 

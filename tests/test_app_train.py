@@ -20,7 +20,7 @@ from omegaconf import OmegaConf
 from test_rl_vector import FAIL_RESET, reset_seed
 
 from vical.apps.train import check_command_line, resumed_config
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.rl.checkpoint import AGENT, CHECKPOINT, load_checkpoint
 from vical.rl.envs import make_env
 from vical.rl.run_settings import parse_settings

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from configs import env_parts
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
 from vical.env.config import MdpConfig
 from vical.env.coverage import Coverage, view_features

@@ -16,7 +16,7 @@ from vical.calib.calibrate import calibrate_extrinsics, calibrate_joint
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.observations import collect_observations
 from vical.calib.synthetic import make_recording, scattered_views, wide_angle_camera
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.data import ImuNoise, ImuSamples, Target
 from vical.env.calibration import INFO_OBS_SIZE, CalibrationEnv
 from vical.env.information import (

@@ -6,7 +6,7 @@ from configs import env_config
 
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.tasks import run_task
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.evaluation.harness import (
     EpisodeRow,
     PolicyEvaluator,

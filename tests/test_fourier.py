@@ -9,7 +9,7 @@ import yaml
 from configs import CONF, env_parts
 from hydra import compose, initialize_config_dir
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
 from vical.env.config import MdpConfig, Workspace
 from vical.policies.base import Policy

@@ -18,6 +18,7 @@ MOVED = {
     "vical.policies.collect": ("vical.collection.runner",),
     "vical.sim.robot": ("vical.sim.panda",),
     "vical.io.checks": ("vical.io.sample_checks",),
+    "vical.config": ("vical.config_checks",),
     "vical.data.types": (
         "vical.data.errors",
         "vical.data.sample_arrays",

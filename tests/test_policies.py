@@ -10,7 +10,7 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from vical.config import ConfigError, from_mapping
+from vical.config_checks import ConfigError, from_mapping
 from vical.env.config import InformationSettings, Workspace
 from vical.evaluation.harness import run_trajectory
 from vical.policies.base import WaypointPolicy

@@ -10,7 +10,7 @@ import pytest
 import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.rl.checkpoint import AGENT, CHECKPOINT, LAST_GOOD, IncompatibleCheckpointError, load_checkpoint
 from vical.rl.single_env_trainer import Trainer, TrainingDivergedError
 from vical.rl.trainer import train

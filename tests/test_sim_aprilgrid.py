@@ -15,7 +15,7 @@ from vical.calib.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
 from vical.calib.calibrate import calibrate_joint
 from vical.calib.intrinsics import calibrate_intrinsics
 from vical.calib.metrics import calibration_errors
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.geometry import euler_to_matrix, make_transform
 from vical.sim import PandaSim, SimConfig
 from vical.sim.camera import ProjectBackend, RenderBackend

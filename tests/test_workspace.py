@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from configs import composed
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.config import Workspace
 from vical.env.workspace import (
     PoseFrame,

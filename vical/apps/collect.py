@@ -30,7 +30,7 @@ from vical.apps.cli import check_then_run, fail, report_error
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask
 from vical.collection.runner import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
-from vical.config import ConfigError, from_mapping, require
+from vical.config_checks import ConfigError, from_mapping, require
 from vical.data import SensorTruth
 from vical.env.calibration import declared_lens_spread
 from vical.env.config import MdpConfig

@@ -35,7 +35,7 @@ from vical.apps.cli import (
     quiet_library_logs,
 )
 from vical.calib.tasks import CalibrationTask
-from vical.config import ConfigError, require
+from vical.config_checks import ConfigError, require
 from vical.evaluation.error_vs_effort import (
     BudgetSummary,
     budget_label,

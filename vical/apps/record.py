@@ -28,7 +28,7 @@ from vical.apps.cli import check_then_run, fail
 from vical.calib.aprilgrid import detect_aprilgrid
 from vical.calib.detection import detect_checkerboard
 from vical.calib.intrinsics import MIN_VIEWS
-from vical.config import ConfigError, require, require_range
+from vical.config_checks import ConfigError, require, require_range
 from vical.data import CameraFrames, Recording
 from vical.geometry import CameraModel, matrix_to_euler, step_pose
 from vical.io.atomic import atomic_directory

@@ -38,7 +38,7 @@ from vical.apps.cli import (
     override_value,
     quiet_library_logs,
 )
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.parallel import check_ray_address
 from vical.rl.checkpoint import (
     CHECKPOINT,

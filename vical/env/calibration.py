@@ -30,7 +30,7 @@ from vical.calib.aprilgrid import detect_aprilgrid
 from vical.calib.detection import detect_checkerboard
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask, run_task
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.data import Recording, SensorTruth
 from vical.env.actions import action_to_step
 from vical.env.config import InformationSettings, MdpConfig

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from vical.config import from_mapping, require, require_range
+from vical.config_checks import from_mapping, require, require_range
 
 
 def _vector(key: str, value: Sequence[float], size: int, positive: bool = True) -> tuple[float, ...]:

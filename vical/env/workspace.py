@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.config import Workspace
 from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
 from vical.sim import PandaSim

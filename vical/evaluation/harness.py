@@ -36,7 +36,7 @@ from tqdm import tqdm
 from vical.calib.errors import CalibrationError
 from vical.calib.metrics import group_errors_px, parameter_errors
 from vical.calib.tasks import CalibrationTask, TaskOutcome, run_task, task_score
-from vical.config import ConfigError, require
+from vical.config_checks import ConfigError, require
 from vical.data import CameraFrames, Recording, SensorTruth
 from vical.env.calibration import CalibrationEnv
 from vical.geometry import CameraModel

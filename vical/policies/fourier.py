@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
 from vical.env.config import Workspace
 from vical.policies.base import WaypointPolicy

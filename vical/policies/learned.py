@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from vical.config import ConfigError, from_mapping
+from vical.config_checks import ConfigError, from_mapping
 from vical.env.calibration import INFO_OBS_SIZE, OBS_SIZE, CalibrationEnv
 from vical.env.config import Workspace
 from vical.policies.base import Policy

@@ -10,7 +10,7 @@ from typing import Any
 
 import torch
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.io.atomic import atomic_file
 
 CHECKPOINT = "checkpoint.pt"  # latest episode-boundary checkpoint: what resume=<run dir> continues from

@@ -13,7 +13,7 @@ import gymnasium as gym
 import hydra.utils
 import numpy as np
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 
 
 class BoxActions:

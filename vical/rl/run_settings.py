@@ -11,7 +11,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from vical.config import from_mapping, require, require_range
+from vical.config_checks import from_mapping, require, require_range
 from vical.parallel import MAX_WORKERS, ParallelConfig
 from vical.rl.sac import SACConfig
 

@@ -32,7 +32,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.rl.buffer import transition_discount
 from vical.rl.checkpoint import CHECKPOINT, flatten, save_checkpoint
 from vical.rl.envs import make_env

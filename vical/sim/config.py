@@ -1,6 +1,6 @@
 """Simulator settings (Hydra group ``sim/``), validated at start-up.
 
-Every value is checked when the dataclass is built; a bad value raises ``vical.config.ConfigError``
+Every value is checked when the dataclass is built; a bad value raises ``vical.config_checks.ConfigError``
 naming its dotted key (``sim.physics.timestep``) and the allowed range.
 """
 
@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from vical.config import ConfigError, from_mapping, require, require_range
+from vical.config_checks import ConfigError, from_mapping, require, require_range
 from vical.data import NS_PER_S, Target
 
 NUM_JOINTS = 7

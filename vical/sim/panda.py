@@ -30,7 +30,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.data import NS_PER_S
 from vical.geometry import euler_to_matrix, make_transform
 from vical.sim.config import NUM_JOINTS, SimConfig
