@@ -31,8 +31,8 @@ from vical.calib.tasks import CalibrationTask, run_task
 from vical.evaluation.harness import build_env, instantiate_policy, run_trajectory
 from vical.io.euroc import read_euroc
 from vical.sim.adapters import RigFaults, SimRig
-from vical.sim.config import SimConfig
 from vical.sim.sampling import SensorSampling
+from vical.sim.settings import SimConfig
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 FIRST_SEED = 60_000

@@ -25,7 +25,7 @@ import yaml
 
 from vical.calib.tasks import CalibrationTask
 from vical.collection.runner import Alignment, Limits
-from vical.env.config import MdpConfig, Workspace
+from vical.env.settings import MdpConfig, Workspace
 from vical.evaluation.harness import PolicySpec
 from vical.parallel import ParallelConfig
 from vical.policies.learned import learned_policy
@@ -37,8 +37,8 @@ from vical.robot.rigs import ros
 from vical.robot.ros import RosArm, RosSensor
 from vical.robot.ur import URArm
 from vical.sim.adapters import RigFaults
-from vical.sim.config import SimConfig
 from vical.sim.sampling import SensorSampling
+from vical.sim.settings import SimConfig
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 NO_DEFAULT = object()  # a field or argument without a default: the YAML is the only place that states it

@@ -6,9 +6,9 @@ from configs import env_parts
 
 from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
-from vical.env.config import MdpConfig
 from vical.env.coverage import Coverage, view_features
 from vical.env.rewards import accuracy_reward
+from vical.env.settings import MdpConfig
 from vical.policies.base import WaypointPolicy
 
 # Waypoints (pose offsets in the authors' box) that sweep the board over the four quadrants, change its distance

@@ -11,7 +11,7 @@ from hydra import compose, initialize_config_dir
 
 from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
-from vical.env.config import MdpConfig, Workspace
+from vical.env.settings import MdpConfig, Workspace
 from vical.policies.base import Policy
 from vical.policies.fourier import (
     DEFAULT_PARAMS_FILE,

@@ -19,6 +19,8 @@ MOVED = {
     "vical.sim.robot": ("vical.sim.panda",),
     "vical.io.checks": ("vical.io.sample_checks",),
     "vical.config": ("vical.config_checks",),
+    "vical.sim.config": ("vical.sim.settings",),
+    "vical.env.config": ("vical.env.settings",),
     "vical.data.types": (
         "vical.data.errors",
         "vical.data.sample_arrays",

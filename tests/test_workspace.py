@@ -5,7 +5,7 @@ import pytest
 from configs import composed
 
 from vical.config_checks import ConfigError
-from vical.env.config import Workspace
+from vical.env.settings import Workspace
 from vical.env.workspace import (
     PoseFrame,
     board_centre,

@@ -33,8 +33,8 @@ from vical.collection.runner import Alignment, CollectionStopped, Collector, Col
 from vical.config_checks import ConfigError, from_mapping, require
 from vical.data import SensorTruth
 from vical.env.calibration import declared_lens_spread
-from vical.env.config import MdpConfig
 from vical.env.information import Guess, LensSpread
+from vical.env.settings import MdpConfig
 from vical.evaluation.harness import instantiate_policy, policy_mdp
 from vical.io.bag import write_bag
 from vical.io.errors import FormatError
@@ -43,8 +43,8 @@ from vical.io.kalibr import read_camchain, read_imu_yaml, write_imu_yaml, write_
 from vical.io.yamlfile import dump_yaml
 from vical.policies.base import Policy
 from vical.robot import MotionRefused, SensorStreamError
-from vical.sim.config import SimConfig
 from vical.sim.sampling import SensorSampling
+from vical.sim.settings import SimConfig
 
 APP = "vical-collect"
 USER_ERRORS = (ConfigError, FileExistsError, FileNotFoundError)

@@ -36,9 +36,9 @@ from vical.io.images import write_png
 from vical.io.recording import write_recording_files
 from vical.sim import MotionResult, PandaSim, SimConfig
 from vical.sim.camera import VisibilityRules
-from vical.sim.config import BoardConfig
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, sample_sensor
+from vical.sim.settings import BoardConfig
 
 APP = "vical-record"
 USER_ERRORS = (ConfigError, FileExistsError)

@@ -37,8 +37,8 @@ from vical.calib.initialization import pnp
 from vical.calib.observations import FrameObservation
 from vical.data import NS_PER_S, ImuSamples, Target
 from vical.env.actions import action_to_step
-from vical.env.config import MdpConfig
 from vical.env.information import Guess
+from vical.env.settings import MdpConfig
 from vical.env.state import EpisodeState
 from vical.env.workspace import PoseFrame, look_at_rotation
 from vical.geometry import make_transform, rotation_angle, transform_points

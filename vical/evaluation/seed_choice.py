@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vical.env.config import GROUP_TOLERANCE
 from vical.env.information import SCORED_GROUPS as TASK_SCORED_GROUPS
+from vical.env.settings import GROUP_TOLERANCE
 from vical.evaluation.harness import END, EpisodeRow
 from vical.evaluation.intervals import Interval
 from vical.evaluation.results_file import by_policy, compare

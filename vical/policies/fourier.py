@@ -28,7 +28,7 @@ import yaml
 
 from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
-from vical.env.config import Workspace
+from vical.env.settings import Workspace
 from vical.policies.base import WaypointPolicy
 
 HARMONICS = (1, 2, 4)

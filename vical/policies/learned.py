@@ -18,7 +18,7 @@ import torch
 
 from vical.config_checks import ConfigError, from_mapping
 from vical.env.calibration import INFO_OBS_SIZE, OBS_SIZE, CalibrationEnv
-from vical.env.config import Workspace
+from vical.env.settings import Workspace
 from vical.policies.base import Policy
 from vical.rl.checkpoint import AGENT, load_checkpoint
 from vical.rl.envs import BoxActions

@@ -33,10 +33,10 @@ from mujoco import rollout
 from vical.config_checks import ConfigError
 from vical.data import NS_PER_S
 from vical.geometry import euler_to_matrix, make_transform
-from vical.sim.config import NUM_JOINTS, SimConfig
 from vical.sim.kinematics import PANDA_LIMITS, IKResult, PandaIK
 from vical.sim.motion import JointPlan, MotionResult, feedforward_torques, motion_steps, quintic_plan, rest_torque
 from vical.sim.scene import build_model, site_pose
+from vical.sim.settings import NUM_JOINTS, SimConfig
 
 StepCallback = Callable[["PandaSim", int], None]
 _STATE = mujoco.mjtState.mjSTATE_FULLPHYSICS
