@@ -22,7 +22,7 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from vical.rl.trainer import make_env
+from vical.rl.envs import make_env
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 FIRST_SEED = 31_000

@@ -38,8 +38,9 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
 from vical.rl.buffer import ReplayBuffer
+from vical.rl.envs import BoxActions
 from vical.rl.sac import SAC
-from vical.rl.trainer import BoxActions, Trainer
+from vical.rl.single_env_trainer import Trainer
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 EVAL_SEED = 10_000  # evaluation episode i starts from reset(seed=EVAL_SEED + i), for every agent

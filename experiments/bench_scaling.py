@@ -32,11 +32,12 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
+from vical.evaluation.harness import PolicySpec, evaluate_policies
 from vical.parallel import ParallelConfig
-from vical.policies.evaluation import PolicySpec, evaluate_policies
 from vical.rl.buffer import ReplayBuffer
+from vical.rl.envs import make_env
 from vical.rl.sac import SAC, SACConfig
-from vical.rl.trainer import make_env, train
+from vical.rl.trainer import train
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 PROJECTED_CORES = (2, 8, 16, 64)

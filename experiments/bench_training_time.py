@@ -32,10 +32,11 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from vical.env.state import EpisodeState
-from vical.rl.trainer import make_env, train
+from vical.rl.envs import make_env
+from vical.rl.trainer import train
 from vical.sim.kinematics import PandaIK
+from vical.sim.panda import PandaSim
 from vical.sim.recorder import SensorRecorder
-from vical.sim.robot import PandaSim
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 EXPERIMENT = "+experiment=train_information_policy"

@@ -1,4 +1,4 @@
-"""Which training seed to ship: the rule of ``vical.policies.results.choose_seed`` on tuning sensors.
+"""Which training seed to ship: the rule of ``vical.evaluation.seed_choice.choose_seed`` on tuning sensors.
 
 Evaluate every candidate run and the baselines on the same tuning sensors (reset seeds that no
 held-out table uses: the documented tables use 40000-40019 for tuning, 50000-50049 held out), in
@@ -28,7 +28,8 @@ from pathlib import Path
 
 from omegaconf import OmegaConf
 
-from vical.policies.results import ShipRule, TaskAssessment, assess, choose_seed, read_results
+from vical.evaluation.results_file import read_results
+from vical.evaluation.seed_choice import ShipRule, TaskAssessment, assess, choose_seed
 
 TASKS = ("joint", "intrinsic")
 

@@ -21,7 +21,7 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from vical.policies.evaluation import PolicyEvaluator, PolicySpec
+from vical.evaluation.harness import PolicyEvaluator, PolicySpec
 
 CONF_DIR = Path(__file__).resolve().parents[1] / "conf"
 BOARDS = {

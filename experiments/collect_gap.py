@@ -2,7 +2,7 @@
 
 For each sensor (reset seeds ``--seed``.., used by no fit, training or evaluation) the policy runs
 (a) one episode of the evaluation's env (projected corners with pixel noise, the simulator's own
-start pose) and (b) one collection of ``vical.policies.collect.Collector`` on the simulated rig
+start pose) and (b) one collection of ``vical.collection.runner.Collector`` on the simulated rig
 (``vical.sim.adapters``: rendered images through the real detector, the alignment from live
 detections with the nominal camera, ``--latency`` of command latency and ``--tracking-mm`` of
 pose-tracking noise), whose EuRoC recording is read back as a user would. Both recordings are
@@ -28,11 +28,11 @@ from omegaconf import OmegaConf
 from vical.apps.collect import FAULTS, build_collector, check_settings, mdp_config, nominal_sensor
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask, run_task
+from vical.evaluation.harness import build_env, instantiate_policy, run_trajectory
 from vical.io.euroc import read_euroc
-from vical.policies.evaluation import build_env, instantiate_policy, run_trajectory
 from vical.sim.adapters import RigFaults, SimRig
-from vical.sim.config import SimConfig
 from vical.sim.sampling import SensorSampling
+from vical.sim.settings import SimConfig
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 FIRST_SEED = 60_000

@@ -15,8 +15,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from vical.policies.effort import budget_label
-from vical.policies.results import budgets_of, by_policy, compare, read_results
+from vical.evaluation.error_vs_effort import budget_label
+from vical.evaluation.results_file import budgets_of, by_policy, compare, read_results
 
 
 def main() -> None:

@@ -35,12 +35,12 @@ from omegaconf import OmegaConf
 
 from vical.calib import CalibrationError
 from vical.calib.tasks import run_task
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.information import TASK_GROUPS
+from vical.evaluation.harness import EpisodeRow, build_env, fill_outcome, instantiate_policy, run_trajectory
+from vical.evaluation.intervals import Interval, proportion
+from vical.evaluation.seed_choice import stopped_right
 from vical.geometry import skew, so3_log
-from vical.policies.evaluation import EpisodeRow, build_env, fill_outcome, instantiate_policy, run_trajectory
-from vical.policies.results import stopped_right
-from vical.policies.statistics import Interval, proportion
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 FIRST_SEED = 30_000

@@ -3,7 +3,7 @@
 Runs ``vical-evaluate`` for each task (50 sensors, seeds 10000..10049, every baseline, budgets
 0.5-8 m), writes ``evaluations/yardstick_<task>/`` (results.csv, summary.md, error_vs_effort.png),
 copies each figure to ``docs/figures/yardstick_<task>.png`` and prints the fingerprint of the
-yardstick (``vical.policies.yardstick``) that docs/results.md records. Fixed seeds: running it
+yardstick (``vical.evaluation.yardstick``) that docs/results.md records. Fixed seeds: running it
 again gives the same numbers, as long as the calibrator and the simulator are unchanged.
 
 Usage:

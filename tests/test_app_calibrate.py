@@ -15,7 +15,6 @@ from vical.calib.solve.checks import check_memory
 from vical.calib.synthetic import Excitation, make_recording
 from vical.data import ImuIntrinsics, ImuNoise, ImuSamples, Target
 from vical.geometry import CameraModel, transform_error
-from vical.io.checks import MAX_GYRO_RAD_S
 from vical.io.csvfiles import write_corners_csv, write_imu_csv
 from vical.io.kalibr import (
     read_camchain,
@@ -26,6 +25,7 @@ from vical.io.kalibr import (
     write_target_yaml,
 )
 from vical.io.recording import save_recording
+from vical.io.sample_checks import MAX_GYRO_RAD_S
 
 
 @pytest.fixture(scope="module")

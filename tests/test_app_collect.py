@@ -16,14 +16,14 @@ from vical.apps import calibrate
 from vical.apps.collect import CONF_DIR, build_collector, check_settings, collect, mdp_config, nominal_sensor
 from vical.calib.metrics import parameter_errors
 from vical.calib.tasks import CalibrationTask, run_task, task_score
-from vical.config import ConfigError
+from vical.collection.runner import CollectionStopped, Collector
+from vical.config_checks import ConfigError
 from vical.env.actions import step_to_action
+from vical.evaluation.harness import build_env, run_trajectory
 from vical.io.bag import read_bag
 from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.base import Policy
-from vical.policies.collect import CollectionStopped, Collector
-from vical.policies.evaluation import build_env, run_trajectory
 from vical.policies.learned import PAPER_POLICY_DIR, learned_policy
 from vical.robot import MotionRefused, SensorStreamError
 

@@ -20,9 +20,9 @@ import pytest
 from hydra import compose, initialize_config_dir
 
 from vical.apps.record import ClampedStepWarning, FewViewsWarning, record, square_px
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.io.recording import load_recording
-from vical.sim.config import BoardConfig
+from vical.sim.settings import BoardConfig
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 SHORT = ["steps=[[0.0,0.04,0.0,0.0,0.0,0.1]]", "settle_time=0.05", "progress=false"]

@@ -20,9 +20,11 @@ from omegaconf import OmegaConf
 from test_rl_vector import FAIL_RESET, reset_seed
 
 from vical.apps.train import check_command_line, resumed_config
-from vical.config import ConfigError
-from vical.rl.checkpoint import load_checkpoint
-from vical.rl.trainer import AGENT, CHECKPOINT, make_env, parse_settings, train
+from vical.config_checks import ConfigError
+from vical.rl.checkpoint import AGENT, CHECKPOINT, load_checkpoint
+from vical.rl.envs import make_env
+from vical.rl.run_settings import parse_settings
+from vical.rl.trainer import train
 
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"

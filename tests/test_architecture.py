@@ -1,52 +1,181 @@
-"""The package dependency direction of docs/architecture.md, checked on the source (static imports)."""
+"""The package dependency direction of docs/architecture.md, checked on the source (static imports).
+
+``ALLOWED`` names, for every unit of vical (a subpackage, or a top-level module such as ``config_checks``), every
+unit it may import: any pair it does not list is forbidden, and a new unit fails until it is given its row. A
+module kept at an old path for old imports (``test_old_imports.MOVED``) counts as the module it re-exports, and
+the ones that re-export another unit's module are left out of their own unit's row (``test_old_imports`` checks
+that they import nothing else).
+"""
 
 import ast
+import re
 from pathlib import Path
 
 import pytest
+from test_old_imports import MOVED
 
-PACKAGE = Path(__file__).resolve().parents[1] / "vical"
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "vical"
 
-# subpackage -> vical subpackages it must never import
-FORBIDDEN = {
-    "geometry": {"data", "io", "sim", "calib", "env", "rl", "policies", "apps"},
-    "data": {"io", "sim", "calib", "env", "rl", "policies", "apps"},
-    "io": {"sim", "calib", "env", "rl", "policies", "apps"},
-    "sim": {"calib", "env", "rl", "policies", "apps"},
-    "calib": {"sim", "env", "rl", "policies", "apps"},
-    "rl": {"sim", "calib", "env", "policies", "apps"},
-    "env": {"rl", "policies", "apps"},
-    "policies": {"apps"},
-    # robot: the arm and sensor interfaces and hardware adapters; the simulated adapters live in sim
-    "robot": {"io", "sim", "calib", "env", "rl", "policies", "apps", "parallel"},
-    "parallel": {"geometry", "data", "io", "sim", "calib", "env", "rl", "policies", "apps"},  # generic: config only
+# unit -> the vical units it may import (directly)
+ALLOWED = {
+    "geometry": set(),  # pure math: nothing of vical
+    "config_checks": set(),  # config validation: nothing of vical
+    "data": {"geometry"},
+    "robot": {"data", "geometry"},  # arm and sensor interfaces, hardware adapters
+    "parallel": {"config_checks"},  # generic worker pools
+    "io": {"config_checks", "data", "geometry"},
+    "calib": {"config_checks", "data", "geometry", "io"},  # calibrates real recordings
+    "sim": {"config_checks", "data", "geometry", "robot"},
+    "rl": {"config_checks", "io", "parallel"},  # generic SAC: any gymnasium env
+    "env": {"calib", "config_checks", "data", "geometry", "sim"},
+    "policies": {"config_checks", "env", "rl"},
+    "evaluation": {"calib", "config_checks", "data", "env", "geometry", "io", "parallel", "policies", "sim"},
+    "collection": {"calib", "data", "env", "geometry", "io", "policies", "robot"},
+    "apps": {
+        "calib", "collection", "config_checks", "data", "env", "evaluation", "geometry", "io", "parallel",
+        "policies", "rl", "robot", "sim",
+    },
+}  # fmt: skip
+
+# Rules docs/architecture.md states: the table above must keep them.
+NEVER = {
+    "geometry": {"config_checks", "robot", "parallel"},
+    "data": {"io", "sim", "calib", "env", "rl", "policies"},
+    "io": {"robot", "parallel", "sim", "calib", "env", "rl"},
+    "calib": {"robot", "parallel", "sim", "env", "rl", "policies"},  # it must calibrate a real sensor's recording
+    "sim": {"calib", "env", "rl"},  # a detector is injected where the simulator needs one
+    "rl": {"sim", "calib", "env", "policies"},  # it trains any gymnasium env
+    "robot": {"io", "sim", "calib", "env", "rl", "policies", "parallel"},  # hardware adapters need no simulator
+    "parallel": {"geometry", "data", "io", "sim", "calib", "env", "rl", "policies"},
 }
+LIBRARY = set(ALLOWED) - {"apps"}  # library code never imports the apps
+
+# Old paths of moved modules -> the unit of the module each re-exports.
+OLD_PATHS = {old: {new.split(".")[1] for new in news} for old, news in MOVED.items()}
+OLD_PATH_IMPORTERS: dict[str, set[str]] = {}  # modules that still import a moved module by its old path
+
+
+def module_name(path: Path) -> str:
+    parts = path.with_suffix("").relative_to(ROOT).parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def unit_of(module: str) -> str:
+    """``vical.sim.panda`` -> ``sim``; ``vical.config_checks`` -> ``config_checks``; old paths -> their new unit."""
+    if module in OLD_PATHS:
+        (unit,) = OLD_PATHS[module]
+        return unit
+    return module.split(".")[1]
+
+
+def imported_modules(path: Path) -> set[str]:
+    """The vical modules a file imports (anywhere in it), ``from a import b`` as ``a.b`` when that is a module."""
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            for alias in node.names:
+                sub = f"{node.module}.{alias.name}"
+                found.add(sub if (ROOT / (sub.replace(".", "/") + ".py")).is_file() else node.module)
+    return {m for m in found if m.startswith("vical.")}
 
 
 def vical_imports(path: Path) -> set[str]:
-    """Second-level vical packages a module imports (``vical.sim.x`` -> ``sim``)."""
-    found = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        names = []
-        if isinstance(node, ast.Import):
-            names = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            names = [node.module]
-        found |= {n.split(".")[1] for n in names if n.startswith("vical.") and n.count(".") >= 1}
-    return found
+    """The vical units a module imports (``vical.sim.x`` -> ``sim``)."""
+    return {unit_of(m) for m in imported_modules(path)}
 
 
-@pytest.mark.parametrize("subpackage", sorted(FORBIDDEN))
-def test_subpackage_respects_dependency_direction(subpackage):
+def re_exports_another_unit(path: Path) -> bool:
+    module = module_name(path)
+    return module in OLD_PATHS and OLD_PATHS[module] != {module.split(".")[1]}
+
+
+def units() -> dict[str, list[Path]]:
+    """Every unit of vical with its modules (the old paths that re-export another unit's module left out)."""
+    out: dict[str, list[Path]] = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if path.parent == PACKAGE and path.stem == "__init__":
+            continue
+        if not re_exports_another_unit(path):
+            out.setdefault(module_name(path).split(".")[1], []).append(path)
+    return out
+
+
+def test_every_unit_has_a_row_and_every_row_a_unit():
+    assert set(units()) == set(ALLOWED)
+    assert all(ALLOWED[u] <= set(ALLOWED) - {u} for u in ALLOWED)
+
+
+@pytest.mark.parametrize("unit", sorted(ALLOWED))
+def test_unit_imports_only_what_its_row_allows(unit):
     violations = []
-    for path in sorted((PACKAGE / subpackage).rglob("*.py")):
-        bad = vical_imports(path) & FORBIDDEN[subpackage]
+    for path in units()[unit]:
+        bad = vical_imports(path) - ALLOWED[unit] - {unit}
         if bad:
-            violations.append(f"{path.relative_to(PACKAGE.parent)} imports vical.{', vical.'.join(sorted(bad))}")
+            violations.append(f"{path.relative_to(ROOT)} imports vical.{', vical.'.join(sorted(bad))}")
     assert not violations, "\n".join(violations)
+
+
+def test_the_table_keeps_the_stated_rules():
+    broken = {u: ALLOWED[u] & NEVER[u] for u in NEVER if ALLOWED[u] & NEVER[u]}
+    assert not broken
+    assert not [u for u in LIBRARY if "apps" in ALLOWED[u]]
+
+
+def test_the_units_form_no_cycle():
+    done: set[str] = set()
+
+    def visit(unit: str, path: tuple[str, ...]) -> None:
+        assert unit not in path, " -> ".join((*path, unit))
+        if unit not in done:
+            for other in sorted(ALLOWED[unit]):
+                visit(other, (*path, unit))
+            done.add(unit)
+
+    for unit in sorted(ALLOWED):
+        visit(unit, ())
+
+
+def test_the_modules_form_no_import_cycle():
+    """No module imports, directly or through others, a module that imports it (lazy imports inside functions too)."""
+    graph = {module_name(p): imported_modules(p) for p in PACKAGE.rglob("*.py")}
+    graph = {m: {d for d in deps if d in graph and d != m} for m, deps in graph.items()}
+    done: set[str] = set()
+
+    def visit(module: str, path: tuple[str, ...]) -> None:
+        assert module not in path, "import cycle: " + " -> ".join((*path[path.index(module) :], module))
+        if module not in done:
+            for other in sorted(graph[module]):
+                visit(other, (*path, module))
+            done.add(module)
+
+    for module in sorted(graph):
+        visit(module, ())
+
+
+def test_library_code_imports_moved_modules_at_their_new_paths():
+    found = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        old = imported_modules(path) & set(OLD_PATHS)
+        if old and module_name(path) not in OLD_PATHS:
+            found[str(path.relative_to(ROOT))] = old
+    assert found == OLD_PATH_IMPORTERS
+
+
+def test_the_documented_table_is_the_imports():
+    """docs/architecture.md's table of direct imports states, for every unit, what its modules import."""
+    rows = re.findall(r"^\| ((?:`\w+`(?:, )?)+) \| (.+) \|$", (ROOT / "docs" / "architecture.md").read_text(), re.M)
+    documented = {}
+    for names, imports in rows:
+        listed = set() if imports == "nothing" else set(re.findall(r"`(\w+)`", imports))
+        documented |= {name: listed for name in re.findall(r"`(\w+)`", names)}
+    actual = {u: set().union(*(vical_imports(p) for p in paths)) - {u} for u, paths in units().items()}
+    assert documented == actual
 
 
 def test_checker_sees_imports(tmp_path):
     module = tmp_path / "m.py"
-    module.write_text("import vical.sim.robot\nfrom vical.calib import x\nfrom . import y\n")
-    assert vical_imports(module) == {"sim", "calib"}
+    module.write_text("import vical.sim.panda\nfrom vical.calib import x\nfrom . import y\nfrom vical.config import z")
+    assert vical_imports(module) == {"sim", "calib", "config_checks"}

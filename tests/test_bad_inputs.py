@@ -28,7 +28,7 @@ from vical.geometry import CameraModel
 from vical.io import save_recording, write_bag, write_euroc
 from vical.io.csvfiles import write_corners_csv, write_imu_csv
 from vical.io.kalibr import write_camchain_imucam, write_imu_yaml, write_target_yaml
-from vical.rl.trainer import AGENT, CHECKPOINT
+from vical.rl.checkpoint import AGENT, CHECKPOINT
 from vical.rl.trainer import train as run_training
 
 

@@ -9,7 +9,7 @@ from vical.calib.metrics import extrinsic_relative_error, intrinsic_relative_err
 from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.synthetic import make_recording
 from vical.calib.tasks import CalibrationTask, calibrate_task, run_task
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.data import ImuNoise, SensorTruth
 
 

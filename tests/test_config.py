@@ -4,7 +4,7 @@ from dataclasses import dataclass, field
 
 import pytest
 
-from vical.config import ConfigError, SettingError, from_mapping, require_range
+from vical.config_checks import ConfigError, SettingError, from_mapping, require_range
 
 
 @dataclass

@@ -24,21 +24,21 @@ import pytest
 import yaml
 
 from vical.calib.tasks import CalibrationTask
-from vical.env.config import MdpConfig, Workspace
+from vical.collection.runner import Alignment, Limits
+from vical.env.settings import MdpConfig, Workspace
+from vical.evaluation.harness import PolicySpec
 from vical.parallel import ParallelConfig
-from vical.policies.collect import Alignment, Limits
-from vical.policies.evaluation import PolicySpec
 from vical.policies.learned import learned_policy
+from vical.rl.run_settings import TrainConfig
 from vical.rl.sac import SACConfig
-from vical.rl.trainer import TrainConfig
 from vical.robot.franka import FrankaArm
 from vical.robot.realsense import RealSenseSensor
 from vical.robot.rigs import ros
 from vical.robot.ros import RosArm, RosSensor
 from vical.robot.ur import URArm
 from vical.sim.adapters import RigFaults
-from vical.sim.config import SimConfig
 from vical.sim.sampling import SensorSampling
+from vical.sim.settings import SimConfig
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 NO_DEFAULT = object()  # a field or argument without a default: the YAML is the only place that states it

@@ -7,11 +7,11 @@ import pytest
 from configs import env_config
 
 from vical.calib.tasks import run_task
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
+from vical.evaluation.error_vs_effort import rows_at_budget, summarize_budget, summarize_effort
+from vical.evaluation.harness import END, EpisodeRow, PolicyEvaluator, PolicySpec, run_trajectory
 from vical.geometry import invert_transform
 from vical.io.recording import load_recording, save_recording
-from vical.policies.effort import rows_at_budget, summarize_budget, summarize_effort
-from vical.policies.evaluation import END, EpisodeRow, PolicyEvaluator, PolicySpec, run_trajectory
 from vical.sim.sampling import sensor_imu_pose
 
 EXPERT_SHORT = {"_target_": "vical.policies.expert.expert_policy", "task": "intrinsic", "length": "short"}

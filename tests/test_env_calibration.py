@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from configs import env_parts
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
-from vical.env.config import MdpConfig
 from vical.env.coverage import Coverage, view_features
 from vical.env.rewards import accuracy_reward
+from vical.env.settings import MdpConfig
 from vical.policies.base import WaypointPolicy
 
 # Waypoints (pose offsets in the authors' box) that sweep the board over the four quadrants, change its distance

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from vical.data import Target
-from vical.env.config import Thresholds, Workspace
 from vical.env.coverage import SKEW_HIGH, SKEW_LOW, Coverage, ViewFeatures, view_features
+from vical.env.settings import Thresholds, Workspace
 from vical.geometry import CameraModel, euler_to_matrix
 
 W, H = 640, 480

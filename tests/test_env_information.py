@@ -16,7 +16,7 @@ from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.solve.observations import collect_observations
 from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint
 from vical.calib.synthetic import make_recording, scattered_views, wide_angle_camera
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.data import ImuNoise, ImuSamples, Target
 from vical.env.calibration import INFO_OBS_SIZE, CalibrationEnv
 from vical.env.information import (
@@ -32,7 +32,7 @@ from vical.env.information import (
     quantile_factor,
 )
 from vical.geometry import CameraModel
-from vical.rl.trainer import make_env
+from vical.rl.envs import make_env
 
 BIASES = {"gyro_bias": [0.01, -0.02, 0.005], "accel_bias": [0.05, -0.1, 0.08]}  # [rad/s], [m/s^2]
 

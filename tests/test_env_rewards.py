@@ -5,8 +5,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from vical.env.config import RewardWeights
 from vical.env.rewards import accuracy_reward, step_reward_terms, terminal_reward_terms
+from vical.env.settings import RewardWeights
 
 
 def test_step_terms_are_weighted_l1_gain_and_executed_motion():

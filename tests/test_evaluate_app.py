@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from vical.policies.evaluation import COLUMNS
+from vical.evaluation.harness import COLUMNS
 
 ROOT = Path(__file__).resolve().parents[1]
 

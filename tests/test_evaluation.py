@@ -6,10 +6,8 @@ from configs import env_config
 
 from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.tasks import run_task
-from vical.config import ConfigError
-from vical.parallel import ParallelConfig
-from vical.policies.base import Policy
-from vical.policies.evaluation import (
+from vical.config_checks import ConfigError
+from vical.evaluation.harness import (
     EpisodeRow,
     PolicyEvaluator,
     PolicySpec,
@@ -19,6 +17,8 @@ from vical.policies.evaluation import (
     run_trajectory,
     summarize,
 )
+from vical.parallel import ParallelConfig
+from vical.policies.base import Policy
 
 SHORT = {"_target_": "vical.policies.handcrafted.handcrafted_policy", "length": "short"}
 HANDCRAFTED_SHORT = PolicySpec(

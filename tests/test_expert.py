@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from configs import env_config
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.workspace import unreachable_reason
 from vical.policies.expert import LENGTHS, TASKS, expert_fractions, expert_policy
 from vical.policies.handcrafted import handcrafted_policy

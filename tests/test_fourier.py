@@ -9,9 +9,9 @@ import yaml
 from configs import CONF, env_parts
 from hydra import compose, initialize_config_dir
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
-from vical.env.config import MdpConfig, Workspace
+from vical.env.settings import MdpConfig, Workspace
 from vical.policies.base import Policy
 from vical.policies.fourier import (
     DEFAULT_PARAMS_FILE,

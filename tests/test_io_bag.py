@@ -8,8 +8,8 @@ from rosbags.rosbag1 import Reader, Writer
 from test_io_samples import make_recording
 
 from vical.io.bag import IMAGE_TYPE, IMU_TYPE, _image_msg, _imu_msg, read_bag, ros1_typestore, write_bag
-from vical.io.checks import FormatWarning
 from vical.io.errors import BagFormatError, FormatError, UnitError
+from vical.io.sample_checks import FormatWarning
 
 
 @pytest.fixture(scope="module")

@@ -11,10 +11,10 @@ import yaml
 from test_io_samples import T0_NS, assert_frames_equal, make_recording
 
 from vical.geometry import CameraModel
-from vical.io.checks import FormatWarning
 from vical.io.csvfiles import IMU_HEADER, read_corners_csv, read_imu_csv, write_corners_csv, write_imu_csv
 from vical.io.errors import CsvFormatError, FormatError, UnitError
 from vical.io.euroc import read_euroc, write_euroc
+from vical.io.sample_checks import FormatWarning
 
 
 def test_euroc_round_trip_is_lossless(tmp_path):

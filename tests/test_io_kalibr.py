@@ -12,7 +12,6 @@ from test_io_samples import make_camera, make_truth
 from vical.data import ImuIntrinsics, ImuNoise, Target
 from vical.geometry.camera import CameraModel
 from vical.geometry.transforms import invert_transform
-from vical.io.checks import FormatWarning
 from vical.io.errors import KalibrFormatError
 from vical.io.kalibr import (
     read_camchain,
@@ -23,6 +22,7 @@ from vical.io.kalibr import (
     write_imu_yaml,
     write_target_yaml,
 )
+from vical.io.sample_checks import FormatWarning
 
 EUROC_CAM0_SENSOR_YAML = """\
 # General sensor definitions.

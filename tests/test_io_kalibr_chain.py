@@ -18,10 +18,10 @@ import yaml
 
 from vical.data import ImuNoise
 from vical.geometry.transforms import euler_to_matrix, invert_transform, make_transform
-from vical.io.checks import FormatWarning
 from vical.io.errors import KalibrFormatError
 from vical.io.kalibr import read_imu_intrinsics, read_imu_yaml
 from vical.io.kalibr_chain import chain_of, read_chain, read_imu_file, write_chain, write_imu_file
+from vical.io.sample_checks import FormatWarning
 from vical.io.yamlfile import dump_yaml
 
 # A rig of four cameras on a bar, 11 cm apart, each slightly turned; the IMU behind cam0.

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.parallel import MAX_WORKERS, ParallelConfig, WorkerCrashed, imap_ordered
 
 TWO = ParallelConfig(workers=2)

@@ -10,10 +10,10 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from vical.config import ConfigError, from_mapping
-from vical.env.config import InformationSettings, Workspace
+from vical.config_checks import ConfigError, from_mapping
+from vical.env.settings import InformationSettings, Workspace
+from vical.evaluation.harness import run_trajectory
 from vical.policies.base import WaypointPolicy
-from vical.policies.evaluation import run_trajectory
 from vical.policies.handcrafted import LENGTHS, TASKS, handcrafted_fractions, handcrafted_policy, handcrafted_waypoints
 from vical.policies.learned import (
     INFORMATION_POLICY_DIR,

@@ -11,9 +11,10 @@ import numpy as np
 import pytest
 
 from vical.apps.evaluate import results_csv
-from vical.policies.effort import rows_at_budget
-from vical.policies.evaluation import EpisodeRow
-from vical.policies.results import ShipRule, assess, by_policy, choose_seed, compare, read_results
+from vical.evaluation.error_vs_effort import rows_at_budget
+from vical.evaluation.harness import EpisodeRow
+from vical.evaluation.results_file import by_policy, compare, read_results
+from vical.evaluation.seed_choice import ShipRule, assess, choose_seed
 
 ROOT = Path(__file__).resolve().parents[1]
 TOLERANCES = {"focal_px": 0.35, "principal_point_px": 0.35, "distortion_px": 0.5, "rotation_deg": 0.1,

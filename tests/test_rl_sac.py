@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from vical.config import ConfigError, from_mapping
+from vical.config_checks import ConfigError, from_mapping
 from vical.rl.buffer import Batch
 from vical.rl.sac import SAC, NonFiniteLossError, SACConfig
 

@@ -10,9 +10,10 @@ import pytest
 import torch
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-from vical.config import ConfigError
-from vical.rl.checkpoint import IncompatibleCheckpointError, load_checkpoint
-from vical.rl.trainer import AGENT, CHECKPOINT, LAST_GOOD, Trainer, TrainingDivergedError, train
+from vical.config_checks import ConfigError
+from vical.rl.checkpoint import AGENT, CHECKPOINT, LAST_GOOD, IncompatibleCheckpointError, load_checkpoint
+from vical.rl.single_env_trainer import Trainer, TrainingDivergedError
+from vical.rl.trainer import train
 from vical.rl.vector_trainer import VectorTrainer
 
 PENDULUM_50 = {"_target_": "gymnasium.make", "id": "Pendulum-v1", "max_episode_steps": 50}

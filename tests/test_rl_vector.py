@@ -11,9 +11,9 @@ import pytest
 import torch
 from test_rl_trainer import assert_same_parameters, parameters, tiny_config
 
-from vical.config import ConfigError
-from vical.rl.checkpoint import load_checkpoint
-from vical.rl.trainer import CHECKPOINT, train
+from vical.config_checks import ConfigError
+from vical.rl.checkpoint import CHECKPOINT, load_checkpoint
+from vical.rl.trainer import train
 from vical.rl.vector import WorkersDidNotStart
 from vical.rl.vector_trainer import EnvWorkerError, WorkerDiedError
 

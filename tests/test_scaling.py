@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from vical.rl.trainer import AGENT
+from vical.rl.checkpoint import AGENT
 
 pytestmark = pytest.mark.integration  # every test starts console scripts in subprocesses
 

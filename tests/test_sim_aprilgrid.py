@@ -15,14 +15,14 @@ from vical.calib.detection.aprilgrid import detect_aprilgrid, make_aprilgrid_det
 from vical.calib.metrics import calibration_errors
 from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.solve.pipeline import calibrate_joint
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.geometry import euler_to_matrix, make_transform
 from vical.sim import PandaSim, SimConfig
 from vical.sim.camera import ProjectBackend, RenderBackend
-from vical.sim.config import BoardConfig
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, sample_sensor
 from vical.sim.scene import camera_pose_cv
+from vical.sim.settings import BoardConfig
 
 BOARD = BoardConfig(kind="aprilgrid", rows=6, cols=6, square=0.088, tag_spacing=0.3, distance=1.0)
 

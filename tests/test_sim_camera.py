@@ -9,7 +9,7 @@ import pytest
 
 from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.synthetic import wide_angle_camera
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.geometry import (
     CameraModel,
     euler_to_matrix,

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from vical.calib.detection.checkerboard import detect_checkerboard
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.geometry import (
     CameraModel,
     euler_to_matrix,

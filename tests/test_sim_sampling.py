@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import yaml
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.data import ImuNoise
 from vical.geometry import R_CAM_BODY, matrix_to_euler
 from vical.sim.sampling import (

@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 import yaml
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.geometry import R_CAM_BODY, CameraModel, euler_to_matrix, invert_transform, make_transform, transform_points
 from vical.sim import PandaSim, SimConfig, body_pose, camera_pose_cv, imu_pose_in_body, set_imu_pose, site_pose
-from vical.sim.config import PhysicsConfig
+from vical.sim.settings import PhysicsConfig
 
 CONF = Path(__file__).resolve().parents[1] / "conf" / "sim" / "default.yaml"
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from vical.policies.statistics import bootstrap_mean, paired_difference, proportion
+from vical.evaluation.intervals import bootstrap_mean, paired_difference, proportion
 
 
 def test_binary_sample_matches_the_binomial_distribution_of_the_bootstrap_mean():

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from configs import composed
 
-from vical.config import ConfigError
-from vical.env.config import Workspace
+from vical.config_checks import ConfigError
+from vical.env.settings import Workspace
 from vical.env.workspace import (
     PoseFrame,
     board_centre,

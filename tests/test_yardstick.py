@@ -8,8 +8,8 @@ import pytest
 import yaml
 
 from vical.apps.evaluate import yardstick_config, yardstick_fingerprint
+from vical.evaluation.yardstick import fingerprint
 from vical.policies.fourier import DEFAULT_PARAMS_FILE
-from vical.policies.yardstick import fingerprint
 
 RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results.md"
 TASKS = ("joint", "intrinsic")

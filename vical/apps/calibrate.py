@@ -98,7 +98,7 @@ from vical.io.yamlfile import load_mapping
 APP = "vical-calibrate"
 TASKS = ("intrinsic", "extrinsic", "joint", "two_stage")
 # The command line's spelling of the calibrator's and readers' arguments that error messages name
-# (``vical.config.SettingError``): the one place where library parameters become flags.
+# (``vical.config_checks.SettingError``): the one place where library parameters become flags.
 FLAGS = {
     "gyro_unit": "--gyro-unit",
     "accel_unit": "--accel-unit",

@@ -20,7 +20,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
-from vical.config import ConfigError, SettingError
+from vical.config_checks import ConfigError, SettingError
 
 if TYPE_CHECKING:
     from omegaconf import DictConfig
@@ -68,7 +68,7 @@ def argparse_main(
     """The console entry point of an argparse command: exit status 0, or 2 with one line on stderr.
 
     ``errors`` are the refusals whose message is the user's to read, settings they name spelled as the
-    command's ``flags`` (``vical.config.SettingError``); a file the readers could not open gives its path
+    command's ``flags`` (``vical.config_checks.SettingError``); a file the readers could not open gives its path
     and the reason, without Python's ``[Errno N]``.
     """
     one_line_warnings()

@@ -2,7 +2,7 @@
 
 Configured by ``conf/collect.yaml``. The ``robot`` group builds the rig (``robot=sim``: the simulated
 Panda, ``vical.sim.adapters``); the ``policy`` group the policy (the shipped learned policy of the
-workspace by default), which brings the MDP it was trained in. ``vical.policies.collect.Collector``
+workspace by default), which brings the MDP it was trained in. ``vical.collection.runner.Collector``
 aligns, runs the policy and writes ``<out>/recording`` (EuRoC, with the detections) as the data
 arrive; then ``vical-calibrate`` calibrates it into ``<out>/calibration``. ``<out>/collect.yaml``
 says what the collection did.
@@ -29,22 +29,22 @@ from vical.apps import calibrate
 from vical.apps.cli import check_then_run, fail, report_error
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask
-from vical.config import ConfigError, from_mapping, require
+from vical.collection.runner import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
+from vical.config_checks import ConfigError, from_mapping, require
 from vical.data import SensorTruth
 from vical.env.calibration import declared_lens_spread
-from vical.env.config import MdpConfig
 from vical.env.information import Guess, LensSpread
+from vical.env.settings import MdpConfig
+from vical.evaluation.harness import instantiate_policy, policy_mdp
 from vical.io.bag import write_bag
 from vical.io.errors import FormatError
 from vical.io.euroc import EurocStreamWriter, read_euroc
 from vical.io.kalibr import read_camchain, read_imu_yaml, write_imu_yaml, write_target_yaml
 from vical.io.yamlfile import dump_yaml
 from vical.policies.base import Policy
-from vical.policies.collect import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
-from vical.policies.evaluation import instantiate_policy, policy_mdp
 from vical.robot import MotionRefused, SensorStreamError
-from vical.sim.config import SimConfig
 from vical.sim.sampling import SensorSampling
+from vical.sim.settings import SimConfig
 
 APP = "vical-collect"
 USER_ERRORS = (ConfigError, FileExistsError, FileNotFoundError)

@@ -35,11 +35,15 @@ from vical.apps.cli import (
     quiet_library_logs,
 )
 from vical.calib.tasks import CalibrationTask
-from vical.config import ConfigError, require
-from vical.io.atomic import write_text_atomic
-from vical.parallel import ParallelConfig, WorkerCrashed
-from vical.policies.effort import BudgetSummary, budget_label, significance_lines, summarize_effort, write_effort_figure
-from vical.policies.evaluation import (
+from vical.config_checks import ConfigError, require
+from vical.evaluation.error_vs_effort import (
+    BudgetSummary,
+    budget_label,
+    significance_lines,
+    summarize_effort,
+    write_effort_figure,
+)
+from vical.evaluation.harness import (
     COLUMNS,
     EPISODE_FAILED,
     Evaluation,
@@ -49,7 +53,9 @@ from vical.policies.evaluation import (
     evaluate_policies,
     instantiate_policy,
 )
-from vical.policies.yardstick import PROTOCOL_KEYS, fingerprint
+from vical.evaluation.yardstick import PROTOCOL_KEYS, fingerprint
+from vical.io.atomic import write_text_atomic
+from vical.parallel import ParallelConfig, WorkerCrashed
 
 # An absolute path: the console script imports this module from anywhere.
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
@@ -161,7 +167,7 @@ def summary_table(summaries: Sequence[Summary]) -> str:
 
 
 def results_csv(evaluations: Sequence[Evaluation]) -> str:
-    """Every row of every policy as CSV (``vical.policies.evaluation.EpisodeRow`` columns; empty = n/a).
+    """Every row of every policy as CSV (``vical.evaluation.harness.EpisodeRow`` columns; empty = n/a).
 
     ``budget_m`` is ``end`` for the whole episode.
     """
@@ -317,7 +323,7 @@ def yardstick_config(task: str) -> dict[str, Any]:
 
 
 def yardstick_fingerprint(task: str) -> dict[str, str]:
-    """The fingerprint of ``+experiment=yardstick_<task>`` (vical.policies.yardstick)."""
+    """The fingerprint of ``+experiment=yardstick_<task>`` (vical.evaluation.yardstick)."""
     return fingerprint(yardstick_config(task))
 
 

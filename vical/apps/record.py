@@ -28,7 +28,7 @@ from vical.apps.cli import check_then_run, fail
 from vical.calib.detection.aprilgrid import detect_aprilgrid
 from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.solve.intrinsics import MIN_VIEWS
-from vical.config import ConfigError, require, require_range
+from vical.config_checks import ConfigError, require, require_range
 from vical.data import CameraFrames, Recording
 from vical.geometry import CameraModel, matrix_to_euler, step_pose
 from vical.io.atomic import atomic_directory
@@ -36,9 +36,9 @@ from vical.io.images import write_png
 from vical.io.recording import write_recording_files
 from vical.sim import MotionResult, PandaSim, SimConfig
 from vical.sim.camera import VisibilityRules
-from vical.sim.config import BoardConfig
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, sample_sensor
+from vical.sim.settings import BoardConfig
 
 APP = "vical-record"
 USER_ERRORS = (ConfigError, FileExistsError)

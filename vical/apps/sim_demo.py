@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from vical.apps.cli import ArgumentParser, one_line_warnings, report_error
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.geometry import make_transform, matrix_to_euler, step_pose
 from vical.io.errors import FormatError
 from vical.io.yamlfile import load_mapping

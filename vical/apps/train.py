@@ -5,7 +5,7 @@
 logging, evaluation and checkpoints may differ from the checkpoint's config: ``RESUMABLE_KEYS``). On
 resume, overrides may only change keys the saved config has: group selections (``agent=...``), additions
 (``+key=...``) and deletions (``~key``) are refused by name. A finished run resumed at its own length is
-complete (nothing to do); with a larger ``train.total_steps`` it goes on (``vical.rl.trainer.resume_status``);
+complete (nothing to do); with a larger ``train.total_steps`` it goes on (``vical.rl.checkpoint.resume_status``);
 with a smaller one it is refused.
 
 User-facing errors (a bad config value, Hydra's own override errors, an incompatible or unreadable
@@ -38,18 +38,18 @@ from vical.apps.cli import (
     override_value,
     quiet_library_logs,
 )
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.parallel import check_ray_address
-from vical.rl.checkpoint import IncompatibleCheckpointError, UnreadableCheckpointError
-from vical.rl.trainer import (
+from vical.rl.checkpoint import (
     CHECKPOINT,
-    RunSettings,
-    TrainingDivergedError,
+    IncompatibleCheckpointError,
+    UnreadableCheckpointError,
     checkpoint_step,
-    parse_settings,
     resume_status,
-    train,
 )
+from vical.rl.run_settings import RunSettings, parse_settings
+from vical.rl.single_env_trainer import TrainingDivergedError
+from vical.rl.trainer import train
 from vical.rl.vector_trainer import EnvWorkerError, WorkerDiedError
 
 # An absolute path: a relative config_path would resolve against the installed package when the console

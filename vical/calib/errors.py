@@ -1,6 +1,6 @@
 """The error type the calibrator raises for inputs it cannot calibrate from."""
 
-from vical.config import SettingError
+from vical.config_checks import SettingError
 
 
 class CalibrationError(ValueError):

@@ -16,7 +16,7 @@ from vical.calib.metrics import CalibrationErrors, calibration_errors
 from vical.calib.result import CalibrationResult
 from vical.calib.solve.pipeline import calibrate_rig
 from vical.calib.solve.visual_inertial import ViOptions
-from vical.config import ConfigError, from_mapping, require
+from vical.config_checks import ConfigError, from_mapping, require
 from vical.data import CameraFrames, Recording
 from vical.geometry import CAMERA_MODELS
 

@@ -30,13 +30,13 @@ from vical.calib.detection.aprilgrid import detect_aprilgrid
 from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask, run_task
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.data import Recording, SensorTruth
 from vical.env.actions import action_to_step
-from vical.env.config import InformationSettings, MdpConfig
 from vical.env.information import GROUPS, TASK_GROUPS, Guess, LensSpread
 from vical.env.plots import episode_figure, information_figure
 from vical.env.rewards import step_reward_terms, terminal_reward_terms
+from vical.env.settings import InformationSettings, MdpConfig
 from vical.env.state import EpisodeState
 from vical.env.workspace import check_workspace, pose_frame
 from vical.geometry import CameraModel
@@ -91,7 +91,7 @@ class CalibrationEnv(gym.Env):
         task: the ``task`` config group (``vical.calib.tasks.CalibrationTask``).
         task_mix: more tasks by name (each a ``task`` config group): every episode draws its task
             from ``task`` and these with equal probability, so that one policy learns them all.
-        **mdp: the MDP constants (``vical.env.config.MdpConfig``).
+        **mdp: the MDP constants (``vical.env.settings.MdpConfig``).
     """
 
     metadata: ClassVar[dict] = {"render_modes": []}

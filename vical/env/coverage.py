@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from vical.data import Target
-from vical.env.config import Thresholds, Workspace
+from vical.env.settings import Thresholds, Workspace
 
 # Corners needed for the homography that places the board in the image.
 MIN_CORNERS = 4

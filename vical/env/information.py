@@ -64,7 +64,7 @@ TASK_GROUPS = {
     "extrinsic": GROUPS[3:],
     "joint": GROUPS,
 }
-# The groups each task's evaluation scores (vical.policies.results.SCORED_GROUPS): the joint task's intrinsics
+# The groups each task's evaluation scores (vical.evaluation.seed_choice.SCORED_GROUPS): the joint task's intrinsics
 # are estimated, but a decentred lens biases them beyond any tolerance.
 SCORED_GROUPS = {"intrinsic": GROUPS[:3], "extrinsic": GROUPS[3:], "joint": GROUPS[3:]}
 GRAVITY = 9.81  # [m/s^2]

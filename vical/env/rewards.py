@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vical.env.config import RewardWeights
+from vical.env.settings import RewardWeights
 from vical.sim.motion import MotionResult
 
 

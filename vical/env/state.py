@@ -13,9 +13,9 @@ import numpy as np
 
 from vical.calib.solve.observations import FrameObservation
 from vical.data import ImuSamples, Target
-from vical.env.config import MdpConfig
 from vical.env.coverage import Coverage, view_features
 from vical.env.information import SCORED_GROUPS, Guess, InformationTracker, excess, features, tolerance_ratios
+from vical.env.settings import MdpConfig
 
 
 class EpisodeState:

@@ -1,6 +1,6 @@
 """Where the camera may go: workspace offsets <-> world poses, and what the Panda reaches of them.
 
-A workspace offset ``[x, y, z [m], roll, pitch, yaw [rad]]`` (``vical.env.config.Workspace``)
+A workspace offset ``[x, y, z [m], roll, pitch, yaw [rad]]`` (``vical.env.settings.Workspace``)
 becomes the camera body pose (the ``ee`` site: x along the optical axis, y left, z up) as
 
     p = p_start + [x, y, z],    R = R_ref(p) Rz(yaw0 + yaw) Ry(pitch0 + pitch) Rx(roll0 + roll)
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vical.config import ConfigError
-from vical.env.config import Workspace
+from vical.config_checks import ConfigError
+from vical.env.settings import Workspace
 from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
 from vical.sim import PandaSim
 

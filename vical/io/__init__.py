@@ -4,7 +4,6 @@ See ``docs/formats.md``. This package depends only on ``vical.geometry`` and ``v
 """
 
 from vical.io.bag import read_bag, read_bag_imu, write_bag
-from vical.io.checks import FormatWarning
 from vical.io.csvfiles import read_corners_csv, read_imu_csv, write_corners_csv, write_imu_csv
 from vical.io.errors import (
     BagFormatError,
@@ -34,6 +33,7 @@ from vical.io.kalibr_chain import (
     write_imu_file,
 )
 from vical.io.recording import is_recording_dir, load_recording, save_recording
+from vical.io.sample_checks import FormatWarning
 from vical.io.sources import detect_source, open_imu, open_recording
 
 __all__ = [

@@ -28,9 +28,9 @@ from tqdm import tqdm
 
 from vical.data import NS_PER_S, CameraFrames, DataError, ImuSamples, Recording, Target
 from vical.io.atomic import remove_stale_temporaries, temporary_prefix
-from vical.io.checks import check_camera_rates, check_sampling, scale_imu, sort_and_dedupe
 from vical.io.errors import BagFormatError, BagTopicError, FormatError, UnitError
 from vical.io.images import ImageDetector, check_size, run_detector, to_gray
+from vical.io.sample_checks import check_camera_rates, check_sampling, scale_imu, sort_and_dedupe
 
 IMAGE_TYPE, COMPRESSED_TYPE, IMU_TYPE = (
     "sensor_msgs/msg/Image",

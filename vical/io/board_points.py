@@ -29,9 +29,9 @@ import numpy as np
 import scipy.spatial
 
 from vical.data import CameraFrames, Target
-from vical.io.checks import check_sampling
 from vical.io.csvfiles import parse_floats, parse_times
 from vical.io.errors import CsvFormatError, FormatError, read_text_file
+from vical.io.sample_checks import check_sampling
 
 TIME_COLUMNS = ("ts", "timestamp", "timestamp [ns]", "t_ns")
 PIXEL_COLUMNS = (("kp_x", "kp_y"), ("u", "v"))

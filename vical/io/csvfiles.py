@@ -25,8 +25,8 @@ import numpy as np
 
 from vical.data import CameraFrames, DataError, ImuSamples, Target
 from vical.io.atomic import atomic_file
-from vical.io.checks import check_sampling, parse_timestamp_ns, scale_imu, sort_and_dedupe, warn
 from vical.io.errors import CsvFormatError, EmptyCsvError, FormatError, read_text_file
+from vical.io.sample_checks import check_sampling, parse_timestamp_ns, scale_imu, sort_and_dedupe, warn
 
 IMU_HEADER = (
     "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from vical.config import SettingError
+from vical.config_checks import SettingError
 
 
 class FormatError(ValueError):

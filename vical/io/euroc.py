@@ -30,7 +30,6 @@ import numpy as np
 from vical.data import NS_PER_S, CameraFrames, ImuNoise, ImuSamples, Recording, SensorTruth, Target
 from vical.geometry.transforms import invert_transform
 from vical.io.atomic import atomic_directory, atomic_file, check_can_write_dir, write_text_atomic
-from vical.io.checks import check_camera_rates, check_sampling, sort_and_dedupe, warn
 from vical.io.csvfiles import (
     CORNER_HEADER,
     IMU_HEADER,
@@ -46,6 +45,7 @@ from vical.io.csvfiles import (
 from vical.io.errors import CsvFormatError, EmptyCsvError, FormatError, KalibrFormatError
 from vical.io.images import ImageDetector, frames_from_images, read_gray, write_png
 from vical.io.kalibr import kalibr_intrinsics, read_camchain, read_imu_yaml
+from vical.io.sample_checks import check_camera_rates, check_sampling, sort_and_dedupe, warn
 from vical.io.yamlfile import as_floats, dump_yaml, load_mapping
 
 EUROC_DISTORTION_NAMES = {"radtan": "radial-tangential", "equidistant": "equidistant"}

@@ -18,8 +18,8 @@ import numpy as np
 from tqdm import tqdm
 
 from vical.data import NS_PER_S, CameraFrames, Target
-from vical.io.checks import warn
 from vical.io.errors import FormatError
+from vical.io.sample_checks import warn
 
 ImageDetector = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm", ".webp")

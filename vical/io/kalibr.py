@@ -40,8 +40,8 @@ from vical.data import ImuIntrinsics, ImuNoise, Target, TargetError
 from vical.geometry import wide_angle
 from vical.geometry.camera import CameraModel, CameraModelError
 from vical.geometry.transforms import invert_transform
-from vical.io.checks import warn
 from vical.io.errors import KalibrFormatError
+from vical.io.sample_checks import warn
 from vical.io.yamlfile import as_floats, dump_yaml, load_mapping, require
 
 logger = logging.getLogger(__name__)

@@ -35,7 +35,6 @@ from vical.data import ImuNoise, Recording
 from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel
 from vical.geometry.transforms import invert_transform
-from vical.io.checks import FormatWarning
 from vical.io.errors import FormatError, KalibrFormatError, read_text_file
 from vical.io.kalibr import (
     DISTORTION_ALIASES,
@@ -48,6 +47,7 @@ from vical.io.kalibr import (
     imu_noise_of,
     parse_transform,
 )
+from vical.io.sample_checks import FormatWarning
 from vical.io.yamlfile import dump_yaml, load_mapping
 
 OPENCV_HEADER = "%YAML:1.0"

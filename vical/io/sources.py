@@ -33,12 +33,12 @@ from vical.io.board_points import (
     read_board_point_csv,
     read_camera_folder,
 )
-from vical.io.checks import GYRO_UNITS
 from vical.io.csvfiles import read_corners_csv, read_imu_csv
 from vical.io.errors import FormatError, SourceSettingError
 from vical.io.euroc import find_euroc_root, read_euroc
 from vical.io.images import ImageDetector, list_images, read_image_folder
 from vical.io.recording import is_recording_dir, load_recording
+from vical.io.sample_checks import GYRO_UNITS
 
 BAG_MAGIC = b"#ROSBAG V2.0"
 

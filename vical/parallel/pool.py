@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any
 from urllib.parse import urlparse
 
-from vical.config import ConfigError, require
+from vical.config_checks import ConfigError, require
 
 MAX_WORKERS = 1024  # more processes than any machine or allocation this runs on has cores
 BACKENDS = ("local", "ray")

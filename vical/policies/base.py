@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.actions import step_to_action
 from vical.env.calibration import CalibrationEnv
 

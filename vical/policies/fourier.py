@@ -26,9 +26,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
-from vical.env.config import Workspace
+from vical.env.settings import Workspace
 from vical.policies.base import WaypointPolicy
 
 HARMONICS = (1, 2, 4)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from vical.env.calibration import CalibrationEnv
-from vical.env.config import Workspace
+from vical.env.settings import Workspace
 from vical.policies.base import WaypointPolicy, require_frame
 
 TASKS = ("intrinsic", "extrinsic")

@@ -1,7 +1,7 @@
 """The model-free learned policy: the SAC agent that ``vical-train env=calibration`` (or ``env=information``) wrote.
 
 Evaluation uses the deterministic action (the mean ``tanh(mu(s))`` in ``[-1, 1]^6``), mapped onto the
-env's action box exactly as training did (``vical.rl.trainer.BoxActions``). The run must have trained
+env's action box exactly as training did (``vical.rl.envs.BoxActions``). The run must have trained
 on the calibration env (the 24-D coverage state or the 13-D information state, 6-D action) with the
 action scale of the env it drives. A policy of the information state brings its state and stopping
 rule to the env it is evaluated in (``Policy.env_settings``): it stops when it predicts every
@@ -16,13 +16,13 @@ from typing import Any
 import numpy as np
 import torch
 
-from vical.config import ConfigError, from_mapping
+from vical.config_checks import ConfigError, from_mapping
 from vical.env.calibration import INFO_OBS_SIZE, OBS_SIZE, CalibrationEnv
-from vical.env.config import Workspace
+from vical.env.settings import Workspace
 from vical.policies.base import Policy
-from vical.rl.checkpoint import load_checkpoint
+from vical.rl.checkpoint import AGENT, load_checkpoint
+from vical.rl.envs import BoxActions
 from vical.rl.sac import SAC, SACConfig
-from vical.rl.trainer import AGENT, BoxActions
 
 CALIBRATION_ENV = "vical.env.calibration.CalibrationEnv"
 ACT_SIZE = 6

@@ -1,4 +1,5 @@
-"""Checkpoint files (written atomically with :mod:`vical.io.atomic`) and checkpoint config compatibility."""
+"""Checkpoint files (written atomically with :mod:`vical.io.atomic`), checkpoint config compatibility, and the files of
+a run directory: whether a run can resume, and from where."""
 
 from __future__ import annotations
 
@@ -9,7 +10,12 @@ from typing import Any
 
 import torch
 
+from vical.config_checks import ConfigError
 from vical.io.atomic import atomic_file
+
+CHECKPOINT = "checkpoint.pt"  # latest episode-boundary checkpoint: what resume=<run dir> continues from
+LAST_GOOD = "last_good.pt"  # state just before a non-finite loss/observation, for inspection
+AGENT = "agent.pt"  # final networks + agent config, for evaluation and deployment
 
 # Settings a resumed run may change: none of them touches the training's random streams or arithmetic
 # (evaluation uses its own env and deterministic actions; logging, plots and checkpoints only read state).
@@ -110,3 +116,56 @@ def require_compatible(saved: Mapping[str, Any], current: Mapping[str, Any], pat
             "Resume with the run's own config (vical-train resume=<run dir> loads it; only "
             f"{sorted(RESUMABLE_KEYS - {'resume', 'run_dir'})} may change) or start a new run."
         )
+
+
+def require_reachable(total_steps: int, step: int, run_dir: Path) -> None:
+    """Refuse a ``total_steps`` below the checkpoint's ``step``: resuming would overwrite later work with earlier."""
+    if total_steps < step:
+        raise ConfigError(
+            f"train.total_steps={total_steps} is below step {step} of the checkpoint {run_dir / CHECKPOINT}: the run "
+            f"is past it already; resume with train.total_steps >= {step}"
+        )
+
+
+def checkpoint_step(run_dir: str | Path) -> int | None:
+    """The step of the run's checkpoint, None when it has none (its tensors are mapped, not read)."""
+    path = Path(run_dir) / CHECKPOINT
+    return int(load_checkpoint(path, mmap=True)["counters"]["step"]) if path.is_file() else None
+
+
+def resume_status(run_dir: str | Path, total_steps: int) -> str | None:
+    """Whether the run at ``run_dir`` can go on to ``total_steps``: None when it can (from its checkpoint), a
+    message when it is complete at that length already (nothing to do).
+
+    A finished run (``agent.pt`` written at the end, no later checkpoint) asked for more steps goes on from
+    its last checkpoint: the steps after it are run again, identically, so the result equals a run of
+    ``total_steps`` from the start.
+
+    Raises:
+        ConfigError: the run would be shortened, or it has no checkpoint to go on from.
+    """
+    run = Path(run_dir)
+    checkpoint = checkpoint_step(run)
+    agent = run / AGENT
+    finished = int(load_checkpoint(agent, mmap=True)["config"]["train"]["total_steps"]) if agent.is_file() else None
+    if finished is not None and (checkpoint is None or checkpoint <= finished):
+        if total_steps == finished:
+            return f"run {run} is complete: it trained {finished} steps and wrote {agent}; nothing to do"
+        if total_steps < finished:
+            raise ConfigError(
+                f"train.total_steps={total_steps} is below the {finished} steps run {run} finished with: a run cannot "
+                f"be shortened (its agent is {agent}); start a new run for a shorter one"
+            )
+        if checkpoint is None:
+            raise ConfigError(
+                f"run {run} finished at {finished} steps without a checkpoint to go on from (train.checkpoint_every); "
+                f"start a new run with train.total_steps={total_steps}"
+            )
+        return None
+    if checkpoint is None:
+        raise ConfigError(
+            f"run {run} has no checkpoint yet (it stopped before its first one, at the first episode end after "
+            "train.checkpoint_every steps): start it again"
+        )
+    require_reachable(total_steps, checkpoint, run)
+    return None

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from vical.config import ConfigError, require, require_range
+from vical.config_checks import ConfigError, require, require_range
 from vical.rl.buffer import Batch
 from vical.rl.networks import QNetworks, TanhGaussianPolicy, ValueNetwork
 

@@ -31,7 +31,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.parallel import ParallelConfig, connect_ray, single_threaded_children
 
 ERROR_KEY = "worker/error"  # info key of an exception caught in an env's step

@@ -32,10 +32,11 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from vical.config import ConfigError
+from vical.config_checks import ConfigError
 from vical.rl.buffer import transition_discount
-from vical.rl.checkpoint import flatten, save_checkpoint
-from vical.rl.trainer import CHECKPOINT, Episode, Trainer, TrainResult, make_env
+from vical.rl.checkpoint import CHECKPOINT, flatten, save_checkpoint
+from vical.rl.envs import make_env
+from vical.rl.single_env_trainer import Episode, Trainer, TrainResult
 from vical.rl.vector import ERROR_KEY, SEED_KEY, WorkerDied, WorkerError, make_workers
 
 log = logging.getLogger(__name__)

@@ -6,11 +6,11 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 
-from vical.sim.config import BoardConfig, IKConfig, MotionConfig, PhysicsConfig, SimConfig
 from vical.sim.kinematics import PANDA_LIMITS, IKResult, JointLimits
 from vical.sim.motion import MotionResult
-from vical.sim.robot import PandaSim, StepCallback
+from vical.sim.panda import PandaSim, StepCallback
 from vical.sim.scene import body_pose, build_model, camera_pose_cv, imu_pose_in_body, set_imu_pose, site_pose
+from vical.sim.settings import BoardConfig, IKConfig, MotionConfig, PhysicsConfig, SimConfig
 
 __all__ = [
     "PANDA_LIMITS",

@@ -32,10 +32,10 @@ from vical.robot.interfaces import (
     ViSensor,
     check_pose,
 )
-from vical.sim.config import SimConfig
+from vical.sim.panda import PandaSim
 from vical.sim.recorder import SensorRecorder
-from vical.sim.robot import PandaSim
 from vical.sim.sampling import SensorSampling, mean_sensor, sample_sensor
+from vical.sim.settings import SimConfig
 
 # The Panda's documented Cartesian limits (translation [m/s], rotation [rad/s], acceleration [m/s^2]);
 # the simulator plans in joint space within sim.motion's fractions of the joint limits.

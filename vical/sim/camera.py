@@ -29,7 +29,7 @@ import cv2
 import mujoco
 import numpy as np
 
-from vical.config import require_range
+from vical.config_checks import require_range
 from vical.data import Target
 from vical.geometry import CameraModel, interpolate_transform
 

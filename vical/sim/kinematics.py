@@ -15,7 +15,7 @@ import numpy as np
 from numpy.linalg import _umath_linalg
 
 from vical.geometry import so3_log
-from vical.sim.config import NUM_JOINTS, IKConfig
+from vical.sim.settings import NUM_JOINTS, IKConfig
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,8 @@ import mujoco
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from vical.sim.config import NUM_JOINTS
 from vical.sim.kinematics import JointLimits
+from vical.sim.settings import NUM_JOINTS
 
 # Peaks of the quintic profile's derivatives on tau in [0, 1]: s' at tau = 1/2, |s''| at
 # tau = 1/2 -+ sqrt(3)/6.

@@ -1,6 +1,6 @@
 """Record a simulated sensor while the Panda moves: IMU, camera frames, ground truth -> ``Recording``.
 
-``SensorRecorder`` is the ``PandaSim.move_to`` step observer (``vical.sim.robot.StepObserver``). It
+``SensorRecorder`` is the ``PandaSim.move_to`` step observer (``vical.sim.panda.StepObserver``). It
 keeps the IMU site's pose and the end effector's position of every physics step of a motion and, at
 each camera exposure, observes the target from the camera pose interpolated between the two
 physics steps around the exposure (the steps it asks to see live). The kept poses become the IMU
@@ -29,7 +29,7 @@ from vical.data import CameraFrames, ImuSamples, PathProfile, Recording, SensorT
 from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
 from vical.sim.imu import ImuSimulator, ImuSiteReader, SiteReadings, row_dot
 from vical.sim.motion import MotionResult
-from vical.sim.robot import PandaSim, StepPoses
+from vical.sim.panda import PandaSim, StepPoses
 from vical.sim.sampling import SensorSampling, sensor_imu_pose
 from vical.sim.scene import camera_pose_cv, set_imu_pose
 
@@ -48,7 +48,7 @@ class SensorRecorder:
     """Collects one episode's sensor data from a ``PandaSim``.
 
     Args:
-        sim: the simulator (``vical.sim.robot.PandaSim``): ``model``, ``data``, ``timestep_ns``,
+        sim: the simulator (``vical.sim.panda.PandaSim``): ``model``, ``data``, ``timestep_ns``,
             ``T_world_board``.
         target: the calibration target on the board.
         sampling: sensor settings (rates, IMU sampling mode, pixel noise, backend).

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from vical.config import ConfigError, from_mapping, require, require_range
+from vical.config_checks import ConfigError, from_mapping, require, require_range
 from vical.data import ImuIntrinsics, ImuNoise, SensorTruth
 from vical.geometry import (
     CameraModel,

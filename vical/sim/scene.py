@@ -16,7 +16,7 @@ import numpy as np
 
 from vical.data import Target
 from vical.geometry import euler_to_matrix, make_transform, matrix_to_quat, quat_to_matrix
-from vical.sim.config import BoardConfig, SimConfig
+from vical.sim.settings import BoardConfig, SimConfig
 
 ASSET_DIR = Path(__file__).resolve().parent / "assets"
 SCENE_XML = ASSET_DIR / "scene.xml"

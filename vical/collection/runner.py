@@ -1,0 +1,511 @@
+"""Run a calibration policy on an arm holding a camera + IMU (``vical.robot``'s interfaces) and record it.
+
+``Collector.run`` does what an episode of ``CalibrationEnv`` does, with a real robot's means:
+
+1. **Alignment** (as in the paper): from live detections (PnP with the sensor's nominal camera) it
+   finds the board, then moves the tool to look at the board centre, upright, from ``distance``
+   along the board's normal, until it sits there within tolerance. That pose is the episode's
+   start pose; the board centre it saw is the workspace's ``look_at``.
+2. **Rest** ``reset_hold`` seconds (still IMU data, first views), then the **policy loop**: the
+   policy's action becomes a goal inside the workspace bounds around the start pose (exactly as
+   the env clips it), the arm moves there and rests ``settle_time``; the frames and IMU samples
+   that arrived update the state with the env's own code (``vical.env.state.EpisodeState``),
+   until the policy's stopping rule holds, it is done, or the step or time limit is reached.
+
+Everything the sensor delivers after the alignment is written as it arrives
+(``vical.io.euroc.EurocStreamWriter``), so a kill leaves a readable, calibratable recording. A
+goal the arm refuses is retried as half the step, then pulled toward the workspace's centre, then
+skipped; several refused steps in a row, a lost board, an IMU gap, any exception or Ctrl-C stop the arm first; the
+recording is flushed and closed in every case.
+
+The path is the sum of the straight lines between the poses the arm reported after each motion
+(the arm's own path between them is not streamed); the env measures the simulated path.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+import numpy as np
+
+from vical.calib.detection import detect_checkerboard
+from vical.calib.detection.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
+from vical.calib.solve.initialization import pnp
+from vical.calib.solve.observations import FrameObservation
+from vical.data import NS_PER_S, ImuSamples, Target
+from vical.env.actions import action_to_step
+from vical.env.information import Guess
+from vical.env.settings import MdpConfig
+from vical.env.state import EpisodeState
+from vical.env.workspace import PoseFrame, look_at_rotation
+from vical.geometry import make_transform, rotation_angle, transform_points
+from vical.io.euroc import EurocStreamWriter
+from vical.policies.base import Policy
+from vical.robot import Arm, MotionRefused, SensorData, SensorStreamError, StampedPose, ViSensor
+
+# The camera's optical frame (z forward, x right, y down) in the tool frame (x forward, y left, z up).
+R_TOOL_CAMERA = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+
+
+# How far beyond the workspace bounds a reached pose may end ([m] x 3, [rad] x 3) before the run stops:
+# tracking error and goals executed a little off stay inside; a wrong tool frame does not.
+OUTSIDE_MARGIN = np.r_[0.05, 0.05, 0.05, 0.1, 0.1, 0.1]
+# A refused goal offset is retried scaled by these, toward the workspace's centre (the start pose).
+CENTRE_FRACTIONS = (0.9, 0.75, 0.5)
+
+
+class CollectionStopped(RuntimeError):
+    """The collection ended early for a reason the user can act on (the arm is stopped, the recording closed)."""
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """How the runner brings the board centre to the image centre before the policy starts.
+
+    Attributes:
+        distance: [m] from the camera to the board centre at the start pose (the policy's training start).
+        tolerance_m: [m] and tolerance_deg: [deg]: close enough to the aligned pose.
+        max_moves: alignment motions before giving up.
+        max_move: [m] the farthest single alignment motion (beyond: the board is not where it should be).
+        min_corners: detected corners a frame needs to locate the board.
+        T_tool_camera: (4, 4) the camera's optical frame in the tool frame (nominal; the calibration
+            does not use it).
+    """
+
+    distance: float
+    tolerance_m: float = 0.005
+    tolerance_deg: float = 1.0
+    max_moves: int = 5
+    max_move: float = 0.3
+    min_corners: int = 12
+    T_tool_camera: np.ndarray = field(default_factory=lambda: make_transform(R_TOOL_CAMERA, np.zeros(3)))
+
+    def __post_init__(self) -> None:
+        for name in ("distance", "tolerance_m", "tolerance_deg", "max_move"):
+            if not float(getattr(self, name)) > 0:
+                raise ValueError(f"collect.align.{name} must be > 0, got {getattr(self, name)}")
+        if int(self.max_moves) < 1 or int(self.min_corners) < 4:
+            raise ValueError("collect.align.max_moves must be >= 1 and collect.align.min_corners >= 4")
+        object.__setattr__(self, "T_tool_camera", np.asarray(self.T_tool_camera, dtype=float).reshape(4, 4))
+
+
+@dataclass(frozen=True)
+class Limits:
+    """When the runner stops on its own.
+
+    Attributes:
+        max_steps: policy steps (None: the MDP's ``max_steps``).
+        time_limit: [s] wall time of the whole collection.
+        lost_frames: consecutive frames without the board that stop the run.
+        max_refused: consecutive steps the arm refuses (with their fallbacks) that stop the run.
+        max_imu_gap: [s] the longest gap between IMU samples that is not a broken stream.
+        wait_timeout: [s] wall time to wait for sensor data before the stream counts as broken.
+        poll_interval: [s] between reads while waiting.
+    """
+
+    max_steps: int | None = None
+    time_limit: float = 900.0
+    lost_frames: int = 60
+    max_refused: int = 3
+    max_imu_gap: float = 0.1
+    wait_timeout: float = 5.0
+    poll_interval: float = 0.005
+
+    def __post_init__(self) -> None:
+        if self.max_steps is not None and int(self.max_steps) < 1:
+            raise ValueError(f"collect.limits.max_steps must be >= 1 or null, got {self.max_steps}")
+        for name in ("time_limit", "max_imu_gap", "wait_timeout"):
+            if not float(getattr(self, name)) > 0:
+                raise ValueError(f"collect.limits.{name} must be > 0, got {getattr(self, name)}")
+        if int(self.lost_frames) < 1 or int(self.max_refused) < 1 or float(self.poll_interval) < 0:
+            raise ValueError(
+                "collect.limits.lost_frames and collect.limits.max_refused must be >= 1, "
+                "collect.limits.poll_interval >= 0"
+            )
+
+
+@dataclass(frozen=True)
+class CollectResult:
+    """What a collection did: steps, path [m], sensor time [s], frames and why it ended."""
+
+    steps: int
+    path_length: float
+    duration: float
+    frames: int
+    goal_reached: bool
+    reason: str
+
+
+class RobotEpisode:
+    """What a policy reads of its episode (``config``, ``action_space``, ``pose_offset``, ``steps``), off the env."""
+
+    def __init__(self, config: MdpConfig) -> None:
+        self.config = config
+        scale = np.asarray(config.action_scale, dtype=np.float32)
+        self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
+        self.pose_offset = np.zeros(6)
+        self.steps = 0
+
+
+class SensorStream:
+    """Reads the sensor, checks the streams, detects the board and (once recording) writes everything.
+
+    Keeps the recording's IMU samples for the state (the detections go to the caller).
+    """
+
+    def __init__(self, sensor: ViSensor, target: Target, writer: EurocStreamWriter | None, limits: Limits) -> None:
+        self.sensor = sensor
+        self.target = target
+        self.writer = writer
+        self.limits = limits
+        self.recording = False
+        self.keep_imu = False  # keep the IMU samples without recording (the dry run)
+        self.frames = 0  # recorded
+        self._imu: list[ImuSamples] = []
+        self._last_imu: int | None = None
+        self._last_frame: int | None = None
+        self._lost = 0
+        self._aprilgrid = make_aprilgrid_detector() if target.kind == "aprilgrid" else None
+
+    def detect(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self._aprilgrid is not None:
+            return detect_aprilgrid(image, self.target, detector=self._aprilgrid)
+        return detect_checkerboard(image, self.target)
+
+    def read(self) -> list[tuple[int, np.ndarray, np.ndarray]]:
+        """New frames' ``(stamp, corners, ids)``; the IMU samples go to the recording."""
+        data = self.sensor.read()
+        self._check(data)
+        detections = []
+        for frame in data.frames:
+            corners, ids = self.detect(frame.image)
+            self._lost = 0 if len(ids) else self._lost + 1
+            if self.recording:
+                self.writer.add_frame(frame.t_ns, frame.image, corners, ids)
+                self.frames += 1
+            detections.append((frame.t_ns, corners, ids))
+        if self.recording and len(data.imu):
+            self.writer.add_imu(data.imu)
+        if (self.recording or self.keep_imu) and len(data.imu):
+            self._imu.append(data.imu)
+        if self._lost >= self.limits.lost_frames:
+            raise CollectionStopped(
+                f"the board was out of view for {self._lost} frames in a row; check the lighting and the "
+                "board's position, then align again"
+            )
+        return detections
+
+    def _check(self, data: SensorData) -> None:
+        """Refuse stamps going backwards and gaps in the IMU stream (a broken USB link, a dropped driver)."""
+        if len(data.imu):
+            t = np.r_[[] if self._last_imu is None else [self._last_imu], data.imu.t].astype(np.int64)
+            steps = np.diff(t) / NS_PER_S
+            if np.any(steps <= 0):
+                raise SensorStreamError("the IMU stamps go backwards; check the sensor's clock settings")
+            if len(steps) and steps.max() > self.limits.max_imu_gap:
+                k = int(np.argmax(steps))
+                raise SensorStreamError(
+                    f"the IMU stream has a {steps[k]:.2f} s gap (limit {self.limits.max_imu_gap} s) at "
+                    f"{t[k]} ns; check the connection and the driver's IMU rate"
+                )
+            self._last_imu = int(data.imu.t[-1])
+        for frame in data.frames:
+            if self._last_frame is not None and frame.t_ns <= self._last_frame:
+                raise SensorStreamError("the camera stamps go backwards; check the sensor's clock settings")
+            self._last_frame = frame.t_ns
+
+    def imu(self) -> ImuSamples:
+        """All IMU samples of the recording so far."""
+        if len(self._imu) != 1:
+            self._imu = [ImuSamples.concatenate(self._imu)]
+        return self._imu[0]
+
+    @property
+    def last_imu_ns(self) -> int | None:
+        return self._last_imu
+
+
+class Collector:
+    """One policy-driven collection on an arm with a camera + IMU (module doc).
+
+    Args:
+        arm, sensor: the robot (``vical.robot``), connected.
+        policy: the calibration policy (it sees a ``RobotEpisode`` as its env).
+        mdp: the MDP the policy runs in (state, workspace, action scale, step limit, rests).
+        task: ``intrinsic``, ``extrinsic`` or ``joint``: the state's calibration problem.
+        target: the board.
+        guess: the sensor's nominal values (the information state's linearisation; the alignment's camera).
+        writer: where the recording goes (None for ``dry_run`` only).
+        align, limits: alignment and stopping settings.
+        progress: prints one line per stage and step.
+    """
+
+    def __init__(
+        self,
+        arm: Arm,
+        sensor: ViSensor,
+        policy: Policy,
+        mdp: MdpConfig,
+        task: str,
+        target: Target,
+        guess: Guess,
+        writer: EurocStreamWriter | None,
+        align: Alignment,
+        limits: Limits | None = None,
+        progress: Callable[[str], None] = print,
+    ) -> None:
+        self.arm = arm
+        self.policy = policy
+        self.mdp = mdp
+        self.task = task
+        self.target = target
+        self.guess = guess
+        self.align_settings = align
+        self.limits = limits or Limits()
+        self.stream = SensorStream(sensor, target, writer, self.limits)
+        self.state = EpisodeState(mdp, target, sensor.image_size)
+        self.episode = RobotEpisode(mdp)
+        self.progress = progress
+        self._started = 0.0
+        self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self._refused = 0
+
+    # ------------------------------------------------------------------ the run
+    def run(self, seed: int = 0) -> CollectResult:
+        """Align, rest, run the policy; the arm is stopped and the recording closed however it ends."""
+        if self.stream.writer is None:
+            raise ValueError("Collector.run needs a writer for the recording")
+        self.policy.check(self.episode)  # a policy made for another MDP fails before anything moves
+        self._started = time.monotonic()
+        self.stream.sensor.start()
+        try:
+            frame = self.align()
+            return self._episode(frame, seed)
+        except BaseException:
+            self.arm.stop()
+            raise
+        finally:
+            self.stream.sensor.stop()
+            self.stream.writer.close()
+
+    def _episode(self, frame: PoseFrame, seed: int) -> CollectResult:
+        self.stream.recording = True
+        self.state.reset(self.task, self.guess)
+        first = self.stream.last_imu_ns
+        self._rest(self.mdp.reset_hold)
+        self._update_state()
+        episode = self.episode
+        self.policy.reset(episode, np.random.default_rng(seed))
+        max_steps = self.limits.max_steps or self.policy.max_steps or self.mdp.max_steps
+        reason = f"the step limit ({max_steps})"
+        while episode.steps < max_steps:
+            action = self.policy.act(self.state.observation(episode.pose_offset, episode.steps), episode)
+            if self.policy.finished:
+                reason = "the policy's last waypoint"
+                break
+            self._step(frame, action)
+            self._report()
+            if self.policy.stop_at_coverage and self.state.goal_reached:
+                reason = "the goal (" + ("every parameter group within tolerance" if self.mdp.state == "information"
+                                         else "coverage complete") + ")"  # fmt: skip
+                break
+            if time.monotonic() - self._started > self.limits.time_limit:
+                reason = f"the time limit ({self.limits.time_limit:.0f} s)"
+                break
+        self.arm.stop()
+        last = self.stream.last_imu_ns
+        duration = 0.0 if first is None or last is None else (last - first) / NS_PER_S
+        self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, {duration:.1f} s")
+        return CollectResult(episode.steps, self.state.path_length, duration, self.stream.frames,
+                             self.state.goal_reached, reason)  # fmt: skip
+
+    def _step(self, frame: PoseFrame, action: np.ndarray) -> None:
+        """Move by one action inside the workspace (as ``CalibrationEnv`` does), rest, update the state."""
+        episode = self.episode
+        space = episode.action_space
+        a = np.clip(np.asarray(action, dtype=float).reshape(-1), space.low, space.high)
+        translation, euler_increment = action_to_step(a)
+        bound = self.mdp.workspace.bound
+        goal = np.clip(episode.pose_offset + np.r_[translation, euler_increment], -bound, bound)
+        before = self.arm.pose()
+        reached = self._move(frame, episode.pose_offset, goal)
+        episode.steps += 1
+        if reached is None:
+            return
+        offset = frame.offset(reached.T_base_tool)
+        if np.any(np.abs(offset) > bound + OUTSIDE_MARGIN):
+            raise CollectionStopped(
+                f"the arm ended outside the workspace (offset {np.round(offset, 3).tolist()}, bounds "
+                f"{np.round(bound, 3).tolist()}); check its tool frame and calibration"
+            )
+        self._rest(self.mdp.settle_time)
+        self.state.add_motion(offset - episode.pose_offset, float(np.linalg.norm(reached.position - before.position)))
+        self._update_state()
+        episode.pose_offset = offset
+
+    def _move(self, frame: PoseFrame, start: np.ndarray, goal: np.ndarray) -> StampedPose | None:
+        """Move toward the workspace offset ``goal``; None when the arm refused it and every fallback.
+
+        The env executes the closest reachable pose of an unreachable goal; an arm refuses it. The
+        runner then tries half the step, then the goal pulled toward the workspace's centre (the start
+        pose, which the arm reached): near the workspace's edge the part of the box the arm reaches
+        depends on where the alignment put the start. A step with every fallback refused is skipped;
+        ``limits.max_refused`` of them in a row stop the run.
+        """
+        fallbacks = [start + 0.5 * (goal - start), *(f * goal for f in CENTRE_FRACTIONS)]
+        for k, offset in enumerate([goal, *fallbacks]):
+            try:
+                reached = self.arm.move_to(frame.pose(offset))
+                self._refused = 0
+                return reached
+            except MotionRefused as err:
+                refused = err
+                if k == 0:
+                    self.progress(f"the arm refused the step ({err}); trying shorter ones")
+        self._refused += 1
+        if self._refused >= self.limits.max_refused:
+            raise MotionRefused(f"{refused}; {self._refused} steps in a row were refused, with their fallbacks")
+        return None
+
+    def _report(self) -> None:
+        s, e = self.state, self.episode
+        elapsed = time.monotonic() - self._started
+        if self.mdp.state == "information":
+            worst = max(s.ratios, key=s.ratios.get)
+            what = f"excess {s.excess:.2f} e-folds, worst {worst} {s.ratios[worst]:.2f}x tolerance"
+        else:
+            what = f"coverage {np.mean(list(s.coverage.progress().values())):.0%} of the way"
+        self.progress(f"step {e.steps}: {what}, {s.frames} frames, path {s.path_length:.2f} m, {elapsed:.0f} s")
+
+    # ------------------------------------------------------------------ data
+    def _rest(self, seconds: float) -> None:
+        """Take what arrived, then keep reading until the IMU stream has advanced ``seconds`` of sensor time."""
+        self._pending.extend(self.stream.read())
+        start = self.stream.last_imu_ns
+
+        def rested() -> bool:
+            nonlocal start
+            start = self.stream.last_imu_ns if start is None else start
+            return start is not None and self.stream.last_imu_ns - start >= seconds * NS_PER_S
+
+        self._wait(rested, self._pending.extend)
+
+    def _update_state(self) -> None:
+        """Feed the frames read since the last update (and all IMU samples) to the state: once per step, as the env."""
+        pending, self._pending = self._pending, []
+        imu = self.stream.imu() if self.state.information is not None else None
+        self.state.add_frames([d[0] for d in pending], [d[1] for d in pending], [d[2] for d in pending], imu)
+
+    def _wait(self, done: Callable[[], bool], take: Callable[[list], None]) -> None:
+        """Read (handing the detections to ``take``) until ``done()``; ``SensorStreamError`` when no data arrive
+        for ``wait_timeout``."""
+        last_data = time.monotonic()
+        while not done():
+            before = self.stream.last_imu_ns
+            take(self.stream.read())
+            if self.stream.last_imu_ns != before:
+                last_data = time.monotonic()
+            elif time.monotonic() - last_data > self.limits.wait_timeout:
+                raise SensorStreamError(
+                    f"no sensor data for {self.limits.wait_timeout:.0f} s; check that the camera and IMU stream"
+                )
+            time.sleep(self.limits.poll_interval)
+
+    # ------------------------------------------------------------------ dry run
+    def dry_run(self, seconds: float = 3.0) -> list[str]:
+        """Check a new set-up without moving: read the streams for ``seconds`` of sensor time, locate the
+        board; lines saying what arrived (also printed). Nothing is written."""
+        self.stream.sensor.start()
+        try:
+            pose = self.arm.pose()
+            self.stream.keep_imu = True
+            seen: list[tuple[int, np.ndarray, np.ndarray]] = []
+            seen.extend(self.stream.read())
+            start = self.stream.last_imu_ns
+            self._wait(lambda: start is None or self._covered(start, seconds), seen.extend)
+        finally:
+            self.stream.sensor.stop()
+        lines = [self._arm_line(pose), *self._camera_lines(seen), self._imu_line(self.stream.imu())]
+        for line in lines:
+            self.progress(line)
+        return lines
+
+    def _covered(self, start: int, seconds: float) -> bool:
+        return self.stream.last_imu_ns - start >= seconds * NS_PER_S
+
+    def _arm_line(self, pose: StampedPose) -> str:
+        p, lim = pose.position, self.arm.limits
+        return (f"arm: tool at [{p[0]:.3f}, {p[1]:.3f}, {p[2]:.3f}] m; limits {lim.max_speed:g} m/s, "
+                f"{lim.max_angular_speed:g} rad/s, {lim.max_acceleration:g} m/s^2")  # fmt: skip
+
+    def _camera_lines(self, seen: list[tuple[int, np.ndarray, np.ndarray]]) -> list[str]:
+        stamps = np.array([d[0] for d in seen], dtype=np.int64)
+        rate = (len(stamps) - 1) / ((stamps[-1] - stamps[0]) / NS_PER_S) if len(stamps) > 1 else 0.0
+        with_board = [d for d in seen if len(d[2]) >= self.align_settings.min_corners]
+        lines = [f"camera: {len(seen)} frames at {rate:.1f} Hz, the board in {len(with_board)} of them"]
+        if with_board:
+            _, corners, ids = with_board[-1]
+            solved = pnp(self.guess.camera, FrameObservation(-1, 0, corners, ids, self.target.points[ids]))
+            if solved is not None:
+                distance = np.linalg.norm(transform_points(solved[0], self.target.center[None])[0])
+                lines.append(f"board: its centre {distance:.3f} m from the camera (with the nominal camera)")
+        return lines
+
+    @staticmethod
+    def _imu_line(imu: ImuSamples) -> str:
+        if len(imu) < 2:
+            return "imu: no samples"
+        rate = (len(imu) - 1) / ((imu.t[-1] - imu.t[0]) / NS_PER_S)
+        gravity = float(np.linalg.norm(imu.accel.mean(axis=0)))
+        spin = float(np.degrees(np.linalg.norm(imu.gyro.mean(axis=0))))
+        return (f"imu: {len(imu)} samples at {rate:.0f} Hz; at rest it reads {gravity:.2f} m/s^2 (gravity: 9.81) "
+                f"and turns {spin:.2f} deg/s (the gyro's bias)")  # fmt: skip
+
+    # ------------------------------------------------------------------ alignment
+    def align(self) -> PoseFrame:
+        """Bring the board centre to the image centre at ``distance``; the start pose's workspace frame."""
+        s = self.align_settings
+        for move in range(s.max_moves + 1):
+            T_base_camera, T_camera_board = self._locate_board()
+            T_base_board = T_base_camera @ T_camera_board
+            centre = transform_points(T_base_board, self.target.center[None])[0]
+            normal = T_base_board[:3, 2] * np.sign(np.dot(T_base_camera[:3, 3] - centre, T_base_board[:3, 2]))
+            position = centre + s.distance * normal
+            goal = make_transform(look_at_rotation(position, centre), position)
+            now = self.arm.pose().T_base_tool
+            off_m = float(np.linalg.norm(goal[:3, 3] - now[:3, 3]))
+            off_deg = float(np.degrees(rotation_angle(goal[:3, :3].T @ now[:3, :3])))
+            if off_m <= s.tolerance_m and off_deg <= s.tolerance_deg:
+                self.progress(f"aligned after {move} moves: board centre {s.distance:.2f} m ahead")
+                return PoseFrame(now, self.mdp.workspace.frame, centre)
+            if off_m > s.max_move:
+                raise CollectionStopped(
+                    f"the aligned start pose is {off_m:.2f} m from the arm (more than collect.align.max_move = "
+                    f"{s.max_move} m); move the arm so that the board is about {s.distance:.2f} m ahead, then run again"
+                )
+            if move < s.max_moves:
+                self.arm.move_to(goal)
+        raise CollectionStopped(
+            f"the alignment did not settle within {s.max_moves} moves (still {off_m * 1e3:.0f} mm / {off_deg:.1f} deg "
+            "away); check collect.align.T_tool_camera and the nominal camera"
+        )
+
+    def _locate_board(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(T_base_camera, T_camera_board)`` from the next frame that shows enough of the board."""
+        found: list[np.ndarray] = []
+        points = self.target.points
+        self.stream.read()  # frames of the last motion: the pose below is where it ended
+
+        def look(detections: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
+            for _, corners, ids in detections:
+                if len(ids) >= self.align_settings.min_corners:
+                    solved = pnp(self.guess.camera, FrameObservation(-1, 0, corners, ids, points[ids]))
+                    if solved is not None:
+                        found.append(solved[0])
+
+        self._wait(lambda: bool(found), look)
+        T_base_camera = self.arm.pose().T_base_tool @ self.align_settings.T_tool_camera
+        return T_base_camera, found[-1]
