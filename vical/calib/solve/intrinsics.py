@@ -35,7 +35,7 @@ from vical.calib.solve.model_fit import COMPARISON, misfit_warnings
 from vical.calib.solve.observations import FrameObservation, collect_observations, image_size
 from vical.calib.solve.outliers import Rejection, reject_outliers
 from vical.calib.solve.solver import covariance_or_unobservable, optimize
-from vical.calib.solve.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
+from vical.calib.solve.uncertainty import assess
 from vical.data import CameraFrames, Target
 from vical.geometry import (
     CAMERA_MODELS,
@@ -209,7 +209,7 @@ def calibrate_intrinsics(
     else:
         sigma_px = float(pixel_sigma)
     names = intrinsic_names(model)
-    found = correlations(names, covariance)
+    assessment = assess(names, covariance, camera)
     decided = left_out(every, observations, rejection.dropped)
     min_corners = min(MIN_INIT_CORNERS, target.num_points)
     comparison = None
@@ -228,8 +228,8 @@ def calibrate_intrinsics(
         parameter_names=names,
         estimate=estimate,
         covariance=covariance,
-        weak_parameters=weak_parameters(names, covariance, camera),
-        correlations=found,
+        weak_parameters=assessment.weak_parameters,
+        correlations=assessment.correlations,
         reprojection=ResidualStats.of(residuals),
         reprojection_residuals=residuals,
         reprojection_frames=frame_index,
@@ -241,8 +241,7 @@ def calibrate_intrinsics(
         num_frames=len(poses),
         warnings=rejection.warnings
         + ([] if joint_start else image_coverage_warnings(observations, size))
-        + correlation_warnings(found)
-        + unobservable_warnings(names, covariance)
+        + assessment.warnings
         + _model_warnings(camera, observations, T_cam_target, residuals, comparison),
         frame_log=build_frame_log(frames, frame_index, min_corners, decided),
         reprojection_pixels=pixels,

@@ -20,7 +20,7 @@ from vical.calib.solve.checks import image_coverage_warnings
 from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.solve.model_fit import is_model_warning
 from vical.calib.solve.observations import FrameObservation, collect_observations
-from vical.calib.solve.uncertainty import correlations, weak_parameters
+from vical.calib.solve.uncertainty import assess
 from vical.calib.solve.visual_inertial import CameraInput, ViOptions, run_visual_inertial
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target
 from vical.geometry import CameraModel, invert_transform
@@ -188,14 +188,15 @@ def _combine(intrinsic: CalibrationResult, extrinsic: CalibrationResult, elapsed
     covariance[n_i:, n_i:] = extrinsic.covariance
     names = intrinsic.parameter_names + extrinsic.parameter_names
     estimate = np.concatenate([intrinsic.estimate, extrinsic.estimate])
+    assessment = assess(names, covariance, extrinsic.camera)  # its warnings: each stage's, below
     return replace(
         extrinsic,
         task="two_stage",
         parameter_names=names,
         estimate=estimate,
         covariance=covariance,
-        weak_parameters=weak_parameters(names, covariance, extrinsic.camera),
-        correlations=correlations(names, covariance),
+        weak_parameters=assessment.weak_parameters,
+        correlations=assessment.correlations,
         iterations=intrinsic.iterations + extrinsic.iterations,
         solve_time=elapsed,
         warnings=intrinsic.warnings + extrinsic.warnings,

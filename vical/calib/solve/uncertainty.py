@@ -10,6 +10,8 @@ absorbed by the camera-IMU rotation, say.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from vical.calib.result import Correlation, WeakParameter
@@ -204,3 +206,25 @@ def unobservable_warnings(names: list[str], covariance: np.ndarray) -> list[str]
         f"the data do not determine {', '.join(free)} (the information matrix is singular): their estimates are "
         f"kept but their uncertainty is unknown (NaN); {hints}"
     ]
+
+
+@dataclass(frozen=True)
+class Assessment:
+    """What a result says about its own uncertainty (the fields every ``CalibrationResult`` gets from its
+    covariance): the weak parameters, the strongest correlations, and the warnings about correlated and
+    undetermined parameters."""
+
+    weak_parameters: list[WeakParameter]
+    correlations: list[Correlation]
+    warnings: list[str]
+
+
+def assess(names: list[str], covariance: np.ndarray, camera: CameraModel) -> Assessment:
+    """``weak_parameters``, ``correlations`` and their warnings (``correlation_warnings`` then
+    ``unobservable_warnings``) of the parameters ``names`` with ``covariance``."""
+    found = correlations(names, covariance)
+    return Assessment(
+        weak_parameters(names, covariance, camera),
+        found,
+        correlation_warnings(found) + unobservable_warnings(names, covariance),
+    )

@@ -18,7 +18,7 @@ from vical.calib.solve.intrinsics import intrinsic_names
 from vical.calib.solve.observations import FrameObservation
 from vical.calib.solve.rig import OtherCamera
 from vical.calib.solve.time_alignment import increment_mismatch, rotation_increments
-from vical.calib.solve.uncertainty import correlation_warnings, correlations, unobservable_warnings, weak_parameters
+from vical.calib.solve.uncertainty import assess
 from vical.calib.solve.vi_covariance import ViMarginals, parameter_covariance, widening_warning
 from vical.calib.solve.vi_graph import ViGraph
 from vical.calib.solve.vi_problem import (
@@ -116,9 +116,8 @@ def first_camera_result(
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
     if est.imu_theta is not None:
         names += ImuIntrinsics.parameter_names(problem.options.g_sensitivity)
-    found = correlations(names, covariance)
-    problem.warnings += widening_warning(names, widening) + correlation_warnings(found)
-    problem.warnings += unobservable_warnings(names, covariance)
+    assessment = assess(names, covariance, camera)
+    problem.warnings += widening_warning(names, widening) + assessment.warnings
     estimate = np.concatenate(
         ([camera.intrinsics, camera.dist] if joint else [])
         + [np.zeros(3), est.T_cam_imu[:3, 3], [est.tau0], est.accel_bias, est.gyro_bias]
@@ -137,8 +136,8 @@ def first_camera_result(
         parameter_names=names,
         estimate=estimate,
         covariance=covariance,
-        weak_parameters=weak_parameters(names, covariance, camera),
-        correlations=found,
+        weak_parameters=assessment.weak_parameters,
+        correlations=assessment.correlations,
         reprojection=ResidualStats.of(residuals),
         reprojection_residuals=residuals,
         reprojection_frames=frame_index,
@@ -188,11 +187,10 @@ def other_camera_result(
     )
     camera = other.camera
     names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
-    found = correlations(names, covariance)
-    notes = other.warnings + widening_warning(names, widening) + correlation_warnings(found)
+    assessment = assess(names, covariance, camera)
     dropped = len(other.observations) - len(paired)
-    if dropped:
-        notes.append(f"{other.name}: {dropped} views without a simultaneous view of the first camera were not used")
+    unpaired = [f"{other.name}: {dropped} views without a simultaneous view of the first camera were not used"]
+    notes = other.warnings + widening_warning(names, widening) + (unpaired if dropped else []) + assessment.warnings
     estimate = np.concatenate(
         ([camera.intrinsics, camera.dist] if joint else [])
         + [np.zeros(3), other.T_cam_imu[:3, 3], [other.tau0], est.accel_bias, est.gyro_bias]
@@ -208,15 +206,15 @@ def other_camera_result(
         time_offset=other.tau0,
         estimate=estimate,
         covariance=covariance,
-        weak_parameters=weak_parameters(names, covariance, camera),
-        correlations=found,
+        weak_parameters=assessment.weak_parameters,
+        correlations=assessment.correlations,
         reprojection=ResidualStats.of(residuals),
         reprojection_residuals=residuals,
         reprojection_frames=used_frames,
         reprojection_pixels=factors.measured,
         pixel_sigma=other.sigma_px,
         num_frames=len(paired),
-        warnings=notes + unobservable_warnings(names, covariance),
+        warnings=notes,
         frame_log=_other_frame_log(problem, other, given, used_frames),
         time_offset_trace=trace,
         frame_poses=FramePoses(
