@@ -57,7 +57,7 @@ def row(name: str, task: str, a: TaskAssessment, rule: ShipRule) -> str:
     )
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--baselines", nargs=2, type=Path, required=True, metavar=("JOINT_CSV", "INTRINSIC_CSV"))
     p.add_argument(
@@ -65,7 +65,7 @@ def main() -> None:
     )
     p.add_argument("--reference", default=ShipRule.reference, help="the baseline's table name")
     p.add_argument("--budget", type=float, default=ShipRule.budget, help="the path budget [m] of the comparison")
-    args = p.parse_args()
+    args = p.parse_args(argv)
     rule = ShipRule(reference=args.reference, budget=args.budget)
     try:
         baselines = {task: read_results(path) for task, path in zip(TASKS, args.baselines, strict=True)}

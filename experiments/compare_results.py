@@ -19,12 +19,12 @@ from vical.evaluation.error_vs_effort import budget_label
 from vical.evaluation.results_file import budgets_of, by_policy, compare, read_results
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("results", type=Path)
     p.add_argument("--policy", required=True, help="the policy's table name")
     p.add_argument("--against", nargs="+", required=True, help="the table names it is compared with")
-    args = p.parse_args()
+    args = p.parse_args(argv)
     try:
         results = read_results(args.results)
     except ValueError as e:

@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-import subprocess
-import sys
+import importlib.util
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -17,6 +16,16 @@ from vical.evaluation.results_file import by_policy, compare, read_results
 from vical.evaluation.seed_choice import ShipRule, assess, choose_seed
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def experiment_script(name: str):
+    """``experiments/<name>.py`` as a module (its ``main(argv)`` runs in this process)."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "experiments" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 TOLERANCES = {"focal_px": 0.35, "principal_point_px": 0.35, "distortion_px": 0.5, "rotation_deg": 0.1,
               "translation_mm": 2.0, "time_offset_ms": 0.1}  # fmt: skip
 EXPERT = "expert (long)"
@@ -138,12 +147,10 @@ def test_bad_results_files_and_tolerances_are_named(tmp_path):
         assess(learned, learned, "joint", TOLERANCES, ShipRule())
 
 
-@pytest.mark.integration
-def test_choose_seed_script_ships_from_files(tmp_path):
+def test_choose_seed_script_ships_from_files(tmp_path, capsys):
     """experiments/choose_seed.py end to end: run configs, results files, the table and the choice."""
     base = {t: write(tmp_path / f"base_{t}.csv", expert_rows()) for t in ("joint", "intrinsic")}
-    args = [sys.executable, str(ROOT / "experiments" / "choose_seed.py"), "--baselines", str(base["joint"]),
-            str(base["intrinsic"])]  # fmt: skip
+    args = ["--baselines", str(base["joint"]), str(base["intrinsic"])]
     for name, score in (("s0", 0.06), ("s1", 0.04)):
         run = tmp_path / name
         run.mkdir()
@@ -158,22 +165,24 @@ def test_choose_seed_script_ships_from_files(tmp_path):
         ]  # fmt: skip
         args += ["--candidate", str(run), str(write(tmp_path / f"{name}_j.csv", rows)),
                  str(write(tmp_path / f"{name}_i.csv", intrinsic))]  # fmt: skip
-    out = subprocess.run(args, capture_output=True, text=True, check=True).stdout
+    choose_seed_script = experiment_script("choose_seed")
+    choose_seed_script.main(args)
+    out = capsys.readouterr().out
     assert out.strip().endswith(f"ship: {tmp_path / 's1'}")
     assert "| joint | 100% | 100% | 1.00 / 100.00 | 20.0 / 400.0 | -0.060" in out
-    bad = subprocess.run([*args[:5], "--candidate", str(tmp_path), args[-2], args[-1]], capture_output=True, text=True)
-    assert bad.returncode != 0 and "config.yaml is missing: pass the run_dir of a vical-train run" in bad.stderr
+    with pytest.raises(SystemExit, match=r"config\.yaml is missing: pass the run_dir of a vical-train run"):
+        choose_seed_script.main([*args[:3], "--candidate", str(tmp_path), args[-2], args[-1]])
 
 
-@pytest.mark.integration
-def test_compare_results_script_prints_every_budget(tmp_path):
+def test_compare_results_script_prints_every_budget(tmp_path, capsys):
     """experiments/compare_results.py end to end: one row per budget the file holds, end last."""
     rows = expert_rows() + [joint_end(LEARNED, s, 0.02 * s, path=0.4) for s in range(4)]
-    script = str(ROOT / "experiments" / "compare_results.py")
-    args = [sys.executable, script, str(write(tmp_path / "results.csv", rows)), "--policy", LEARNED]
-    out = subprocess.run([*args, "--against", EXPERT], capture_output=True, text=True, check=True).stdout
+    script = experiment_script("compare_results")
+    args = [str(write(tmp_path / "results.csv", rows)), "--policy", LEARNED]
+    script.main([*args, "--against", EXPERT])
+    out = capsys.readouterr().out
     lines = [line for line in out.splitlines() if line.startswith("| 0.5 m") or line.startswith("| end")]
     # The learned episodes end before 0.5 m (their whole episodes count there): mean 0.03 against 0.10 and 0.05.
     assert [line.split(" | ")[1].split()[0] for line in lines] == ["-0.070", "-0.020"]
-    bad = subprocess.run([*args, "--against", "nobody"], capture_output=True, text=True)
-    assert bad.returncode != 0 and "no policy 'nobody'" in bad.stderr
+    with pytest.raises(SystemExit, match="no policy 'nobody'"):
+        script.main([*args, "--against", "nobody"])
