@@ -8,7 +8,7 @@ from configs import env_config
 
 from vical.calib.tasks import run_task
 from vical.config_checks import ConfigError
-from vical.evaluation.error_vs_effort import rows_at_budget, summarize_budget, summarize_effort
+from vical.evaluation.error_vs_effort import rows_at_budget, significance_lines, summarize_budget, summarize_effort
 from vical.evaluation.harness import END, EpisodeRow, PolicyEvaluator, PolicySpec, run_trajectory
 from vical.geometry import invert_transform
 from vical.io.recording import load_recording, save_recording
@@ -89,6 +89,21 @@ def test_summaries_compare_every_policy_with_the_reference_by_sensor():
     assert [s.policy for s in summaries] == ["reference", "better"]
     assert summaries[0].versus is None
     assert summaries[1].versus.verdict == "lower" and summaries[1].versus.estimate == pytest.approx(-0.2 * hard.mean())
+
+
+@pytest.mark.parametrize("sensors", [1, 4])
+def test_fewer_than_five_sensors_give_no_interval_and_say_why(sensors):
+    """A bootstrap over one sensor reads [x, x]: below five sensors no interval is printed, and the lines say why."""
+    rows = {
+        "reference": [row("reference", s, END, 0.3) for s in range(sensors)],
+        "other": [row("other", s, END, 0.1 + 0.01 * s) for s in range(sensors)],
+    }
+    summaries = summarize_effort(rows, budgets=(), reference="reference")
+    assert summaries[1].versus is None
+    assert significance_lines(summaries, "reference") == [
+        f"- no confidence interval against reference: a paired 95 % interval needs at least 5 sensors, "
+        f"these were evaluated on {sensors}"
+    ]
 
 
 def test_a_policy_better_by_design_is_significantly_better_on_real_episodes(expert):
