@@ -22,7 +22,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from vical.evaluation.harness import END, EpisodeRow
-from vical.evaluation.intervals import Interval, paired_difference
+from vical.evaluation.intervals import LEVEL, MIN_SENSORS, Interval, paired_difference
 from vical.io.atomic import atomic_file
 
 
@@ -42,7 +42,8 @@ class BudgetSummary:
             successful calibrations (None where the task does not estimate them).
         path_m, time_s: mean path [m] and recording time [s] of the calibrated data.
         versus: mean paired difference to the reference policy [%] with its 95 % interval (None for the
-            reference itself, or when the two were not evaluated on the same sensors).
+            reference itself, when the two were not evaluated on the same sensors, or on fewer than
+            ``MIN_SENSORS``).
     """
 
     policy: str
@@ -75,7 +76,7 @@ def _median(rows: Sequence[EpisodeRow], key: str) -> float | None:
 
 
 def _versus(chosen: dict[int, EpisodeRow], reference: dict[int, EpisodeRow] | None) -> Interval | None:
-    if reference is None or set(chosen) != set(reference):
+    if reference is None or set(chosen) != set(reference) or len(chosen) < MIN_SENSORS:
         return None
     seeds = sorted(chosen)
     mine = np.array([chosen[s].effective_score_pct for s in seeds])
@@ -128,6 +129,13 @@ def budget_label(budget: float) -> str:
 
 def significance_lines(summaries: Sequence[BudgetSummary], reference: str) -> list[str]:
     """Per budget, which policies are significantly lower / higher in error than ``reference`` (95 % paired CI)."""
+    compared = [s for s in summaries if s.policy != reference]
+    if compared and all(s.sensors < MIN_SENSORS for s in compared):
+        sensors = min(s.sensors for s in compared)
+        return [
+            f"- no confidence interval against {reference}: a paired {100 * LEVEL:.0f} % interval needs at least "
+            f"{MIN_SENSORS} sensors, these were evaluated on {sensors}"
+        ]
     lines = []
     for budget in dict.fromkeys(s.budget_m for s in summaries):
         at = [s for s in summaries if s.budget_m == budget and s.versus is not None]
