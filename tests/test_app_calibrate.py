@@ -299,3 +299,24 @@ def test_an_openvins_imu_chain_with_an_ideal_imu_is_accepted_and_one_with_intrin
     err = capsys.readouterr().err
     assert f"{imu_chain} [imu0]: Ta differs from an ideal IMU's (identity)" in err
     assert not (tmp_path / "scaled").exists()
+
+
+def test_flags_the_task_ignores_or_a_given_file_overrides_are_named_in_a_warning(recording_dir, tmp_path, capsys):
+    """An IMU flag given to the camera-only task, and --model where the extrinsic task keeps the --intrinsics
+    camera, change nothing: each is named in a warning (the run still succeeds)."""
+    path, _ = recording_dir
+    imu_flags = ["--imu-model", "scale-misalignment", "--fixed-time-offset", "--max-time-offset", "0.05"]
+    assert main([str(path), "--task", "intrinsic", *imu_flags, "--out", str(tmp_path / "a"), "--no-report"]) == 0
+    printed = capsys.readouterr().out
+    for flag in ("--imu-model scale-misalignment", "--fixed-time-offset", "--max-time-offset 0.05"):
+        assert f"warning: {flag} is ignored: the intrinsic task calibrates the camera alone" in printed, flag
+    assert "ignored" in (tmp_path / "a" / "results.txt").read_text()
+    written = tmp_path / "a" / "camchain.yaml"
+    args = ["--task", "extrinsic", "--intrinsics", str(written), "--model", "eucm", "--no-report"]
+    assert main([str(path), *args, "--out", str(tmp_path / "b")]) == 0
+    assert (
+        "warning: --model eucm is ignored: the extrinsic task keeps the --intrinsics camera (radtan); "
+        "calibrate it with --task joint to fit another model"
+    ) in capsys.readouterr().out
+    assert main([str(path), "--task", "joint", "--out", str(tmp_path / "c"), "--no-report"]) == 0
+    assert "is ignored" not in capsys.readouterr().out  # nothing to say where every flag counts
