@@ -428,13 +428,42 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
         {n: s.size for n, s in setup.items()}, noise, known if args.task in ("intrinsic", "extrinsic") else None,
         guesses, offsets, options,
     ).results  # fmt: skip
-    if hint:  # the board size the images suggest: said once, with the first camera's warnings
-        results[names[0]] = replace(results[names[0]], warnings=[hint, *results[names[0]].warnings])
+    said = ([hint] if hint else []) + ignored_flags(args, known)  # said once, with the first camera's warnings
+    if said:
+        results[names[0]] = replace(results[names[0]], warnings=[*said, *results[names[0]].warnings])
     failure = _failure_line(results, guesses, rec, args, one)
     write_outputs(out, results, rec, args, noise, chain, failure)
     if failure:
         raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
     return results["cam0"] if one else RigCalibration(results)
+
+
+# What only the camera-IMU tasks read: the intrinsic task calibrates the camera alone.
+IMU_FLAGS = ("imu_yaml", "imu_csv", "imu_topic", "gyro_unit", "accel_unit", "max_time_offset", "fixed_time_offset",
+             "imu_model", "g_sensitivity")  # fmt: skip
+
+
+def ignored_flags(args: argparse.Namespace, known: dict[str, CameraModel]) -> list[str]:
+    """A warning per flag the task does not read, or that a given file overrides (the flags left at their
+    defaults say nothing)."""
+    defaults = build_parser()
+    given = [d for d in IMU_FLAGS if getattr(args, d) != defaults.get_default(d)]
+    if args.task == "intrinsic":
+        return [f"{_spelled(d, getattr(args, d))} is ignored: the intrinsic task calibrates the camera alone"
+                for d in given]  # fmt: skip
+    models = sorted({c.distortion for c in known.values()})
+    if args.task == "extrinsic" and args.model != defaults.get_default("model") and args.model not in models:
+        return [
+            f"--model {args.model} is ignored: the extrinsic task keeps the --intrinsics camera "
+            f"({', '.join(models)}); calibrate it with --task joint to fit another model"
+        ]
+    return []
+
+
+def _spelled(dest: str, value) -> str:
+    """A flag as typed: ``--max-time-offset 0.05``; a switch alone."""
+    flag = "--" + dest.replace("_", "-")
+    return flag if value is True else f"{flag} {value}"
 
 
 @dataclass(frozen=True)
