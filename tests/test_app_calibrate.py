@@ -320,3 +320,19 @@ def test_flags_the_task_ignores_or_a_given_file_overrides_are_named_in_a_warning
     ) in capsys.readouterr().out
     assert main([str(path), "--task", "joint", "--out", str(tmp_path / "c"), "--no-report"]) == 0
     assert "is ignored" not in capsys.readouterr().out  # nothing to say where every flag counts
+
+
+def test_an_imu_yaml_rate_that_is_not_the_datas_is_named_and_the_datas_rate_written(recording_dir, tmp_path, capsys):
+    """A 50 Hz imu.yaml (the tutorial's file) given for 200 Hz data: a warning with both rates, and the output
+    imu.yaml says 200 Hz (the noise densities are the file's)."""
+    path, rec = recording_dir
+    write_imu_yaml(tmp_path / "imu.yaml", replace(rec.truth.imu_noise, rate_hz=50.0))
+    argv = [str(path), "--task", "joint", "--imu-yaml", str(tmp_path / "imu.yaml"), "--no-report"]
+    assert main([*argv, "--out", str(tmp_path / "out")]) == 0
+    assert (
+        f"warning: --imu-yaml {tmp_path / 'imu.yaml'} says update_rate 50 Hz, but the IMU samples come at 200 Hz; "
+        "the output imu.yaml says 200 Hz"
+    ) in capsys.readouterr().out
+    written = yaml.safe_load((tmp_path / "out" / "imu.yaml").read_text())
+    assert written["update_rate"] == pytest.approx(200.0)
+    assert written["gyroscope_noise_density"] == pytest.approx(rec.truth.imu_noise.gyro_noise_density)
