@@ -367,6 +367,28 @@ def _imu_noise(args, rec: Recording) -> ImuNoise:
     return ImuNoise()
 
 
+RATE_TOLERANCE = 0.1  # an imu.yaml rate this far (relative) from the samples' is named
+
+
+def _data_rate(rec: Recording) -> float:
+    """[Hz] the IMU samples' rate (their median interval's inverse)."""
+    return 1e9 / float(np.median(np.diff(rec.imu.t)))
+
+
+def _rate_note(args, noise: ImuNoise, rec: Recording) -> str | None:
+    """A warning when ``--imu-yaml``'s rate is not the samples' (the calibration does not read it; the output
+    ``imu.yaml`` gets the samples' rate)."""
+    if not args.imu_yaml or len(rec.imu) < 2:
+        return None
+    rate = _data_rate(rec)
+    if abs(noise.rate_hz - rate) <= RATE_TOLERANCE * rate:
+        return None
+    return (
+        f"--imu-yaml {args.imu_yaml} says update_rate {noise.rate_hz:g} Hz, but the IMU samples come at "
+        f"{rate:.4g} Hz; the output imu.yaml says {rate:.4g} Hz"
+    )
+
+
 class CalibrationFailed(CalibrationError):
     """The solve ended, but its data do not support the result; the outputs were written marked as failed."""
 
@@ -420,6 +442,8 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     setup = _one_camera_setup(args, rec, detector) if one else _rig_setup(args, rec, names, chain)
     _check_known_intrinsics(args, names, chain, setup, one)
     noise = None if args.task == "intrinsic" else _imu_noise(args, rec)
+    rate_note = None if noise is None else _rate_note(args, noise, rec)
+    noise = noise if rate_note is None else replace(noise, rate_hz=_data_rate(rec))
     known = {n: s.camera for n, s in setup.items() if s.camera is not None}
     guesses = {n: s.T_cam_imu for n, s in setup.items() if s.T_cam_imu is not None}
     offsets = {n: s.time_shift for n, s in setup.items() if s.time_shift is not None}
@@ -428,7 +452,7 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
         {n: s.size for n, s in setup.items()}, noise, known if args.task in ("intrinsic", "extrinsic") else None,
         guesses, offsets, options,
     ).results  # fmt: skip
-    said = ([hint] if hint else []) + ignored_flags(args, known)  # said once, with the first camera's warnings
+    said = [w for w in (hint, rate_note) if w] + ignored_flags(args, known)  # said once, with the first camera's
     if said:
         results[names[0]] = replace(results[names[0]], warnings=[*said, *results[names[0]].warnings])
     failure = _failure_line(results, guesses, rec, args, one)
