@@ -2,6 +2,7 @@
 bad inputs refused in one line."""
 
 import cv2
+import numpy as np
 import pytest
 import yaml
 from imu_streams import NOISE, static_stream, truths
@@ -119,3 +120,30 @@ def test_a_moving_recording_is_refused_with_the_span(tmp_path, capsys):
     write_imu_csv(type(imu)(imu.t, gyro, imu.accel), moving)
     status, _, err = run([moving, "--out", tmp_path / "o"], capsys)
     assert status == 2 and "the IMU moves between 100.0 s and 101.0 s: gyro z changes by 1" in err
+
+
+@pytest.mark.parametrize(
+    ("scale", "unit", "message"),
+    [
+        # The test stream's gyro (0.002 rad/s/sqrt(Hz), a noisy MEMS) logged in deg/s and read as rad/s: 0.115.
+        (180 / np.pi, None, "gyroscope_noise_density 0.115 rad/s/sqrt(Hz) is above any real gyro"),
+        # A quiet gyro (2e-5 rad/s/sqrt(Hz)) logged in rad/s and read with --gyro-unit deg/s: 3.5e-7.
+        (0.01, "deg/s", "gyroscope_noise_density 3.49e-07 rad/s/sqrt(Hz) is below any real gyro"),
+    ],
+)
+def test_a_gyro_density_no_real_gyro_has_names_the_likely_unit(scale, unit, message, tmp_path, capsys):
+    imu = static_stream(1800, 4)
+    path = tmp_path / "static.csv"
+    write_imu_csv(type(imu)(imu.t, imu.gyro * scale, imu.accel), path)
+    argv = [path, "--out", tmp_path / "o"] + (["--gyro-unit", unit] if unit else [])
+    status, printed, _ = run(argv, capsys)
+    assert status == 0
+    fix = "pass --gyro-unit deg/s" if unit is None else "leave out --gyro-unit deg/s"
+    warning = next(line for line in printed.splitlines() if line.startswith("warning:"))
+    assert message in warning and fix in warning, warning
+    assert "navigation grade" in warning
+
+
+def test_a_gyro_in_the_range_of_real_gyros_gets_no_unit_warning(euroc, tmp_path, capsys):
+    status, printed, _ = run([euroc, "--out", tmp_path / "o"], capsys)
+    assert status == 0 and "warning:" not in printed
