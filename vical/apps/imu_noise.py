@@ -56,6 +56,10 @@ from vical.io.yamlfile import dump_yaml
 APP = "vical-imu-noise"
 FLAGS = {"gyro_unit": "--gyro-unit", "accel_unit": "--accel-unit"}
 RATE_TOLERANCE = 0.02  # a --rate further than this from the timestamps' rate is a mistake in one of them
+# [rad/s/sqrt(Hz)] the gyro noise densities of real gyros: a navigation-grade gyro's angle random walk is about
+# 0.002 deg/sqrt(h) (5.8e-7), the noisiest MEMS gyros' about 0.3 deg/s/sqrt(Hz) (5.2e-3); a gyro logged in deg/s and
+# read as rad/s lies 57x above its true value, one logged in rad/s and read as deg/s 57x below.
+REAL_GYRO_DENSITY = (5e-7, 5e-3)
 UNIT_NOTE = (
     "units: noise densities rad/s/sqrt(Hz) (gyro), m/s^2/sqrt(Hz) (accel); random walks rad/s^2/sqrt(Hz), "
     "m/s^3/sqrt(Hz); update_rate Hz"
@@ -187,6 +191,19 @@ def summary(result: NoiseIdentification, measured: ImuNoise, inflated: ImuNoise)
     return "\n".join(lines)
 
 
+def gyro_unit_warnings(measured: ImuNoise, gyro_unit: str) -> list[str]:
+    """A warning naming the likely unit when the gyro's density is beyond the range of real gyros."""
+    density, (low, high) = measured.gyro_noise_density, REAL_GYRO_DENSITY
+    real = f"real gyros lie between {low:g} (navigation grade) and {high:g} (the noisiest MEMS)"
+    if density > high and gyro_unit == "rad/s":
+        return [f"gyroscope_noise_density {density:.3g} rad/s/sqrt(Hz) is above any real gyro ({real}): the file "
+                "likely logs deg/s; pass --gyro-unit deg/s"]  # fmt: skip
+    if density < low and gyro_unit == "deg/s":
+        return [f"gyroscope_noise_density {density:.3g} rad/s/sqrt(Hz) is below any real gyro ({real}): the file "
+                "likely logs rad/s; leave out --gyro-unit deg/s"]  # fmt: skip
+    return []
+
+
 def run(args: argparse.Namespace) -> NoiseIdentification:
     """Identify the noise as the parsed arguments say, write the outputs and print the summary."""
     out = Path(args.out)
@@ -196,6 +213,8 @@ def run(args: argparse.Namespace) -> NoiseIdentification:
     result = identify(imu, args.recording)
     measured = result.imu_noise(rate)
     write_outputs(out, result, measured, args)
+    for warning in gyro_unit_warnings(measured, args.gyro_unit):
+        print(f"warning: {warning}")
     print(summary(result, measured, inflate(measured, args.inflate_density, args.inflate_walk)))
     print(f"outputs written to {out}")
     return result
