@@ -104,11 +104,20 @@ def test_a_missing_topic_lists_the_bag_topics(short_bag, tmp_path, capsys):
         (["{euroc}", "--start", "2000"], "--start 2000 s leaves nothing of the 1800.0 s recording"),
         (["{empty}"], "holds no IMU CSV: neither"),
         (["{euroc}", "--inflate-walk", "0.5"], "argument --inflate-walk: must be a number >= 1, got '0.5'"),
+        # One row: no --start was given, so the message must not blame it.
+        (["{one_row}"], "holds one IMU sample: the noise identification needs hours of a resting IMU"),
     ],
 )
 def test_bad_inputs_are_refused_in_one_line(argv, message, euroc, tmp_path, capsys):
     (tmp_path / "empty").mkdir()
-    paths = {"missing": tmp_path / "nothing.csv", "euroc": euroc, "empty": tmp_path / "empty"}
+    imu = static_stream(1, 0)
+    write_imu_csv(type(imu)(imu.t[:1], imu.gyro[:1], imu.accel[:1]), tmp_path / "one.csv")
+    paths = {
+        "missing": tmp_path / "nothing.csv",
+        "euroc": euroc,
+        "empty": tmp_path / "empty",
+        "one_row": tmp_path / "one.csv",
+    }
     status, _, err = run([a.format(**paths) for a in argv] + ["--out", tmp_path / "o"], capsys)
     lines = [line for line in err.replace("\r", "\n").splitlines() if line.startswith("vical-imu-noise")]
     assert status == 2 and len(lines) == 1 and message in lines[0], err
