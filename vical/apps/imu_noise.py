@@ -89,6 +89,10 @@ def load(args: argparse.Namespace) -> ImuSamples:
     imu = open_imu(args.recording, args.imu_topic, args.gyro_unit, args.accel_unit)
     if len(imu) == 0:
         raise FormatError(f"{args.recording} holds no IMU samples")
+    if len(imu) == 1:
+        raise NoiseIdentificationError(
+            f"{args.recording} holds one IMU sample: the noise identification needs hours of a resting IMU"
+        )
     span = (imu.t[-1] - imu.t[0]) / NS_PER_S
     end = span if args.end is None else args.end
     if args.start >= min(end, span):
