@@ -163,6 +163,17 @@ def test_bad_settings_are_refused_by_key(tmp_path):
         check_settings(config(f"out={tmp_path / 'o'}", "guess.camchain=nope.yaml"))
     with pytest.raises(Exception, match="extrinsic task calibrates with known intrinsics"):
         check_settings(config(f"out={tmp_path / 'o'}", "task=extrinsic"))
+    # Guess files a reader refuses: one line naming the key, before anything connects (was a 32-line traceback).
+    (tmp_path / "ds.yaml").write_text(
+        "cam0:\n  camera_model: ds\n  intrinsics: [-0.2, 1.4, 300, 300, 320, 240]\n  distortion_model: none\n"
+        "  distortion_coeffs: []\n  resolution: [640, 480]\n"
+    )
+    with pytest.raises(ConfigError, match=r"guess\.camchain=.*ds\.yaml.*alpha must be in \[0, 1\], got 1\.4"):
+        check_settings(config(f"out={tmp_path / 'o'}", f"guess.camchain={tmp_path / 'ds.yaml'}"))
+    noise = "accelerometer_noise_density: 0.0\naccelerometer_random_walk: 2.0e-4\n"
+    (tmp_path / "zero.yaml").write_text(noise + "gyroscope_noise_density: 2.0e-4\ngyroscope_random_walk: 2.0e-5\n")
+    with pytest.raises(ConfigError, match=r"guess\.imu_yaml=.*accelerometer_noise_density must be a positive"):
+        check_settings(config(f"out={tmp_path / 'o'}", f"guess.imu_yaml={tmp_path / 'zero.yaml'}"))
     # The paper's policy in the practitioner's workspace: refused before the rig is built.
     with pytest.raises(ConfigError, match="trained in workspace 'paper'"):
         collect(config(f"out={tmp_path / 'o'}", f"policy.run_dir={PAPER_POLICY_DIR}"))
