@@ -79,6 +79,19 @@ def _existing_file(value: Any, key: str) -> Path | None:
     return path
 
 
+def _readable_file(value: Any, key: str, reader) -> Path | None:
+    """``_existing_file`` that ``reader`` also reads: a file it refuses is a ``ConfigError`` naming ``key``, before
+    anything connects."""
+    path = _existing_file(value, key)
+    if path is not None:
+        try:
+            reader(path)
+        except FormatError as err:
+            why = str(err).removeprefix(str(path)).lstrip(" :")
+            raise ConfigError(f"{key}={value}: {why}") from None
+    return path
+
+
 def check_settings(cfg: DictConfig) -> CollectSettings:
     """The settings of ``cfg``, checked before anything connects; ``ConfigError`` naming the key otherwise."""
     out = cfg.get("out")
@@ -89,7 +102,7 @@ def check_settings(cfg: DictConfig) -> CollectSettings:
         raise FileExistsError(f"out={out} already exists; choose another directory or pass overwrite=true")
     task = cfg.task.name
     guess = _plain(cfg.get("guess")) or {}
-    camchain = _existing_file(guess.get("camchain"), "guess.camchain")
+    camchain = _readable_file(guess.get("camchain"), "guess.camchain", read_camchain)
     if task == "extrinsic" and camchain is None:
         raise ConfigError("the extrinsic task calibrates with known intrinsics: pass guess.camchain=<camchain.yaml>")
     try:
@@ -98,7 +111,7 @@ def check_settings(cfg: DictConfig) -> CollectSettings:
     except ValueError as err:
         raise ConfigError(str(err)) from None
     return CollectSettings(path, overwrite, task, align, limits, camchain,
-                           _existing_file(guess.get("imu_yaml"), "guess.imu_yaml"))  # fmt: skip
+                           _readable_file(guess.get("imu_yaml"), "guess.imu_yaml", read_imu_yaml))  # fmt: skip
 
 
 def mdp_config(cfg: DictConfig, policy: Policy) -> MdpConfig:
