@@ -174,6 +174,13 @@ def test_bad_settings_are_refused_by_key(tmp_path):
     (tmp_path / "zero.yaml").write_text(noise + "gyroscope_noise_density: 2.0e-4\ngyroscope_random_walk: 2.0e-5\n")
     with pytest.raises(ConfigError, match=r"guess\.imu_yaml=.*accelerometer_noise_density must be a positive"):
         check_settings(config(f"out={tmp_path / 'o'}", f"guess.imu_yaml={tmp_path / 'zero.yaml'}"))
+    # A robot the adapter refuses, or one whose extra is missing: one line, not Hydra's "Error in call to target".
+    with pytest.raises(ConfigError, match=r"^robot: RigFaults\.latency must be a number >= 0, got -1$"):
+        collect(config(f"out={tmp_path / 'o'}", "robot.faults.latency=-1"))
+    with pytest.raises(
+        ConfigError, match=r"^robot: FrankaArm needs the panda-python package: pip install 'vical\[franka\]'$"
+    ):
+        collect(config(f"out={tmp_path / 'o'}", "robot=franka"))
     # The paper's policy in the practitioner's workspace: refused before the rig is built.
     with pytest.raises(ConfigError, match="trained in workspace 'paper'"):
         collect(config(f"out={tmp_path / 'o'}", f"policy.run_dir={PAPER_POLICY_DIR}"))
