@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 import hydra
+from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf
 
 from vical.apps import calibrate
@@ -140,13 +141,24 @@ def nominal_sensor(s: CollectSettings, rig: Any) -> SensorTruth:
     return SensorTruth(camera, T_cam_imu, shift or 0.0, noise)
 
 
+def build_robot(robot: DictConfig) -> Any:
+    """The ``robot`` group's rig; what its adapter refuses (a bad setting, a missing extra) is a ``ConfigError``."""
+    try:
+        return hydra.utils.instantiate(robot, _convert_="all")
+    except InstantiationException as err:
+        cause = err.__cause__
+        if isinstance(cause, ValueError | ImportError):
+            raise ConfigError(f"robot: {cause}") from None
+        raise
+
+
 def collect(cfg: DictConfig) -> int:
     """Collect and calibrate as ``cfg`` says; the exit status (module doc)."""
     s = check_settings(cfg)
     policy = instantiate_policy(_plain(cfg.policy)[s.task], cfg.policy.get("name", "policy"))
     mdp = mdp_config(cfg, policy)
     policy.check(RobotEpisode(mdp))  # before connecting: a policy of another workspace or state
-    rig = hydra.utils.instantiate(cfg.robot, _convert_="all")
+    rig = build_robot(cfg.robot)
     try:
         nominal = nominal_sensor(s, rig)
         if cfg.get("dry_run"):
