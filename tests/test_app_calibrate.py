@@ -336,3 +336,21 @@ def test_an_imu_yaml_rate_that_is_not_the_datas_is_named_and_the_datas_rate_writ
     written = yaml.safe_load((tmp_path / "out" / "imu.yaml").read_text())
     assert written["update_rate"] == pytest.approx(200.0)
     assert written["gyroscope_noise_density"] == pytest.approx(rec.truth.imu_noise.gyro_noise_density)
+
+
+def test_a_failed_solve_with_overwrite_never_replaces_a_good_result(slow_deg_per_s_csvs, tmp_path, capsys):
+    """--overwrite over a good result whose new solve fails: the good result stays, the failed one is written
+    beside it (``<out>.failed``) and the error line says both."""
+    _, args, _ = slow_deg_per_s_csvs
+    out = tmp_path / "out"
+    good = [*args, "--image-size", "640", "480", "--gyro-unit", "deg/s", "--no-report"]
+    assert main([*good, "--out", str(out)]) == 0
+    before = (out / "camchain-imucam.yaml").read_text()
+    capsys.readouterr()
+    argv = [*args, "--image-size", "640", "480", "--no-report", "--out", str(out), "--overwrite"]
+    assert main(argv) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith("vical-calibrate: error: the calibration failed: the gyro reads 5")
+    assert line.endswith(f"the outputs in {out}.failed are marked as failed; {out} keeps the result it held")
+    assert (out / "camchain-imucam.yaml").read_text() == before and not (out / "camchain-imucam.failed.yaml").exists()
+    assert (tmp_path / "out.failed" / "camchain-imucam.failed.yaml").is_file()
