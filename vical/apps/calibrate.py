@@ -32,7 +32,8 @@ the recording carries it.
 A result the data do not support (residuals far above the declared noise, a solve that never left
 its initial guess: ``vical.calib.solve.plausibility``) fails with its likely cause; its files are kept
 for diagnosis, marked as failed (``results.txt`` starts with ``FAILED:``, the camchain is named
-``*.failed.yaml``). User errors and failed calibrations print one line ``vical-calibrate: error:
+``*.failed.yaml``); a failure never replaces a good result: with ``--overwrite`` over one, the failed outputs
+go to ``<out>.failed`` and ``--out`` keeps what it held. User errors and failed calibrations print one line ``vical-calibrate: error:
 ...`` and exit with status 2.
 """
 
@@ -367,6 +368,17 @@ def _imu_noise(args, rec: Recording) -> ImuNoise:
     return ImuNoise()
 
 
+def holds_result(out: Path) -> bool:
+    """Whether ``out`` holds a calibration that did not fail (its camchain is not ``*.failed.yaml``)."""
+    return any((out / name).is_file() for name in ("camchain.yaml", "camchain-imucam.yaml"))
+
+
+def failed_out(out: Path) -> Path:
+    """Where a failed calibration goes when ``out`` holds a good one (``--overwrite`` never replaces it by a
+    failure): ``<out>.failed``, replaced whole."""
+    return out.with_name(out.name + ".failed")
+
+
 RATE_TOLERANCE = 0.1  # an imu.yaml rate this far (relative) from the samples' is named
 
 
@@ -456,9 +468,11 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     if said:
         results[names[0]] = replace(results[names[0]], warnings=[*said, *results[names[0]].warnings])
     failure = _failure_line(results, guesses, rec, args, one)
-    write_outputs(out, results, rec, args, noise, chain, failure)
+    written = failed_out(out) if failure and holds_result(out) else out
+    write_outputs(written, results, rec, args, noise, chain, failure)
     if failure:
-        raise CalibrationFailed(f"{failure}; the outputs in {out} are marked as failed")
+        kept = "" if written == out else f"; {out} keeps the result it held"
+        raise CalibrationFailed(f"{failure}; the outputs in {written} are marked as failed{kept}")
     return results["cam0"] if one else RigCalibration(results)
 
 
