@@ -29,12 +29,12 @@ atomically; an existing ``--out`` that holds files is refused unless ``--overwri
 replaces it whole). A summary table goes to the terminal, with the errors against the truth when
 the recording carries it.
 
-A result the data do not support (residuals far above the declared noise, a solve that never left
-its initial guess: ``vical.calib.solve.plausibility``) fails with its likely cause; its files are kept
-for diagnosis, marked as failed (``results.txt`` starts with ``FAILED:``, the camchain is named
-``*.failed.yaml``); a failure never replaces a good result: with ``--overwrite`` over one, the failed outputs
-go to ``<out>.failed`` and ``--out`` keeps what it held. User errors and failed calibrations print one line ``vical-calibrate: error:
-...`` and exit with status 2.
+A result the data do not support (a setting the data prove wrong, a solve that never left its initial
+guess: ``vical.calib.solve.plausibility``) fails with its likely cause; its files are kept for diagnosis,
+marked as failed (``results.txt`` starts with ``FAILED:``, the camchain is named ``*.failed.yaml``). A
+failure never replaces a good result: with ``--overwrite`` over one, the failed outputs go to
+``<out>.failed`` and ``--out`` keeps what it held. User errors and failed calibrations print one line
+``vical-calibrate: error: ...`` and exit with status 2.
 """
 
 from __future__ import annotations
