@@ -1,0 +1,105 @@
+"""Ctrl-C and SIGTERM in the commands: one line saying what was kept, exit 130 (Ctrl-C) or 143 (SIGTERM), nothing
+half-written. In process, the interrupt is raised through a hook at a stage (writing, the Allan computation);
+in the integration tier, a real signal is sent when the command prints the marker of a stage."""
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from imu_streams import static_stream
+
+from vical.calib.synthetic import make_recording
+from vical.data import ImuNoise
+from vical.io.csvfiles import write_imu_csv
+from vical.io.recording import save_recording
+
+INTERRUPTS = [("KeyboardInterrupt", 130, "Ctrl-C"), ("Terminated", 143, "SIGTERM")]
+
+
+def entry_point(name: str):
+    """The console script's function in ``vical.apps.entry`` (imported here: the module is what is tested)."""
+    import vical.apps.entry
+
+    return getattr(vical.apps.entry, name)
+
+
+def interrupt(kind: str):
+    import vical.apps.entry
+
+    error = KeyboardInterrupt if kind == "KeyboardInterrupt" else vical.apps.entry.Terminated
+
+    def hook(*args, **kwargs):
+        raise error()
+
+    return hook
+
+
+def run_entry(function, argv: list, monkeypatch, capsys) -> tuple[int, list[str]]:
+    monkeypatch.setattr(sys, "argv", [str(a) for a in argv])
+    with pytest.raises(SystemExit) as done:
+        function()
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    return done.value.code, lines
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    rec = make_recording(duration=4.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=2)
+    return save_recording(rec, tmp_path_factory.mktemp("rec") / "rec")
+
+
+@pytest.mark.parametrize(("kind", "status", "name"), INTERRUPTS)
+def test_calibrate_interrupted_while_writing_its_report_leaves_out_as_it_was(
+    kind, status, name, recording, tmp_path, monkeypatch, capsys
+):
+    from vical.apps import calibrate_outputs
+
+    monkeypatch.setattr(calibrate_outputs, "write_report", interrupt(kind))
+    out = tmp_path / "out"
+    code, lines = run_entry(entry_point("calibrate"), ["vical-calibrate", recording, "--out", out], monkeypatch, capsys)
+    assert code == status
+    assert lines == [f"vical-calibrate: interrupted ({name}); --out {out} is as it was: the outputs are written "
+                     "whole or not at all"]  # fmt: skip
+    assert not out.exists() and not [p for p in tmp_path.iterdir() if p.name != "out"]
+
+
+@pytest.mark.parametrize(("kind", "status", "name"), INTERRUPTS)
+def test_imu_noise_interrupted_in_the_allan_computation_writes_nothing(
+    kind, status, name, tmp_path, monkeypatch, capsys
+):
+    from vical.apps import imu_noise
+
+    path = tmp_path / "static.csv"
+    write_imu_csv(static_stream(600, 1), path)
+    monkeypatch.setattr(imu_noise, "identify_noise", interrupt(kind))
+    out = tmp_path / "out"
+    code, lines = run_entry(entry_point("imu_noise"), ["vical-imu-noise", path, "--out", out], monkeypatch, capsys)
+    assert code == status
+    assert lines[-1] == (f"vical-imu-noise: interrupted ({name}); --out {out} is as it was: the outputs are "
+                         "written whole or not at all")  # fmt: skip
+    assert not out.exists()
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("sig", "status", "name"), [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
+def test_a_real_signal_during_the_allan_computation_stops_vical_imu_noise_in_one_line(sig, status, name, tmp_path):
+    path = tmp_path / "static.csv"
+    write_imu_csv(static_stream(3 * 3600, 1), path)  # long enough to still be computing when the signal lands
+    out = tmp_path / "out"
+    command = [str(Path(sys.executable).parent / "vical-imu-noise"), str(path), "--out", str(out)]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen = ""
+    while "Allan deviation" not in seen:  # the marker of the stage: its progress bar
+        char = proc.stderr.read(1)
+        assert char, f"vical-imu-noise ended before the Allan computation: {seen}"
+        seen += char
+    os.kill(proc.pid, sig)
+    rest = proc.stderr.read()
+    assert proc.wait(timeout=60) == status
+    lines = [line for line in (seen + rest).replace("\r", "\n").splitlines() if line.startswith("vical-imu-noise")]
+    assert lines == [f"vical-imu-noise: interrupted ({name}); --out {out} is as it was: the outputs are written "
+                     "whole or not at all"], seen + rest  # fmt: skip
+    assert "Traceback" not in rest and not out.exists()
