@@ -226,7 +226,7 @@ def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, s
     _, err = proc.communicate(timeout=60)
     if sig == signal.SIGINT:
         assert proc.returncode == 130
-        assert "interrupted: the arm is stopped and the recording so far is in" in err
+        assert "interrupted (Ctrl-C): the arm is stopped and the recording so far is in" in err
         assert "interrupted" in (out / "collect.yaml").read_text()
     target = read_target_yaml(out / "target.yaml")
     rec = read_euroc(out / "recording", target)

@@ -213,7 +213,7 @@ def test_ctrl_c_says_where_the_last_checkpoint_is_and_how_to_resume(tmp_path):
     assert proc.returncode == 130, out
     step = load_checkpoint(run / CHECKPOINT)["counters"]["step"]
     assert out.splitlines()[-1] == (
-        f"vical-train: interrupted; the last checkpoint (step {step}) is {run / CHECKPOINT}; "
+        f"vical-train: interrupted (Ctrl-C); the last checkpoint (step {step}) is {run / CHECKPOINT}; "
         f"continue with: vical-train resume={run}"
     )
     assert "Traceback" not in out and "KeyboardInterrupt" not in out

@@ -59,6 +59,7 @@ from vical.apps.calibrate_rig import (
     topic_list,
 )
 from vical.apps.cli import ArgumentParser, OutputError, argparse_main
+from vical.apps.entry import run as run_command
 from vical.calib.detection.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
 from vical.calib.detection.board_size import MAX_SAMPLE, board_size_hint
 from vical.calib.detection.checkerboard import detect_checkerboard
@@ -632,5 +633,5 @@ def main(argv: list[str] | None = None) -> int:
     return argparse_main(APP, build_parser(), run, errors, FLAGS, argv)
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM
+    run_command(APP, main)

@@ -28,6 +28,8 @@ from omegaconf import DictConfig, OmegaConf
 
 from vical.apps import calibrate
 from vical.apps.cli import check_then_run, fail, report_error
+from vical.apps.entry import interrupted_by, interrupted_status
+from vical.apps.entry import run as run_command
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask
 from vical.collection.runner import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
@@ -50,7 +52,7 @@ from vical.sim.settings import SimConfig
 APP = "vical-collect"
 USER_ERRORS = (ConfigError, FileExistsError, FileNotFoundError)
 FAULTS = (CollectionStopped, MotionRefused, SensorStreamError)
-EXIT_FAULT, EXIT_INTERRUPTED = 1, 130
+EXIT_FAULT = 1
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
 
@@ -231,11 +233,11 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
         report_error(APP, f"stopped: {err}; the arm is stopped and the recording so far is in {writer.path} "
                           f"({writer.frames} frames): {_calibrate_hint(s)}")  # fmt: skip
         return None
-    except KeyboardInterrupt:
-        _write_summary(s, None, "interrupted (Ctrl-C)", writer.frames)
-        print(f"{APP}: interrupted: the arm is stopped and the recording so far is in {writer.path} "
-              f"({writer.frames} frames): {_calibrate_hint(s)}", file=sys.stderr)  # fmt: skip
-        raise SystemExit(EXIT_INTERRUPTED) from None
+    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (vical.apps.entry)
+        _write_summary(s, None, f"interrupted ({interrupted_by(err)})", writer.frames)
+        print(f"{APP}: interrupted ({interrupted_by(err)}): the arm is stopped and the recording so far is in "
+              f"{writer.path} ({writer.frames} frames): {_calibrate_hint(s)}", file=sys.stderr)  # fmt: skip
+        raise SystemExit(interrupted_status(err)) from None
     _write_summary(s, result, f"done: {result.reason}", writer.frames)
     _write_bag(cfg, s)
     return result
@@ -298,5 +300,5 @@ def main() -> None:
     check_then_run(APP, CONF_DIR, "collect", check_settings, hydra_main, USER_ERRORS)
 
 
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM
+    run_command(APP, main)

@@ -34,6 +34,7 @@ from vical.apps.cli import (
     override_value,
     quiet_library_logs,
 )
+from vical.apps.entry import run as run_command
 from vical.calib.tasks import CalibrationTask
 from vical.config_checks import ConfigError, require
 from vical.evaluation.error_vs_effort import (
@@ -356,5 +357,5 @@ def main() -> None:
     hydra_main()
 
 
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM
+    run_command(APP, main)

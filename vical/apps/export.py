@@ -23,12 +23,12 @@ next export into the same ``--out`` removes.
 
 from __future__ import annotations
 
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 
 from vical.apps.calibrate_outputs import view_overlaps
 from vical.apps.cli import ArgumentParser, cannot_write, one_line_warnings, report_error
+from vical.apps.entry import run as run_command
 from vical.data import DataError, ImuNoise, Recording
 from vical.geometry.transforms import invert_transform
 from vical.io.atomic import remove_stale_temporaries
@@ -230,5 +230,5 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM
+    run_command("vical-export", main)

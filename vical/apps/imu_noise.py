@@ -28,13 +28,13 @@ error: ...`` and exit with status 2.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from tqdm import tqdm
 
 from vical.apps.calibrate import _number, check_out
 from vical.apps.cli import ArgumentParser, OutputError, argparse_main, cannot_write
+from vical.apps.entry import run as run_command
 from vical.calib.noise.allan import (
     AXES,
     AxisNoise,
@@ -230,5 +230,5 @@ def main(argv: list[str] | None = None) -> int:
     return argparse_main(APP, build_parser(), run, errors, FLAGS, argv)
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM
+    run_command(APP, main)

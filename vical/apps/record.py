@@ -25,6 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from vical.apps.cli import check_then_run, fail
+from vical.apps.entry import run as run_command
 from vical.calib.detection.aprilgrid import detect_aprilgrid
 from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.solve.intrinsics import MIN_VIEWS
@@ -246,5 +247,5 @@ def main() -> None:
     check_then_run(APP, CONF_DIR, "record", check_settings, hydra_main, USER_ERRORS)
 
 
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM
+    run_command(APP, main)

@@ -10,12 +10,12 @@ with exit status 2.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from vical.apps.cli import ArgumentParser, one_line_warnings, report_error
+from vical.apps.entry import run as run_command
 from vical.config_checks import ConfigError
 from vical.geometry import make_transform, matrix_to_euler, step_pose
 from vical.io.errors import FormatError
@@ -95,5 +95,5 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-if __name__ == "__main__":
-    sys.exit(main())
+if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM
+    run_command("vical-sim-demo", main)

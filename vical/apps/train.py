@@ -38,6 +38,8 @@ from vical.apps.cli import (
     override_value,
     quiet_library_logs,
 )
+from vical.apps.entry import interrupted_by, interrupted_status
+from vical.apps.entry import run as run_command
 from vical.config_checks import ConfigError
 from vical.parallel import check_ray_address
 from vical.rl.checkpoint import (
@@ -68,7 +70,6 @@ USER_ERRORS = (
     InstantiationException,  # the env's _target_ could not be built (bad id, bad arguments)
 )
 APP = "vical-train"
-INTERRUPTED = 130  # the shell's status for a command stopped by Ctrl-C (128 + SIGINT)
 
 _ABSENT = object()
 
@@ -185,16 +186,19 @@ def _remove_unused(run_dir: Path) -> None:
         parent.rmdir()
 
 
-def interrupted_message(run_dir: Path) -> str:
-    """Where a run stopped by Ctrl-C can go on from, and the command that does it."""
+def interrupted_message(run_dir: Path, by: str = "Ctrl-C") -> str:
+    """Where a run stopped ``by`` Ctrl-C or SIGTERM can go on from, and the command that does it."""
     try:
         step = checkpoint_step(run_dir)
     except UnreadableCheckpointError:
         step = None
     if step is None:
-        return f"{APP}: interrupted before the run's first checkpoint; nothing to resume in {run_dir}: start it again"
+        return (
+            f"{APP}: interrupted ({by}) before the run's first checkpoint; nothing to resume in {run_dir}: start it "
+            "again"
+        )
     return (
-        f"{APP}: interrupted; the last checkpoint (step {step}) is {run_dir / CHECKPOINT}; "
+        f"{APP}: interrupted ({by}); the last checkpoint (step {step}) is {run_dir / CHECKPOINT}; "
         f"continue with: {APP} resume={run_dir}"
     )
 
@@ -215,9 +219,9 @@ def hydra_main(cfg: DictConfig) -> None:
     except USER_ERRORS as err:
         _remove_unused(output_dir)
         fail(APP, err)
-    except KeyboardInterrupt:
-        print(interrupted_message(Path(cfg.run_dir or output_dir)), file=sys.stderr)
-        raise SystemExit(INTERRUPTED) from None
+    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (vical.apps.entry)
+        print(interrupted_message(Path(cfg.run_dir or output_dir), interrupted_by(err)), file=sys.stderr)
+        raise SystemExit(interrupted_status(err)) from None
     print(f"trained {result.steps} steps, {result.episodes} episodes; run directory: {result.run_dir}")
 
 
@@ -234,10 +238,10 @@ def main() -> None:
         return
     try:
         hydra_main()
-    except KeyboardInterrupt:  # before the run began (Hydra starting, the env being built)
-        print(f"{APP}: interrupted before the run began", file=sys.stderr)
-        raise SystemExit(INTERRUPTED) from None
+    except KeyboardInterrupt as err:  # before the run began (Hydra starting, the env being built)
+        print(f"{APP}: interrupted ({interrupted_by(err)}) before the run began", file=sys.stderr)
+        raise SystemExit(interrupted_status(err)) from None
 
 
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM
+    run_command(APP, main)
