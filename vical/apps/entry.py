@@ -37,22 +37,25 @@ def _terminate(signum, frame) -> NoReturn:
     raise Terminated()
 
 
-# What each command that writes its outputs whole keeps when stopped (its --out or out= flag).
-AS_IT_WAS = "{flag} {out} is as it was: the outputs are written whole or not at all"
-OUT_FLAGS = {"vical-calibrate": "--out", "vical-imu-noise": "--out", "vical-export": "--out",
-             "vical-record": "out=", "vical-evaluate": "out="}  # fmt: skip
+# What each command keeps when stopped, by its output flag (--out or out=): the commands that write their output
+# directory whole leave it as it was; vical-evaluate writes each of its files whole.
+AS_IT_WAS = "{where} is as it was: the outputs are written whole or not at all"
+EACH_WHOLE = "each file in {where} is whole: a file is written whole or not at all"
+OUT_FLAGS = {"vical-calibrate": ("--out", AS_IT_WAS), "vical-imu-noise": ("--out", AS_IT_WAS),
+             "vical-export": ("--out", AS_IT_WAS), "vical-record": ("out=", AS_IT_WAS),
+             "vical-evaluate": ("out=", EACH_WHOLE)}  # fmt: skip
 
 
 def _kept(app: str, argv: list[str]) -> str:
-    """What an interrupted ``app`` kept: its output directory as it was (named as the command line gave it)."""
-    flag = OUT_FLAGS.get(app)
-    if flag is None:
+    """What an interrupted ``app`` kept: its output directory, named as the command line gave it."""
+    if app not in OUT_FLAGS:
         return "nothing was written"
-    if flag.endswith("="):
-        given = next((a[len(flag) :] for a in argv if a.startswith(flag)), None)
-        return AS_IT_WAS.format(flag="out", out=given or "(its default)")
-    given = next((b for a, b in pairwise(argv) if a == flag), None)
-    return AS_IT_WAS.format(flag=flag, out=given or "(its default)")
+    flag, kept = OUT_FLAGS[app]
+    if flag.endswith("="):  # a Hydra override
+        given = next((a for a in argv if a.startswith(flag)), None)
+    else:
+        given = next((f"{a} {b}" for a, b in pairwise(argv) if a == flag), None)
+    return kept.format(where=given or f"{flag.strip('-=')} (its default)")
 
 
 def run(app: str, target: str | Callable[[], int | None]) -> NoReturn:
