@@ -1,5 +1,6 @@
 """Trainer: determinism, exact resume, refusal of incompatible checkpoints, NaN handling, logging, config errors."""
 
+import logging
 import os
 from pathlib import Path
 from typing import ClassVar
@@ -245,6 +246,25 @@ def test_tensorboard_gets_namespaced_scalars_env_terms_hyperparameters_and_traje
     assert [e.step for e in events.Images("charts/trajectory")] == [100, 200]  # episodes 5 and 10 of 20 steps
     assert Reach1D.figures_drawn == [(21, 20), (21, 20)]  # the env's own hook drew them
     assert "hyperparameters/text_summary" in events.Tags()["tensors"]
+
+
+@pytest.mark.parametrize("num_envs", [1, 2])
+def test_the_log_tells_the_run_its_evaluations_checkpoints_and_end(tmp_path, num_envs, caplog):
+    """What vical-train's train.log holds (Hydra writes the vical loggers' records there): the run's start, every
+    evaluation, every checkpoint and the end, with their steps."""
+    caplog.set_level(logging.INFO, logger="vical")
+    train(tiny_config(tmp_path, total_steps=400, eval_every=200, checkpoint_every=100, num_envs=num_envs))
+    lines = [r.getMessage() for r in caplog.records if r.name.startswith("vical.rl")]
+    assert lines[0].startswith(f"training 400 steps in {tmp_path}")
+    evaluations = [line for line in lines if line.startswith("step ") and "evaluation return" in line]
+    assert [line.split()[1] for line in evaluations] == ["200", "400"]
+    checkpoints = [
+        line
+        for line in lines
+        if line.startswith("step ") and line.endswith(f"checkpoint written: {tmp_path / CHECKPOINT}")
+    ]
+    assert len(checkpoints) >= 2
+    assert lines[-1].startswith("trained 400 steps") and str(tmp_path / AGENT) in lines[-1]
 
 
 @pytest.mark.parametrize(
