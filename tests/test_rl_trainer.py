@@ -257,7 +257,7 @@ def test_the_log_tells_the_run_its_evaluations_checkpoints_and_end(tmp_path, num
     lines = [r.getMessage() for r in caplog.records if r.name.startswith("vical.rl")]
     assert lines[0].startswith(f"training 400 steps in {tmp_path}")
     evaluations = [line for line in lines if line.startswith("step ") and "evaluation return" in line]
-    assert [line.split()[1] for line in evaluations] == ["200", "400"]
+    assert [line.split()[1] for line in evaluations] == ["200:", "400:"]
     checkpoints = [
         line
         for line in lines

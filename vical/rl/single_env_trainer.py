@@ -108,6 +108,7 @@ class Trainer:
     # ---- the loop -------------------------------------------------------------------------------
     def run(self) -> TrainResult:
         t = self.settings.train
+        self._log_start()
         if self.step == 0:
             self.logger.hyperparameters(flatten(self.config))
         self._clock = (time.perf_counter(), self.step, self.updates)
@@ -186,6 +187,7 @@ class Trainer:
         if t.checkpoint_every and self.step - self.last_checkpoint_step >= t.checkpoint_every:
             self.last_checkpoint_step = self.step
             save_checkpoint(self._state(), self.settings.run_dir / CHECKPOINT)
+            self._log_checkpoint()
 
     def _log_episode(self, episode: Episode, bar: tqdm) -> None:
         t = self.settings.train
@@ -212,6 +214,8 @@ class Trainer:
         t = self.settings.train
         returns = [self._eval_episode(self.settings.seed + EVAL_SEED_OFFSET + i) for i in range(t.eval_episodes)]
         self.last_eval_return = float(np.mean(returns))
+        log.info("step %d: evaluation return %.3f (std %.3f over %d episodes)", self.step, self.last_eval_return,
+                 float(np.std(returns)), len(returns))  # fmt: skip
         self.logger.scalars(
             {"charts/eval_return_mean": self.last_eval_return, "charts/eval_return_std": float(np.std(returns))},
             self.step,
@@ -272,6 +276,19 @@ class Trainer:
     def _write_agent(self) -> None:
         state = {"model": self.agent.state_dict(), "agent_config": asdict(self.agent.config), "config": self.config}
         save_checkpoint(state, self.settings.run_dir / AGENT)
+        elapsed = time.perf_counter() - self._clock[0]
+        log.info("trained %d steps, %d episodes (%.0f s in this process): the agent is %s", self.step, self.episode,
+                 elapsed, self.settings.run_dir / AGENT)  # fmt: skip
+
+    # ---- train.log (Hydra writes the vical loggers' records into the run directory) ---------------
+    def _log_start(self) -> None:
+        s = self.settings
+        start = "from scratch" if self.resumed_from is None else f"resumed from step {self.resumed_from}"
+        log.info("training %d steps in %s (%s, seed %d, %d env(s))", s.train.total_steps, s.run_dir, start, s.seed,
+                 s.train.num_envs)  # fmt: skip
+
+    def _log_checkpoint(self) -> None:
+        log.info("step %d: checkpoint written: %s", self.step, self.settings.run_dir / CHECKPOINT)
 
     def _checked_obs(self, obs: Any, term: str) -> np.ndarray:
         obs = np.asarray(obs, np.float32).ravel()

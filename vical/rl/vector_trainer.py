@@ -153,6 +153,7 @@ class VectorTrainer(Trainer):
     # ---- the loop -------------------------------------------------------------------------------
     def run(self) -> TrainResult:
         t = self.settings.train
+        self._log_start()
         if self.step == 0:
             self.logger.hyperparameters(flatten(self.config))
         self._clock = (time.perf_counter(), self.step, self.updates)
@@ -344,6 +345,7 @@ class VectorTrainer(Trainer):
         ]
         state["policy_versions"] = dict(self.versions.states)
         save_checkpoint(state, self.settings.run_dir / CHECKPOINT)
+        self._log_checkpoint()
 
     def _restore(self, state: dict) -> None:
         super()._restore(state)
