@@ -159,6 +159,18 @@ def saved_run(tmp_path) -> Path:
     return tmp_path
 
 
+def test_a_run_dir_holding_a_run_is_refused_unless_resumed_or_overwritten(saved_run):
+    """A finished (or any) run is never trained over: its agent, config and TensorBoard events would mix with the
+    new run's."""
+    with pytest.raises(ConfigError) as err:
+        check_command_line([*TINY, f"run_dir={saved_run}"])
+    assert str(err.value) == (
+        f"run_dir={saved_run} holds a vical-train run (config.yaml); continue it with resume={saved_run}, choose "
+        "another run_dir, or pass overwrite=true to replace it once the new run is complete"
+    )
+    assert check_command_line([*TINY, f"run_dir={saved_run}", "overwrite=true"]) is None
+
+
 def test_resume_applies_key_value_overrides_to_the_saved_config(saved_run):
     overrides = [
         f"resume={saved_run}",
@@ -198,6 +210,19 @@ def test_resume_lists_every_refused_override(saved_run):
     with pytest.raises(ConfigError) as err:
         resumed_config(str(saved_run), ["agent=sac_authors", "~train.total_steps", "+foo=1"])
     assert all(name in str(err.value) for name in ("agent=sac_authors (", "~train.total_steps (", "+foo=1 ("))
+
+
+@pytest.mark.integration
+def test_overwrite_replaces_a_run_only_once_the_new_run_is_complete(tmp_path):
+    run = tmp_path / "run"
+    assert run_app(*TINY, "train.total_steps=300", f"run_dir={run}", cwd=tmp_path).wait(timeout=300) == 0
+    old = load_checkpoint(run / AGENT)["config"]["train"]["total_steps"]
+    proc = run_app(*TINY, "train.total_steps=400", f"run_dir={run}", "overwrite=true", cwd=tmp_path)
+    out, _ = proc.communicate(timeout=300)
+    assert proc.returncode == 0, out
+    assert (old, load_checkpoint(run / AGENT)["config"]["train"]["total_steps"]) == (300, 400)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]  # nothing left aside
+    assert f"replaced the run in {run}" in out
 
 
 @pytest.mark.integration
