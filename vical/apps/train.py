@@ -14,13 +14,19 @@ reset, an unreachable Ray cluster) print one line ``vical-train: error: ...`` an
 ``vical-calibrate`` does; they are checked before Hydra creates the run directory where the command line
 allows (no ``-m`` or other Hydra flags), env workers start before the run directory is written, and a run
 directory that an error left empty is removed. Ctrl-C stops the run with one line saying how to resume it
-(exit status 130).
+(exit status 130; SIGTERM 143).
+
+A ``run_dir`` that holds a run is refused unless the run is resumed (``resume=``) or ``overwrite=true``: the new
+run then trains in a sibling directory and replaces the old one only once it is complete (an interrupted or
+failed new run leaves the old one as it was).
 """
 
 from __future__ import annotations
 
+import os
 import shutil
 import sys
+import tempfile
 from pathlib import Path
 
 import hydra
@@ -43,6 +49,7 @@ from vical.apps.entry import run as run_command
 from vical.config_checks import ConfigError
 from vical.parallel import check_ray_address
 from vical.rl.checkpoint import (
+    AGENT,
     CHECKPOINT,
     IncompatibleCheckpointError,
     UnreadableCheckpointError,
@@ -155,6 +162,13 @@ def check_command_line(argv: list[str]) -> str | None:
     cfg = check_composes(CONF_DIR, "train", argv)
     if cfg is None:
         return None  # Hydra flags (-m, --cfg, ...): Hydra and the task function check the rest
+    held = held_run(argv) if resume is None else None
+    if held is not None and not cfg.overwrite:
+        key, path, found = held
+        raise ConfigError(
+            f"{key}={path} holds a vical-train run ({', '.join(found)}); continue it with resume={path}, choose "
+            f"another {key}, or pass overwrite=true to replace it once the new run is complete"
+        )
     if resume is not None:
         resumed = resumed_config(resume, argv)
         complete = resume_status(resume, resumed.train.total_steps)
@@ -164,6 +178,42 @@ def check_command_line(argv: list[str]) -> str | None:
     settings = OmegaConf.to_container(cfg, resolve=True)
     _check_cluster(parse_settings({**settings, "run_dir": settings["run_dir"] or "runs/<time>"}))  # Hydra names it
     return None
+
+
+RUN_FILES = ("config.yaml", CHECKPOINT, AGENT)  # what makes a directory hold a run
+
+
+def held_run(argv: list[str]) -> tuple[str, Path, list[str]] | None:
+    """(key, directory, run files) of the ``run_dir`` (or ``hydra.run.dir``) the command line names when it holds a
+    run, else None."""
+    for key in ("run_dir", "hydra.run.dir"):
+        value = override_value(argv, key)
+        if value is not None:
+            found = [name for name in RUN_FILES if (Path(value) / name).exists()]
+            if found:
+                return key, Path(value), found
+    return None
+
+
+def train_aside(argv: list[str], key: str, run_dir: Path) -> tuple[list[str], Path]:
+    """The command line with ``key`` pointing at a fresh sibling of ``run_dir`` where the new run trains, and that
+    sibling."""
+    aside = Path(tempfile.mkdtemp(prefix=f"{run_dir.name}.new-", dir=run_dir.parent))
+    aside.rmdir()  # Hydra creates it
+    return [f"{key}={aside}" if a.lstrip("+").startswith(f"{key}=") else a for a in argv], aside
+
+
+def replace_run(aside: Path, run_dir: Path) -> None:
+    """Put the complete new run ``aside`` in place of the old one at ``run_dir`` (renamed, then the old removed)."""
+    old = Path(tempfile.mkdtemp(prefix=f".{run_dir.name}.old-", dir=run_dir.parent))
+    old.rmdir()
+    os.rename(run_dir, old)
+    try:
+        os.rename(aside, run_dir)
+    except BaseException:
+        os.rename(old, run_dir)
+        raise
+    shutil.rmtree(old, ignore_errors=True)
 
 
 def _check_cluster(settings: RunSettings) -> None:
@@ -236,11 +286,20 @@ def main() -> None:
     if complete:
         print(complete)
         return
+    argv = sys.argv[1:]
+    hydra_flags = any(a.startswith("-") for a in argv)  # -m and the like: Hydra names the run directories
+    held = None if hydra_flags or override_value(argv, "resume") else held_run(argv)
+    if held is not None:  # overwrite=true (check_command_line refused it otherwise): train beside the old run
+        key, run_dir, _ = held
+        sys.argv[1:], aside = train_aside(argv, key, run_dir)
     try:
         hydra_main()
     except KeyboardInterrupt as err:  # before the run began (Hydra starting, the env being built)
         print(f"{APP}: interrupted ({interrupted_by(err)}) before the run began", file=sys.stderr)
         raise SystemExit(interrupted_status(err)) from None
+    if held is not None:
+        replace_run(aside, run_dir)
+        print(f"replaced the run in {run_dir} by the new one")
 
 
 if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM
