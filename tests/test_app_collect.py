@@ -274,3 +274,20 @@ def test_collect_with_the_shipped_policy_calibrates_as_well_as_the_env_on_the_sa
 def composed_evaluate(*overrides: str) -> dict:
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         return OmegaConf.to_container(compose(config_name="evaluate", overrides=list(overrides)), resolve=True)
+
+
+def test_overwrite_replaces_a_collection_only_once_the_new_one_is_complete(tmp_path):
+    """overwrite=true over a complete collection: a new run that stops on a fault leaves the old one as it was
+    (the new, partial one beside it); a new run that completes replaces it."""
+    out = tmp_path / "out"
+    args = [f"out={out}", "policy=random_moving", "calibrate=false", "seed=5"]
+    assert collect(config(*args, "limits.max_steps=6")) == 0
+    before = (out / "recording" / "mav0" / "cam0" / "data.csv").read_text()
+    assert collect(config(*args, "overwrite=true", "limits.max_steps=6", "robot.faults.imu_gap=[0.5,0.5]")) == 1
+    assert (out / "recording" / "mav0" / "cam0" / "data.csv").read_text() == before
+    (aside,) = [p for p in tmp_path.iterdir() if p.name.startswith("out.new-")]
+    assert "stopped" in (aside / "collect.yaml").read_text()
+    assert collect(config(*args, "overwrite=true", "limits.max_steps=3", "seed=6")) == 0
+    assert (out / "recording" / "mav0" / "cam0" / "data.csv").read_text() != before
+    assert "done" in (out / "collect.yaml").read_text()
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("out.new-")) == ["out"]
