@@ -15,10 +15,10 @@ stopped, the recording closed).
 
 from __future__ import annotations
 
-import shutil
 import sys
+import tempfile
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -39,6 +39,7 @@ from vical.env.calibration import declared_lens_spread
 from vical.env.information import Guess, LensSpread
 from vical.env.settings import MdpConfig
 from vical.evaluation.harness import instantiate_policy, policy_mdp
+from vical.io.atomic import replace_directory
 from vical.io.bag import write_bag
 from vical.io.errors import FormatError
 from vical.io.euroc import EurocStreamWriter, read_euroc
@@ -154,6 +155,16 @@ def build_robot(robot: DictConfig) -> Any:
         raise
 
 
+def _aside(out: Path) -> Path:
+    """Where a run collects: ``out`` when nothing is there, else a fresh sibling (``overwrite=true`` over a
+    collection: it replaces the old one once complete, ``replace_directory``)."""
+    if not out.exists():
+        return out
+    aside = Path(tempfile.mkdtemp(prefix=f"{out.name}.new-", dir=out.parent))
+    aside.rmdir()
+    return aside
+
+
 def collect(cfg: DictConfig) -> int:
     """Collect and calibrate as ``cfg`` says; the exit status (module doc)."""
     s = check_settings(cfg)
@@ -166,14 +177,17 @@ def collect(cfg: DictConfig) -> int:
         if cfg.get("dry_run"):
             _dry_run(cfg, s, rig, policy, mdp, nominal)
             return 0
-        if s.out.exists():
-            shutil.rmtree(s.out)
+        final, s = s.out, replace(s, out=_aside(s.out))  # a collection there is replaced only by a complete one
         result = _run(cfg, s, rig, policy, mdp, nominal)
     finally:
         rig.close()
-    if result is None or not cfg.get("calibrate"):
-        return 0 if result is not None else EXIT_FAULT
-    return _calibrate(s, bool(cfg.get("report")))
+    if result is None:
+        return EXIT_FAULT
+    status = _calibrate(s, bool(cfg.get("report"))) if cfg.get("calibrate") else 0
+    if s.out != final:
+        replace_directory(s.out, final)
+        print(f"the collection in {final} is replaced by this one (the paths above, under {s.out}, are now under it)")
+    return status
 
 
 def build_collector(

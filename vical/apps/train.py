@@ -23,7 +23,6 @@ failed new run leaves the old one as it was).
 
 from __future__ import annotations
 
-import os
 import shutil
 import sys
 import tempfile
@@ -47,6 +46,7 @@ from vical.apps.cli import (
 from vical.apps.entry import interrupted_by, interrupted_status
 from vical.apps.entry import run as run_command
 from vical.config_checks import ConfigError
+from vical.io.atomic import replace_directory
 from vical.parallel import check_ray_address
 from vical.rl.checkpoint import (
     AGENT,
@@ -203,19 +203,6 @@ def train_aside(argv: list[str], key: str, run_dir: Path) -> tuple[list[str], Pa
     return [f"{key}={aside}" if a.lstrip("+").startswith(f"{key}=") else a for a in argv], aside
 
 
-def replace_run(aside: Path, run_dir: Path) -> None:
-    """Put the complete new run ``aside`` in place of the old one at ``run_dir`` (renamed, then the old removed)."""
-    old = Path(tempfile.mkdtemp(prefix=f".{run_dir.name}.old-", dir=run_dir.parent))
-    old.rmdir()
-    os.rename(run_dir, old)
-    try:
-        os.rename(aside, run_dir)
-    except BaseException:
-        os.rename(old, run_dir)
-        raise
-    shutil.rmtree(old, ignore_errors=True)
-
-
 def _check_cluster(settings: RunSettings) -> None:
     """A Ray cluster where nothing answers is refused within seconds, before the run directory exists (only env
     workers use it: train.num_envs > 1)."""
@@ -298,7 +285,7 @@ def main() -> None:
         print(f"{APP}: interrupted ({interrupted_by(err)}) before the run began", file=sys.stderr)
         raise SystemExit(interrupted_status(err)) from None
     if held is not None:
-        replace_run(aside, run_dir)
+        replace_directory(aside, run_dir)
         print(f"replaced the run in {run_dir} by the new one")
 
 

@@ -139,15 +139,23 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
 
 
 def _replace_directory(tmp: Path, final: Path, overwrite: bool) -> None:
+    if final.exists():
+        check_can_write_dir(final, overwrite)
+    replace_directory(tmp, final)
+
+
+def replace_directory(new: str | os.PathLike, final: str | os.PathLike) -> None:
+    """Put the complete directory ``new`` at ``final`` (a sibling): the old ``final`` is renamed aside, ``new``
+    renamed into place, then the old one deleted; if the second rename fails the old one is renamed back."""
+    new, final = Path(new), Path(final)
     if not final.exists():
-        os.rename(tmp, final)
+        os.rename(new, final)
         return
-    check_can_write_dir(final, overwrite)
     old = Path(tempfile.mkdtemp(prefix=f".{final.name}.old-", dir=final.parent))
     os.rmdir(old)
     os.rename(final, old)
     try:
-        os.rename(tmp, final)
+        os.rename(new, final)
     except BaseException:
         os.rename(old, final)  # put the previous content back
         raise
