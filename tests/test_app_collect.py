@@ -9,6 +9,7 @@ from pathlib import Path
 import hydra.utils
 import numpy as np
 import pytest
+import yaml
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
@@ -291,3 +292,35 @@ def test_overwrite_replaces_a_collection_only_once_the_new_one_is_complete(tmp_p
     assert (out / "recording" / "mav0" / "cam0" / "data.csv").read_text() != before
     assert "done" in (out / "collect.yaml").read_text()
     assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith("out.new-")) == ["out"]
+
+
+@pytest.mark.parametrize(
+    ("kind", "status", "name"), [("KeyboardInterrupt", 130, "Ctrl-C"), ("Terminated", 143, "SIGTERM")]
+)
+def test_an_interrupt_in_the_final_calibration_keeps_the_recording_and_says_how_to_calibrate_it(
+    kind, status, name, tmp_path, monkeypatch, capsys
+):
+    import vical.apps.entry
+    from vical.apps import calibrate
+
+    error = KeyboardInterrupt if kind == "KeyboardInterrupt" else vical.apps.entry.Terminated
+
+    def interrupted(argv):
+        raise error()
+
+    monkeypatch.setattr(calibrate, "main", interrupted)
+    out = tmp_path / "out"
+    try:
+        collect(config(f"out={out}", "policy=random_moving", "limits.max_steps=3", "seed=5"))
+        code = "no exit"
+    except SystemExit as done:
+        code = done.code
+    except KeyboardInterrupt:  # not handled: it would stop the test session itself
+        code = "the interrupt escaped"
+    assert code == status
+    (line,) = [line for line in capsys.readouterr().err.splitlines() if line.startswith("vical-collect")]
+    assert line.startswith(f"vical-collect: interrupted ({name}) in the calibration: the recording is in {out}")
+    assert f"calibrate it with: vical-calibrate {out / 'recording'}" in line
+    assert yaml.safe_load((out / "collect.yaml").read_text())["outcome"].startswith(
+        f"done: the recording; the calibration interrupted ({name})"
+    )
