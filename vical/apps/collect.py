@@ -183,7 +183,7 @@ def collect(cfg: DictConfig) -> int:
         rig.close()
     if result is None:
         return EXIT_FAULT
-    status = _calibrate(s, bool(cfg.get("report"))) if cfg.get("calibrate") else 0
+    status = _calibrate_or_stop(s, result, bool(cfg.get("report"))) if cfg.get("calibrate") else 0
     if s.out != final:
         replace_directory(s.out, final)
         print(f"the collection in {final} is replaced by this one (the paths above, under {s.out}, are now under it)")
@@ -281,6 +281,19 @@ def _calibrate_args(s: CollectSettings) -> list[str]:
 
 def _calibrate_hint(s: CollectSettings) -> str:
     return "calibrate it with: vical-calibrate " + " ".join(_calibrate_args(s))
+
+
+def _calibrate_or_stop(s: CollectSettings, result: CollectResult, report: bool) -> int:
+    """``_calibrate``; an interrupt there keeps the recording, says how to calibrate it, and is recorded in
+    ``collect.yaml``."""
+    try:
+        return _calibrate(s, report)
+    except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (vical.apps.entry)
+        by = interrupted_by(err)
+        _write_summary(s, result, f"done: the recording; the calibration interrupted ({by})", result.frames)
+        print(f"{APP}: interrupted ({by}) in the calibration: the recording is in {s.out}: {_calibrate_hint(s)}",
+              file=sys.stderr)  # fmt: skip
+        raise SystemExit(interrupted_status(err)) from None
 
 
 def _calibrate(s: CollectSettings, report: bool) -> int:
