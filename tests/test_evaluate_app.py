@@ -1,5 +1,6 @@
 """vical-evaluate end to end: results.csv + summary.md, and one-line errors with exit status 2."""
 
+import contextlib
 import csv
 import subprocess
 import sys
@@ -87,3 +88,30 @@ def test_an_env_override_a_learned_policy_replaces_is_named_in_a_warning(tmp_pat
         "warning: env.information.confidence does not apply to 'model-free learned policy': it runs with the "
         "settings it was trained with (its run's env.information, env.max_steps, env.state); the other policies get it"
     ]
+
+
+def test_an_evaluation_stopped_while_writing_leaves_the_previous_results_whole(tmp_path, monkeypatch):
+    """overwrite=true: the new results.csv, summary.md and figure replace the old ones only together, once all
+    three are made; an interrupt while making them (here the figure) leaves the old set as it was."""
+    from hydra import compose, initialize_config_dir
+
+    from vical.apps import evaluate as app
+
+    out = tmp_path / "eval"
+
+    def run(*overrides: str):
+        with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+            cfg = compose("evaluate", overrides=[f"out={out}", "progress=false", "budgets=[0.5]", *overrides])
+        return app.evaluate(cfg, None)
+
+    run("episodes=1", "seed=5")
+    before = {name: (out / name).read_bytes() for name in ("results.csv", "summary.md", "error_vs_effort.png")}
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(app, "write_effort_figure", interrupted)
+    with contextlib.suppress(KeyboardInterrupt):
+        run("episodes=1", "seed=6", "overwrite=true")
+    assert {name: (out / name).read_bytes() for name in before} == before
+    assert sorted(p.name for p in out.iterdir()) == sorted(before)  # no temporary left
