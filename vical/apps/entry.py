@@ -37,25 +37,23 @@ def _terminate(signum, frame) -> NoReturn:
     raise Terminated()
 
 
-# What each command keeps when stopped, by its output flag (--out or out=): the commands that write their output
-# directory whole leave it as it was; vical-evaluate writes each of its files whole.
+# What each command keeps when stopped, by its output flag (--out or out=): they write their outputs whole (a
+# directory at once, or vical-evaluate's files together once all are made), so it is as it was.
 AS_IT_WAS = "{where} is as it was: the outputs are written whole or not at all"
-EACH_WHOLE = "each file in {where} is whole: a file is written whole or not at all"
-OUT_FLAGS = {"vical-calibrate": ("--out", AS_IT_WAS), "vical-imu-noise": ("--out", AS_IT_WAS),
-             "vical-export": ("--out", AS_IT_WAS), "vical-record": ("out=", AS_IT_WAS),
-             "vical-evaluate": ("out=", EACH_WHOLE)}  # fmt: skip
+OUT_FLAGS = {"vical-calibrate": "--out", "vical-imu-noise": "--out", "vical-export": "--out", "vical-record": "out=",
+             "vical-evaluate": "out="}  # fmt: skip
 
 
 def _kept(app: str, argv: list[str]) -> str:
     """What an interrupted ``app`` kept: its output directory, named as the command line gave it."""
     if app not in OUT_FLAGS:
         return "nothing was written"
-    flag, kept = OUT_FLAGS[app]
+    flag = OUT_FLAGS[app]
     if flag.endswith("="):  # a Hydra override
         given = next((a for a in argv if a.startswith(flag)), None)
     else:
         given = next((f"{a} {b}" for a, b in pairwise(argv) if a == flag), None)
-    return kept.format(where=given or f"{flag.strip('-=')} (its default)")
+    return AS_IT_WAS.format(where=given or f"{flag.strip('-=')} (its default)")
 
 
 def run(app: str, target: str | Callable[[], int | None]) -> NoReturn:

@@ -3,7 +3,8 @@
 Config: ``conf/evaluate.yaml`` (groups ``sim``, ``sensor``, ``task``, ``env``, ``workspace``, ``policy``;
 ``policies`` for a table of several; ``budgets`` for error versus path; ``+experiment=table1_intrinsic``
 etc. for the paper's tables). Writes ``<out>/results.csv`` (one row per episode and budget),
-``<out>/summary.md`` (the tables) and, with budgets, ``<out>/error_vs_effort.png``, all atomically.
+``<out>/summary.md`` (the tables) and, with budgets, ``<out>/error_vs_effort.png``, together: with
+``overwrite=true`` the old files stay until all the new ones are made.
 
 User-facing errors (an unknown policy, a missing run directory of the learned policy, a bad config
 value) print one line ``vical-evaluate: error: ...`` and exit with status 2, as ``vical-train`` does.
@@ -55,7 +56,7 @@ from vical.evaluation.harness import (
     instantiate_policy,
 )
 from vical.evaluation.yardstick import PROTOCOL_KEYS, fingerprint
-from vical.io.atomic import write_text_atomic
+from vical.io.atomic import files_together
 from vical.parallel import ParallelConfig, WorkerCrashed
 
 # An absolute path: the console script imports this module from anywhere.
@@ -300,10 +301,11 @@ def evaluate(
                 print(f"warning: {row.policy}: {row.error}", file=sys.stderr)
     summaries = [e.summary for e in evaluations]
     effort = summarize_effort({e.summary.policy: e.rows for e in evaluations}, budgets, reference)
-    write_text_atomic(out / RESULTS, results_csv(evaluations))
-    write_text_atomic(out / SUMMARY, summary_markdown(cfg, summaries, seeds, effort, reference))
-    if budgets:
-        write_effort_figure(out / FIGURE, effort, cfg.task.name)
+    with files_together(out) as path_of:  # overwrite=true: the old set stays until the new one is whole
+        path_of(RESULTS).write_text(results_csv(evaluations))
+        path_of(SUMMARY).write_text(summary_markdown(cfg, summaries, seeds, effort, reference))
+        if budgets:
+            write_effort_figure(path_of(FIGURE), effort, cfg.task.name)
     return out, summaries, effort
 
 

@@ -14,7 +14,7 @@ import os
 import shutil
 import socket
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 
@@ -103,6 +103,28 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` atomically."""
     with atomic_file(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+@contextlib.contextmanager
+def files_together(directory: str | os.PathLike) -> Iterator[Callable[[str], Path]]:
+    """Write several files of ``directory`` as one result: yields ``path_of(name)``, the temporary path to write
+    the file ``name`` to; when the body ends, the files are moved into place one after another (each rename
+    whole), none of them before all are written; if the body raises, none is moved and nothing is left."""
+    final = Path(directory)
+    final.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=temporary_prefix(final / "files"), dir=final))
+    written: list[str] = []
+
+    def path_of(name: str) -> Path:
+        written.append(name)
+        return staging / name
+
+    try:
+        yield path_of
+        for name in written:
+            os.replace(staging / name, final / name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def check_can_write_dir(path: str | os.PathLike, overwrite: bool) -> Path:
