@@ -1,5 +1,6 @@
 """vical-collect on the simulated Panda: alignment, the policy loop, the recording, the calibration, and faults."""
 
+import re
 import signal
 import subprocess
 import sys
@@ -324,3 +325,22 @@ def test_an_interrupt_in_the_final_calibration_keeps_the_recording_and_says_how_
     assert yaml.safe_load((out / "collect.yaml").read_text())["outcome"].startswith(
         f"done: the recording; the calibration interrupted ({name})"
     )
+
+
+def test_the_step_lines_tell_the_same_story_as_the_summary(tmp_path):
+    """Each step line names the worst group the goal needs (not a group the goal leaves out) and counts the
+    episode's sensor time, as the summary and collect.yaml do."""
+    from vical.env.information import SCORED_GROUPS
+
+    c, rig = collector(tmp_path, Scripted(translation=(0.0, 0.04, 0.0), euler=(0.1, 0.0, 0.0)), "env=information",
+                       "env.information.goal_groups=scored", "limits.max_steps=4")  # fmt: skip
+    try:
+        result = c.run()
+    finally:
+        rig.close()
+    steps = [line for line in c.lines if line.startswith("step ")]
+    assert len(steps) == 4
+    worst = [re.search(r"worst (\w+) ", line).group(1) for line in steps]
+    assert set(worst) <= set(SCORED_GROUPS["joint"]), worst
+    last = float(re.search(r", (\d+\.\d) s$", steps[-1]).group(1))
+    assert last == pytest.approx(result.duration, abs=0.15)
