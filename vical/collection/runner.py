@@ -270,6 +270,7 @@ class Collector:
         self.episode = RobotEpisode(mdp)
         self.progress = progress
         self._started = 0.0
+        self._episode_start: int | None = None  # [ns] the IMU's last stamp when the episode began
         self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []
         self._refused = 0
 
@@ -294,7 +295,7 @@ class Collector:
     def _episode(self, frame: PoseFrame, seed: int) -> CollectResult:
         self.stream.recording = True
         self.state.reset(self.task, self.guess)
-        first = self.stream.last_imu_ns
+        self._episode_start = self.stream.last_imu_ns
         self._rest(self.mdp.reset_hold)
         self._update_state()
         episode = self.episode
@@ -316,8 +317,7 @@ class Collector:
                 reason = f"the time limit ({self.limits.time_limit:.0f} s)"
                 break
         self.arm.stop()
-        last = self.stream.last_imu_ns
-        duration = 0.0 if first is None or last is None else (last - first) / NS_PER_S
+        duration = self._sensor_time()
         self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, {duration:.1f} s")
         return CollectResult(episode.steps, self.state.path_length, duration, self.stream.frames,
                              self.state.goal_reached, reason)  # fmt: skip
@@ -370,15 +370,23 @@ class Collector:
             raise MotionRefused(f"{refused}; {self._refused} steps in a row were refused, with their fallbacks")
         return None
 
+    def _sensor_time(self) -> float:
+        """[s] of sensor (IMU) time since the episode began: the clock of the summary and ``collect.yaml``."""
+        first, last = self._episode_start, self.stream.last_imu_ns
+        return 0.0 if first is None or last is None else (last - first) / NS_PER_S
+
     def _report(self) -> None:
+        """A step's line: what the goal still needs (its groups only, as ``goal_reached`` judges them), the data,
+        and the episode's sensor time."""
         s, e = self.state, self.episode
-        elapsed = time.monotonic() - self._started
         if self.mdp.state == "information":
-            worst = max(s.ratios, key=s.ratios.get)
-            what = f"excess {s.excess:.2f} e-folds, worst {worst} {s.ratios[worst]:.2f}x tolerance"
+            goal = s.goal_ratios
+            worst = max(goal, key=goal.get)
+            what = f"excess {s.excess:.2f} e-folds, worst {worst} {goal[worst]:.2f}x tolerance"
         else:
             what = f"coverage {np.mean(list(s.coverage.progress().values())):.0%} of the way"
-        self.progress(f"step {e.steps}: {what}, {s.frames} frames, path {s.path_length:.2f} m, {elapsed:.0f} s")
+        time_s = self._sensor_time()
+        self.progress(f"step {e.steps}: {what}, {s.frames} frames, path {s.path_length:.2f} m, {time_s:.1f} s")
 
     # ------------------------------------------------------------------ data
     def _rest(self, seconds: float) -> None:
