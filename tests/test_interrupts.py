@@ -103,3 +103,40 @@ def test_a_real_signal_during_the_allan_computation_stops_vical_imu_noise_in_one
     assert lines == [f"vical-imu-noise: interrupted ({name}); --out {out} is as it was: the outputs are written "
                      "whole or not at all"], seen + rest  # fmt: skip
     assert "Traceback" not in rest and not out.exists()
+
+
+@pytest.fixture(scope="module")
+def euroc_with_images(tmp_path_factory):
+    """A rendered recording written as an EuRoC folder: vical-calibrate detects its corners (a progress bar)."""
+    from test_app_calibrate_sources import record_rendered
+
+    from vical.io import write_euroc, write_imu_yaml, write_target_yaml
+
+    rec = record_rendered()
+    root = tmp_path_factory.mktemp("euroc")
+    write_euroc(rec, root / "euroc")
+    write_target_yaml(root / "target.yaml", rec.target)
+    write_imu_yaml(root / "imu.yaml", rec.truth.imu_noise)
+    return root
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("sig", "status", "name"), [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
+def test_a_real_signal_during_the_detection_stops_vical_calibrate_in_one_line(sig, status, name, euroc_with_images):
+    root = euroc_with_images
+    out = root / f"out-{name}"
+    command = [str(Path(sys.executable).parent / "vical-calibrate"), str(root / "euroc"), "--target",
+               str(root / "target.yaml"), "--imu-yaml", str(root / "imu.yaml"), "--out", str(out)]  # fmt: skip
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen = ""
+    while "EuRoC cam0" not in seen:  # the marker of the stage: the detection's progress bar
+        char = proc.stderr.read(1)
+        assert char, f"vical-calibrate ended before the detection: {seen}"
+        seen += char
+    os.kill(proc.pid, sig)
+    rest = proc.stderr.read()
+    assert proc.wait(timeout=60) == status
+    lines = [line for line in (seen + rest).replace("\r", "\n").splitlines() if line.startswith("vical-calibrate")]
+    assert lines == [f"vical-calibrate: interrupted ({name}); --out {out} is as it was: the outputs are written "
+                     "whole or not at all"], seen + rest  # fmt: skip
+    assert "Traceback" not in rest and not out.exists()
