@@ -82,7 +82,7 @@ from vical.calib.solve.plausibility import (
     wrong_board_scale,
 )
 from vical.calib.solve.visual_inertial import GRAVITY_MAGNITUDE, ViOptions
-from vical.data import DataError, ImuNoise, Recording, Target
+from vical.data import DataError, ImuNoise, Recording, Target, median_rate_hz
 from vical.data.target import TargetError
 from vical.geometry import CAMERA_MODELS, CameraModel, CameraModelError
 from vical.io.atomic import remove_stale_temporaries
@@ -383,20 +383,15 @@ def failed_out(out: Path) -> Path:
 RATE_TOLERANCE = 0.1  # an imu.yaml rate this far (relative) from the samples' is named
 
 
-def _data_rate(rec: Recording) -> float:
-    """[Hz] the IMU samples' rate (their median interval's inverse)."""
-    return 1e9 / float(np.median(np.diff(rec.imu.t)))
-
-
-def _rate_note(args, noise: ImuNoise, rec: Recording) -> str | None:
-    """A warning when ``--imu-yaml``'s rate is not the samples' (the calibration does not read it; the output
-    ``imu.yaml`` gets the samples' rate)."""
+def _at_data_rate(args, noise: ImuNoise, rec: Recording) -> tuple[ImuNoise, str | None]:
+    """``noise`` with the samples' rate and a warning when ``--imu-yaml``'s rate is not it (the calibration does
+    not read the rate; the output ``imu.yaml`` gets the samples'); ``noise`` as given otherwise."""
     if not args.imu_yaml or len(rec.imu) < 2:
-        return None
-    rate = _data_rate(rec)
+        return noise, None
+    rate = median_rate_hz(rec.imu.t)
     if abs(noise.rate_hz - rate) <= RATE_TOLERANCE * rate:
-        return None
-    return (
+        return noise, None
+    return replace(noise, rate_hz=rate), (
         f"--imu-yaml {args.imu_yaml} says update_rate {noise.rate_hz:g} Hz, but the IMU samples come at "
         f"{rate:.4g} Hz; the output imu.yaml says {rate:.4g} Hz"
     )
@@ -455,8 +450,7 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     setup = _one_camera_setup(args, rec, detector) if one else _rig_setup(args, rec, names, chain)
     _check_known_intrinsics(args, names, chain, setup, one)
     noise = None if args.task == "intrinsic" else _imu_noise(args, rec)
-    rate_note = None if noise is None else _rate_note(args, noise, rec)
-    noise = noise if rate_note is None else replace(noise, rate_hz=_data_rate(rec))
+    noise, rate_note = (None, None) if noise is None else _at_data_rate(args, noise, rec)
     known = {n: s.camera for n, s in setup.items() if s.camera is not None}
     guesses = {n: s.T_cam_imu for n, s in setup.items() if s.T_cam_imu is not None}
     offsets = {n: s.time_shift for n, s in setup.items() if s.time_shift is not None}

@@ -4,7 +4,7 @@ from vical.data.camera_frames import CameraFrames
 from vical.data.errors import DataError
 from vical.data.imu import ImuNoise, ImuSamples
 from vical.data.imu_model import ImuIntrinsics
-from vical.data.sample_arrays import NS_PER_S, seconds_since
+from vical.data.sample_arrays import NS_PER_S, median_rate_hz, seconds_since
 from vical.data.sensor_recording import FIRST_CAMERA, Recording
 from vical.data.sensor_truth import SensorTruth
 from vical.data.target import Target, TargetError
@@ -24,5 +24,6 @@ __all__ = [
     "Target",
     "TargetError",
     "Trajectory",
+    "median_rate_hz",
     "seconds_since",
 ]

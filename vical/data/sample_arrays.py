@@ -13,6 +13,12 @@ from vical.data.errors import DataError
 NS_PER_S = 1_000_000_000
 
 
+def median_rate_hz(t_ns: np.ndarray) -> float:
+    """[Hz] a stream's rate from its median sample interval (robust to a few dropped samples); 0 for fewer than
+    two stamps."""
+    return float(NS_PER_S / np.median(np.diff(t_ns))) if len(t_ns) > 1 else 0.0
+
+
 def seconds_since(t_ns: np.ndarray, t0_ns: int) -> np.ndarray:
     """Float seconds of int64 ns timestamps relative to ``t0_ns`` (exact to ~1e-16 s for short spans)."""
     return (np.asarray(t_ns, dtype=np.int64) - np.int64(t0_ns)).astype(np.float64) / NS_PER_S

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from vical.data import NS_PER_S, CameraFrames, ImuNoise, ImuSamples, Recording, SensorTruth, Target
+from vical.data import CameraFrames, ImuNoise, ImuSamples, Recording, SensorTruth, Target, median_rate_hz
 from vical.geometry.transforms import invert_transform
 from vical.io.atomic import atomic_directory, atomic_file, check_can_write_dir, write_text_atomic
 from vical.io.csvfiles import (
@@ -95,17 +95,13 @@ def _write_images(frames: CameraFrames, cam: Path) -> None:
     (cam / "data.csv").write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
-def _rate_hz(t: np.ndarray) -> float:
-    return float(NS_PER_S / np.median(np.diff(t))) if len(t) > 1 else 0.0
-
-
 def _matrix(T: np.ndarray) -> dict[str, Any]:
     return {"cols": 4, "rows": 4, "data": [float(v) for v in np.asarray(T).reshape(-1)]}
 
 
 def _camera_sensor_yaml(frames: CameraFrames, truth: SensorTruth | None) -> dict[str, Any]:
     height, width = frames.images.shape[1:]
-    data: dict[str, Any] = {"sensor_type": "camera", "comment": "written by vical", "rate_hz": _rate_hz(frames.t)}
+    data: dict[str, Any] = {"sensor_type": "camera", "comment": "written by vical", "rate_hz": median_rate_hz(frames.t)}
     data["resolution"] = [int(width), int(height)]
     if truth is not None:
         cam = truth.camera
@@ -127,7 +123,7 @@ def _camera_sensor_yaml(frames: CameraFrames, truth: SensorTruth | None) -> dict
 
 def _imu_sensor_yaml(rec: Recording) -> dict[str, Any]:
     if rec.truth is None:
-        return _imu_noise_yaml(None, _rate_hz(rec.imu.t), "written by vical")
+        return _imu_noise_yaml(None, median_rate_hz(rec.imu.t), "written by vical")
     return _imu_noise_yaml(rec.truth.imu_noise, rec.truth.imu_noise.rate_hz, "written by vical")
 
 

@@ -12,7 +12,7 @@ import warnings
 
 import numpy as np
 
-from vical.data import NS_PER_S
+from vical.data import NS_PER_S, median_rate_hz
 from vical.io.errors import FormatError, UnitError
 
 # A plausible sample interval in ns: 10 kHz .. 0.1 Hz.
@@ -158,7 +158,7 @@ RATE_TOLERANCE = 0.01
 
 def check_camera_rates(where: str, stamps: dict[str, np.ndarray]) -> None:
     """Warn when the cameras of one rig (timestamps [ns] by name) run at different frame rates."""
-    rates = {name: NS_PER_S / float(np.median(np.diff(t))) for name, t in stamps.items() if len(t) > 1}
+    rates = {name: median_rate_hz(t) for name, t in stamps.items() if len(t) > 1}
     if len(rates) < 2:
         return
     first, *others = rates.items()
