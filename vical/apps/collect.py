@@ -16,7 +16,6 @@ stopped, the recording closed).
 from __future__ import annotations
 
 import sys
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -39,7 +38,7 @@ from vical.env.calibration import declared_lens_spread
 from vical.env.information import Guess, LensSpread
 from vical.env.settings import MdpConfig
 from vical.evaluation.harness import instantiate_policy, policy_mdp
-from vical.io.atomic import replace_directory
+from vical.io.atomic import replace_directory, unused_sibling
 from vical.io.bag import write_bag
 from vical.io.errors import FormatError
 from vical.io.euroc import EurocStreamWriter, read_euroc
@@ -160,9 +159,7 @@ def _aside(out: Path) -> Path:
     collection: it replaces the old one once complete, ``replace_directory``)."""
     if not out.exists():
         return out
-    aside = Path(tempfile.mkdtemp(prefix=f"{out.name}.new-", dir=out.parent))
-    aside.rmdir()
-    return aside
+    return unused_sibling(out, "new")
 
 
 def collect(cfg: DictConfig) -> int:

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import hydra
@@ -46,7 +45,7 @@ from vical.apps.cli import (
 from vical.apps.entry import interrupted_by, interrupted_status
 from vical.apps.entry import run as run_command
 from vical.config_checks import ConfigError
-from vical.io.atomic import replace_directory
+from vical.io.atomic import replace_directory, unused_sibling
 from vical.parallel import check_ray_address
 from vical.rl.checkpoint import (
     AGENT,
@@ -198,8 +197,7 @@ def held_run(argv: list[str]) -> tuple[str, Path, list[str]] | None:
 def train_aside(argv: list[str], key: str, run_dir: Path) -> tuple[list[str], Path]:
     """The command line with ``key`` pointing at a fresh sibling of ``run_dir`` where the new run trains, and that
     sibling."""
-    aside = Path(tempfile.mkdtemp(prefix=f"{run_dir.name}.new-", dir=run_dir.parent))
-    aside.rmdir()  # Hydra creates it
+    aside = unused_sibling(run_dir, "new")  # Hydra creates it
     return [f"{key}={aside}" if a.lstrip("+").startswith(f"{key}=") else a for a in argv], aside
 
 

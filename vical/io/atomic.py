@@ -166,6 +166,15 @@ def _replace_directory(tmp: Path, final: Path, overwrite: bool) -> None:
     replace_directory(tmp, final)
 
 
+def unused_sibling(path: str | os.PathLike, label: str) -> Path:
+    """A name beside ``path`` that nothing uses (``<name>.<label>-<random>``, reserved and released at once): where
+    a replacement is built before ``replace_directory`` puts it in place."""
+    path = Path(path)
+    sibling = Path(tempfile.mkdtemp(prefix=f"{path.name}.{label}-", dir=path.parent))
+    sibling.rmdir()
+    return sibling
+
+
 def replace_directory(new: str | os.PathLike, final: str | os.PathLike) -> None:
     """Put the complete directory ``new`` at ``final`` (a sibling): the old ``final`` is renamed aside, ``new``
     renamed into place, then the old one deleted; if the second rename fails the old one is renamed back."""
@@ -173,8 +182,7 @@ def replace_directory(new: str | os.PathLike, final: str | os.PathLike) -> None:
     if not final.exists():
         os.rename(new, final)
         return
-    old = Path(tempfile.mkdtemp(prefix=f".{final.name}.old-", dir=final.parent))
-    os.rmdir(old)
+    old = unused_sibling(final.with_name(f".{final.name}"), "old")
     os.rename(final, old)
     try:
         os.rename(new, final)
