@@ -83,26 +83,34 @@ def test_imu_noise_interrupted_in_the_allan_computation_writes_nothing(
     assert not out.exists()
 
 
+def signal_at_marker(app: str, args: list[str], marker: str, sig: int) -> tuple[int, list[str], str]:
+    """Run the console script ``app``, send ``sig`` when its stderr shows ``marker`` (the stage's line, never after a
+    sleep); its exit status, its stderr lines that start with its name, and its whole stderr."""
+    proc = subprocess.Popen([str(Path(sys.executable).parent / app), *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+    seen = ""
+    while marker not in seen:
+        char = proc.stderr.read(1)
+        assert char, f"{app} ended before {marker!r}: {seen}"
+        seen += char
+    os.kill(proc.pid, sig)
+    stderr = seen + proc.stderr.read()
+    status = proc.wait(timeout=60)
+    return status, [line for line in stderr.replace("\r", "\n").splitlines() if line.startswith(app)], stderr
+
+
 @pytest.mark.integration
 @pytest.mark.parametrize(("sig", "status", "name"), [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
 def test_a_real_signal_during_the_allan_computation_stops_vical_imu_noise_in_one_line(sig, status, name, tmp_path):
     path = tmp_path / "static.csv"
     write_imu_csv(static_stream(3 * 3600, 1), path)  # long enough to still be computing when the signal lands
     out = tmp_path / "out"
-    command = [str(Path(sys.executable).parent / "vical-imu-noise"), str(path), "--out", str(out)]
-    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    seen = ""
-    while "Allan deviation" not in seen:  # the marker of the stage: its progress bar
-        char = proc.stderr.read(1)
-        assert char, f"vical-imu-noise ended before the Allan computation: {seen}"
-        seen += char
-    os.kill(proc.pid, sig)
-    rest = proc.stderr.read()
-    assert proc.wait(timeout=60) == status
-    lines = [line for line in (seen + rest).replace("\r", "\n").splitlines() if line.startswith("vical-imu-noise")]
+    command = [str(path), "--out", str(out)]
+    status_seen, lines, stderr = signal_at_marker("vical-imu-noise", command, "Allan deviation", sig)  # progress bar
+    assert status_seen == status
     assert lines == [f"vical-imu-noise: interrupted ({name}); --out {out} is as it was: the outputs are written "
-                     "whole or not at all"], seen + rest  # fmt: skip
-    assert "Traceback" not in rest and not out.exists()
+                     "whole or not at all"], stderr  # fmt: skip
+    assert "Traceback" not in stderr and not out.exists()
 
 
 @pytest.fixture(scope="module")
@@ -125,18 +133,10 @@ def euroc_with_images(tmp_path_factory):
 def test_a_real_signal_during_the_detection_stops_vical_calibrate_in_one_line(sig, status, name, euroc_with_images):
     root = euroc_with_images
     out = root / f"out-{name}"
-    command = [str(Path(sys.executable).parent / "vical-calibrate"), str(root / "euroc"), "--target",
-               str(root / "target.yaml"), "--imu-yaml", str(root / "imu.yaml"), "--out", str(out)]  # fmt: skip
-    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    seen = ""
-    while "EuRoC cam0" not in seen:  # the marker of the stage: the detection's progress bar
-        char = proc.stderr.read(1)
-        assert char, f"vical-calibrate ended before the detection: {seen}"
-        seen += char
-    os.kill(proc.pid, sig)
-    rest = proc.stderr.read()
-    assert proc.wait(timeout=60) == status
-    lines = [line for line in (seen + rest).replace("\r", "\n").splitlines() if line.startswith("vical-calibrate")]
+    command = [str(root / "euroc"), "--target", str(root / "target.yaml"), "--imu-yaml", str(root / "imu.yaml"),
+               "--out", str(out)]  # fmt: skip
+    status_seen, lines, stderr = signal_at_marker("vical-calibrate", command, "EuRoC cam0", sig)  # the detection's bar
+    assert status_seen == status
     assert lines == [f"vical-calibrate: interrupted ({name}); --out {out} is as it was: the outputs are written "
-                     "whole or not at all"], seen + rest  # fmt: skip
-    assert "Traceback" not in rest and not out.exists()
+                     "whole or not at all"], stderr  # fmt: skip
+    assert "Traceback" not in stderr and not out.exists()
