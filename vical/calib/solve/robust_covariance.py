@@ -19,6 +19,7 @@ windows the robust estimate is noisy.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import gtsam
 import numpy as np
@@ -80,15 +81,23 @@ def _inverse_columns(H: scipy.sparse.csc_matrix, theta: np.ndarray) -> np.ndarra
     return scale[:, None] * lu.solve(rhs)
 
 
+class Covariances(NamedTuple):
+    """The keys' covariances from one factorisation of the information (``sandwich_covariances``)."""
+
+    model: np.ndarray  # under the noise model the solve weighted with: the keys' block of H^-1
+    scaled: np.ndarray  # under the measured noise levels
+    robust: np.ndarray | None  # cluster-robust (None with fewer than two windows)
+
+
 def sandwich_covariances(
     linear: gtsam.GaussianFactorGraph,
     values: gtsam.Values,
     keys: Sequence[int],
     clusters: np.ndarray,
     variance_scale: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray | None] | None:
-    """The keys' covariance under the measured noise levels, and the cluster-robust one, of a solve weighted by the
-    declared noise (in the keys' tangent spaces, in order; the graph linearised at the solution ``values``).
+) -> Covariances | None:
+    """The keys' covariance under the noise model, under the measured noise levels and the cluster-robust one, of a
+    solve weighted by the declared noise (in the keys' tangent spaces, in order; the graph linearised at the solution ``values``).
 
     A solve that weighs its factors by a noise whose true variance is ``s_k`` times the declared one has the
     covariance ``H^-1 (sum_k s_k H_k) H^-1`` (``H_k = A_k^T A_k``): exact for white noise of the measured
@@ -102,8 +111,7 @@ def sandwich_covariances(
         variance_scale: (F,) the true variance of each factor over its weight's (1: as declared).
 
     Returns:
-        (noise-level covariance, robust covariance or None with fewer than two windows); None when the
-        information matrix is singular.
+        The three covariances; None when the information matrix is singular.
     """
     P, columns = _offsets(values)
     H, M, gradients = _normal_equations(linear, columns, P, clusters, variance_scale)
@@ -111,12 +119,12 @@ def sandwich_covariances(
     X = _inverse_columns(H, theta)  # H^-1 E_theta
     if X is None:
         return None
-    scaled = X.T @ (M @ X)
+    model, scaled = X[theta], X.T @ (M @ X)
     C = gradients.shape[1]
     if C < 2:
-        return scaled, None
+        return Covariances(model, scaled, None)
     pulls = gradients.T @ X  # (C, k): each window's pull g_c^T H^-1 on the parameters
-    return scaled, C / (C - 1) * (pulls.T @ pulls)
+    return Covariances(model, scaled, C / (C - 1) * (pulls.T @ pulls))
 
 
 def widen(model: np.ndarray, robust: np.ndarray) -> np.ndarray:

@@ -154,6 +154,20 @@ def _inverse(information: np.ndarray) -> np.ndarray:
     return (vectors / eigenvalues) @ vectors.T * np.outer(scale, scale)
 
 
+def determined(covariance: np.ndarray) -> bool:
+    """Whether a covariance computed without checking for free directions (e.g. from a sparse LU of the information)
+    has none: finite, and its equilibrated eigenvalues within ``SINGULAR_EIGENVALUE`` of each other, as
+    ``linear_covariance`` requires of the information."""
+    if not np.all(np.isfinite(covariance)):
+        return False
+    diagonal = np.diag(covariance)
+    if not np.all(diagonal > 0):
+        return False
+    scale = 1.0 / np.sqrt(diagonal)
+    eigenvalues = np.linalg.eigvalsh(0.5 * (covariance + covariance.T) * np.outer(scale, scale))
+    return bool(eigenvalues[0] > SINGULAR_EIGENVALUE * eigenvalues[-1])
+
+
 UNOBSERVABLE_DAMPING = 1e-6  # [whitened information] added to every variable when the information is singular
 UNOBSERVABLE_SIGMA = 1e2  # a damped 1-sigma this large (in the tangent's unit) means: not determined by the data
 

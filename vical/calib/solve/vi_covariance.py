@@ -10,7 +10,7 @@ import gtsam
 import numpy as np
 
 from vical.calib.solve.robust_covariance import sandwich_covariances, widen
-from vical.calib.solve.solver import covariance_or_unobservable
+from vical.calib.solve.solver import covariance_or_unobservable, determined
 from vical.calib.solve.vi_graph import ViGraph, variance_scale
 from vical.calib.solve.vi_problem import (
     GAP_WARNING_FACTOR,
@@ -131,14 +131,18 @@ def solution_marginals(
     keys = [k for index in range(len(problem.others) + 1) for k in _camera_keys(index, joint, fixed)]
     keys += [state_key("b", 0)] + ([I_KEY] if estimated_imu else [])
     linear = g.graph.linearize(values)
-    model = covariance_or_unobservable(linear, values, keys)
     scale = variance_scale(problem, g, linear.size())
     found = sandwich_covariances(linear, values, keys, _clusters(g, linear.size()), scale)
+    # The sparse factorisation's covariance serves where it has no free direction; else the elimination tells the
+    # free directions apart (NaN) from the determined ones.
+    model = found.model if found is not None and determined(found.model) else None
+    if model is None:
+        model = covariance_or_unobservable(linear, values, keys)
     zero = values.zeroVectors()
     sizes = [zero.at(k).size for k in keys]
     starts = np.cumsum([0, *sizes])
     columns = {k: np.arange(starts[n], starts[n + 1]) for n, k in enumerate(keys)}
-    return ViMarginals(columns, model, None if found is None else found[0], None if found is None else found[1])
+    return ViMarginals(columns, model, None if found is None else found.scaled, None if found is None else found.robust)
 
 
 def parameter_covariance(
