@@ -97,7 +97,8 @@ def sandwich_covariances(
     variance_scale: np.ndarray,
 ) -> Covariances | None:
     """The keys' covariance under the noise model, under the measured noise levels and the cluster-robust one, of a
-    solve weighted by the declared noise (in the keys' tangent spaces, in order; the graph linearised at the solution ``values``).
+    solve weighted by the declared noise (in the keys' tangent spaces, in order; the graph linearised at the
+    solution ``values``).
 
     A solve that weighs its factors by a noise whose true variance is ``s_k`` times the declared one has the
     covariance ``H^-1 (sum_k s_k H_k) H^-1`` (``H_k = A_k^T A_k``): exact for white noise of the measured
