@@ -39,46 +39,61 @@ def _offsets(values: gtsam.Values) -> tuple[int, dict[int, np.ndarray]]:
     return start, columns
 
 
-def _normal_equations(
-    linear: gtsam.GaussianFactorGraph,
-    columns: dict[int, np.ndarray],
-    P: int,
-    clusters: np.ndarray,
-    variance_scale: np.ndarray,
-):
-    """The information ``H = A^T A`` (P, P, sparse), the noise's information ``M = sum_k s_k A_k^T A_k`` (P, P,
-    sparse; ``s_k`` the true variance of factor k over the one it is weighted with) and each window's gradient
-    ``A_c^T b_c`` (P, C)."""
-    ids = np.unique(clusters[clusters >= 0])
-    window = np.searchsorted(ids, clusters)
-    rows, cols, entries, scales = [], [], [], []
-    gradients = np.zeros((P, len(ids)))
-    for k in range(linear.size()):
-        factor = linear.at(k)
-        A, b = factor.jacobian()
-        index = np.concatenate([columns[key] for key in factor.keys()])  # noqa: SIM118 (a factor is no dict)
-        rows.append(np.repeat(index, len(index)))
-        cols.append(np.tile(index, len(index)))
-        entries.append((A.T @ A).ravel())
-        scales.append(np.full(len(index) ** 2, variance_scale[k]))
-        if clusters[k] >= 0:
-            gradients[index, window[k]] += A.T @ b
-    where = (np.concatenate(rows), np.concatenate(cols))
-    H = scipy.sparse.csc_matrix((np.concatenate(entries), where), shape=(P, P))
-    M = scipy.sparse.csc_matrix((np.concatenate(entries) * np.concatenate(scales), where), shape=(P, P))
-    return H, M, gradients
+class LinearSystem:
+    """The normal equations of a graph linearised at its solution, factorised once for every covariance of it.
 
+    ``H = A^T A`` (P, P, sparse) is the information, ``M = sum_k s_k A_k^T A_k`` the noise's information
+    (``s_k`` the true variance of factor k over the one it is weighted with) and ``gradients`` (P, C) each window's
+    ``A_c^T b_c`` (``A``, ``b``: the whitened Jacobian and right-hand side of ``linear``; ``b`` is minus the
+    whitened error).
+    """
 
-def _inverse_columns(H: scipy.sparse.csc_matrix, theta: np.ndarray) -> np.ndarray | None:
-    """``H^-1 E_theta`` (P, k), or None for a singular ``H`` (Jacobi-equilibrated sparse LU)."""
-    scale = 1.0 / np.sqrt(np.maximum(H.diagonal(), np.finfo(float).tiny))
-    try:
-        lu = scipy.sparse.linalg.splu((scipy.sparse.diags(scale) @ H @ scipy.sparse.diags(scale)).tocsc())
-    except RuntimeError:
-        return None
-    rhs = np.zeros((H.shape[0], len(theta)))
-    rhs[theta, np.arange(len(theta))] = scale[theta]
-    return scale[:, None] * lu.solve(rhs)
+    def __init__(
+        self, linear: gtsam.GaussianFactorGraph, values: gtsam.Values, clusters: np.ndarray, variance_scale: np.ndarray
+    ) -> None:
+        self.size, self.columns = _offsets(values)
+        ids = np.unique(clusters[clusters >= 0])
+        self.window = np.where(clusters >= 0, np.searchsorted(ids, clusters), -1)  # each factor's window, -1: none
+        rows, cols, entries, scales = [], [], [], []
+        self.gradients = np.zeros((self.size, len(ids)))
+        self.gradient = np.zeros(self.size)  # A^T b of every factor (zero at a converged solution)
+        self.variance_scale = np.asarray(variance_scale, float)
+        for k in range(linear.size()):
+            factor = linear.at(k)
+            A, b = factor.jacobian()
+            index = self.factor_columns(factor)
+            rows.append(np.repeat(index, len(index)))
+            cols.append(np.tile(index, len(index)))
+            entries.append((A.T @ A).ravel())
+            scales.append(np.full(len(index) ** 2, variance_scale[k]))
+            self.gradient[index] += A.T @ b
+            if self.window[k] >= 0:
+                self.gradients[index, self.window[k]] += A.T @ b
+        where = (np.concatenate(rows), np.concatenate(cols))
+        shape = (self.size, self.size)
+        self.H = scipy.sparse.csc_matrix((np.concatenate(entries), where), shape=shape)
+        self.M = scipy.sparse.csc_matrix((np.concatenate(entries) * np.concatenate(scales), where), shape=shape)
+        self._scale = 1.0 / np.sqrt(np.maximum(self.H.diagonal(), np.finfo(float).tiny))
+        try:  # Jacobi-equilibrated sparse LU
+            self._lu = scipy.sparse.linalg.splu((scipy.sparse.diags(self._scale) @ self.H @ scipy.sparse.diags(
+                self._scale)).tocsc())  # fmt: skip
+        except RuntimeError:
+            self._lu = None
+
+    def factor_columns(self, factor) -> np.ndarray:
+        """The columns of a linear factor's variables."""
+        return np.concatenate([self.columns[key] for key in factor.keys()])  # noqa: SIM118 (a factor is no dict)
+
+    @property
+    def singular(self) -> bool:
+        return self._lu is None
+
+    def solve(self, rhs: np.ndarray) -> np.ndarray:
+        """``H^-1 rhs`` (P, k) of (P, k)."""
+        return self._scale[:, None] * self._lu.solve(self._scale[:, None] * rhs)
+
+    def key_columns(self, keys: Sequence[int]) -> np.ndarray:
+        return np.concatenate([self.columns[k] for k in keys])
 
 
 class Covariances(NamedTuple):
@@ -89,43 +104,31 @@ class Covariances(NamedTuple):
     robust: np.ndarray | None  # cluster-robust (None with fewer than two windows)
 
 
-def sandwich_covariances(
-    linear: gtsam.GaussianFactorGraph,
-    values: gtsam.Values,
-    keys: Sequence[int],
-    clusters: np.ndarray,
-    variance_scale: np.ndarray,
-) -> Covariances | None:
+def sandwich_covariances(system: LinearSystem, keys: Sequence[int]) -> Covariances | None:
     """The keys' covariance under the noise model, under the measured noise levels and the cluster-robust one, of a
-    solve weighted by the declared noise (in the keys' tangent spaces, in order; the graph linearised at the
-    solution ``values``).
+    solve weighted by the declared noise (in the keys' tangent spaces, in order).
 
     A solve that weighs its factors by a noise whose true variance is ``s_k`` times the declared one has the
     covariance ``H^-1 (sum_k s_k H_k) H^-1`` (``H_k = A_k^T A_k``): exact for white noise of the measured
     levels (``vical.calib.solve.variance``). The cluster-robust one measures it from the residuals themselves.
 
-    Args:
-        linear: the graph linearised at the solution (whitened factors).
-        values: the solution.
-        keys: the variables whose joint covariance is wanted.
-        clusters: (F,) the window of each factor of ``linear`` (-1: none, e.g. priors, which are no data).
-        variance_scale: (F,) the true variance of each factor over its weight's (1: as declared).
-
     Returns:
         The three covariances; None when the information matrix is singular.
     """
-    P, columns = _offsets(values)
-    H, M, gradients = _normal_equations(linear, columns, P, clusters, variance_scale)
-    theta = np.concatenate([columns[k] for k in keys])
-    X = _inverse_columns(H, theta)  # H^-1 E_theta
-    if X is None:
+    if system.singular:
         return None
-    model, scaled = X[theta], X.T @ (M @ X)
-    C = gradients.shape[1]
-    if C < 2:
-        return Covariances(model, scaled, None)
-    pulls = gradients.T @ X  # (C, k): each window's pull g_c^T H^-1 on the parameters
-    return Covariances(model, scaled, C / (C - 1) * (pulls.T @ pulls))
+    theta = system.key_columns(keys)
+    unit = np.zeros((system.size, len(theta)))
+    unit[theta, np.arange(len(theta))] = 1.0
+    X = system.solve(unit)  # H^-1 E_theta
+    model, scaled = X[theta], X.T @ (system.M @ X)
+    return Covariances(0.5 * (model + model.T), scaled, cluster_robust(system.gradients.T @ X))
+
+
+def cluster_robust(pulls: np.ndarray) -> np.ndarray | None:
+    """``C / (C - 1) sum_c p_c p_c^T`` of the windows' pulls ``p_c`` (C, k) on some parameters (None: C < 2)."""
+    C = len(pulls)
+    return None if C < 2 else C / (C - 1) * (pulls.T @ pulls)
 
 
 def widen(model: np.ndarray, robust: np.ndarray) -> np.ndarray:

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 import gtsam
 import numpy as np
 
-from vical.calib.solve.robust_covariance import sandwich_covariances, widen
+from vical.calib.solve.gyro_model import GyroModelError, gyro_model_error
+from vical.calib.solve.robust_covariance import LinearSystem, sandwich_covariances, widen
 from vical.calib.solve.solver import covariance_or_unobservable, determined
 from vical.calib.solve.vi_graph import ViGraph, variance_scale
 from vical.calib.solve.vi_problem import (
@@ -106,14 +107,18 @@ class ViMarginals:
     model: np.ndarray
     scaled: np.ndarray | None
     robust: np.ndarray | None
+    gyro: GyroModelError | None = None  # the gyro's scales and misalignments the residuals show (gyro_model)
 
-    def block(self, keys: list[int]) -> tuple[np.ndarray, np.ndarray | None]:
-        """The keys' covariance (the measured noise levels' where finite, else the model's) and robust one."""
+    def block(self, keys: list[int]) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """The keys' covariance (the measured noise levels' where finite, else the model's), robust one, and the
+        covariance the gyro's unmodelled scales and misalignments add (zero where the data do not show them)."""
         index = np.concatenate([self.columns[k] for k in keys])
         model = self.model[np.ix_(index, index)]
         if self.scaled is not None and np.all(np.isfinite(model)):
             model = self.scaled[np.ix_(index, index)]
-        return model, None if self.robust is None else self.robust[np.ix_(index, index)]
+        robust = None if self.robust is None else self.robust[np.ix_(index, index)]
+        considered = np.zeros_like(model) if self.gyro is None else self.gyro.considered()[np.ix_(index, index)]
+        return model, robust, considered
 
 
 def _camera_keys(index: int, joint: bool, fixed_offset: bool) -> list[int]:
@@ -131,8 +136,8 @@ def solution_marginals(
     keys = [k for index in range(len(problem.others) + 1) for k in _camera_keys(index, joint, fixed)]
     keys += [state_key("b", 0)] + ([I_KEY] if estimated_imu else [])
     linear = g.graph.linearize(values)
-    scale = variance_scale(problem, g, linear.size())
-    found = sandwich_covariances(linear, values, keys, _clusters(g, linear.size()), scale)
+    system = LinearSystem(linear, values, _clusters(g, linear.size()), variance_scale(problem, g, linear.size()))
+    found = sandwich_covariances(system, keys)
     # The sparse factorisation's covariance serves where it has no free direction; else the elimination tells the
     # free directions apart (NaN) from the determined ones.
     model = found.model if found is not None and determined(found.model) else None
@@ -142,7 +147,12 @@ def solution_marginals(
     sizes = [zero.at(k).size for k in keys]
     starts = np.cumsum([0, *sizes])
     columns = {k: np.arange(starts[n], starts[n + 1]) for n, k in enumerate(keys)}
-    return ViMarginals(columns, model, None if found is None else found.scaled, None if found is None else found.robust)
+    gyro = None
+    if not estimated_imu:  # the scale-misalignment model estimates them
+        imu = (problem.t_imu, problem.gyro)
+        gyro = gyro_model_error(system, linear, values, g.imu_factors, g.state_times, imu, keys)
+    scaled, robust = (None, None) if found is None else (found.scaled, found.robust)
+    return ViMarginals(columns, model, scaled, robust, gyro)
 
 
 def parameter_covariance(
@@ -158,10 +168,13 @@ def parameter_covariance(
 
     Of camera ``index``'s variables (0: the first camera's), the first bias and, with ``imu_theta`` (the
     estimated IMU intrinsics), those. The covariance under the measured noise levels widened wherever the
-    cluster-robust one (``vical.calib.solve.robust_covariance``) is larger; a fixed time offset gets zero variance.
+    cluster-robust one (``vical.calib.solve.robust_covariance``) is larger, plus what the gyro's unmodelled scales and
+    misalignments add where the data show them (``vical.calib.solve.gyro_model``; not part of the widening, which
+    is the robust one's); a fixed time offset gets zero variance.
     """
     intrinsic_keys = [] if imu_theta is None else [I_KEY]
-    model, robust = marginals.block([*_camera_keys(index, joint, fixed_offset), state_key("b", 0), *intrinsic_keys])
+    keys = [*_camera_keys(index, joint, fixed_offset), state_key("b", 0), *intrinsic_keys]
+    model, robust, considered = marginals.block(keys)
     cov = model if robust is None else widen(model, robust)
     offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
     camera_block = [np.eye(values.atVector(state_key("k", index)).size)] if joint else []
@@ -175,7 +188,7 @@ def parameter_covariance(
     final, noise_model = J @ cov @ J.T, J @ model @ J.T
     with np.errstate(divide="ignore", invalid="ignore"):
         widening = np.sqrt(np.diag(final) / np.diag(noise_model))
-    return final, np.where(np.isfinite(widening), widening, 1.0)
+    return final + J @ considered @ J.T, np.where(np.isfinite(widening), widening, 1.0)
 
 
 def widening_warning(names: list[str], widening: np.ndarray) -> list[str]:
