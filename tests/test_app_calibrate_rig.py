@@ -12,6 +12,7 @@ combined (its errors are those of the two ``T_cam_imu``, partly cancelling: the 
 from __future__ import annotations
 
 import csv
+import shutil
 from dataclasses import replace
 
 import numpy as np
@@ -26,7 +27,9 @@ from vical.calib.synthetic import Excitation, RigCamera, default_camera, make_re
 from vical.data import CameraFrames, ImuNoise, ImuSamples
 from vical.geometry import euler_to_matrix, make_transform, transform_error
 from vical.io import save_recording, write_bag, write_euroc, write_imu_yaml, write_target_yaml
+from vical.io.errors import FormatError
 from vical.io.kalibr_chain import CameraChain, ChainCamera, read_chain, write_chain
+from vical.io.sources import open_recording
 from vical.io.yamlfile import dump_yaml, load_mapping
 
 T_C1_C0 = make_transform(euler_to_matrix([0.02, -0.03, 0.01]), [-0.06, 0.002, 0.001])  # a 6 cm stereo baseline
@@ -160,6 +163,20 @@ def test_one_named_camera_is_calibrated_alone_as_the_chains_first(rig, tmp_path)
     assert "cameras cam1" in text and "written to the camchain as cam0" in text and "==== cam0" not in text
 
 
+def test_a_chain_of_more_cameras_gives_the_chosen_camera_its_section(rig, tmp_path):
+    """--cameras cam0 with a stereo camchain: cam0's section is used, cam1's neither read nor looked for (its
+    resolution, which cam1's images contradict here, is not checked)."""
+    rec, _, argv = rig
+    chain = tmp_path / "stereo.yaml"
+    kalibr_camchain(rec, chain, T_C1_C0, sizes=((640, 480), (1280, 960)))
+    out = tmp_path / "out"
+    assert main([*argv, "--cameras", "cam0", "--task", "extrinsic", "--intrinsics", str(chain), "--out", str(out),
+                 "--no-report"]) == 0  # fmt: skip
+    (written,) = read_chain(out / "camchain-imucam.yaml").cameras
+    assert written.camera.fx == pytest.approx(rec.truth.camera.fx, rel=1e-12)  # the given intrinsics, kept
+    assert rotation_deg(written.T_cam_imu, rec.truth.T_cam_imu) < 0.2
+
+
 def kalibr_camchain(rec, path, T_cn_cnm1, sizes=((640, 480), (640, 480))) -> None:
     """A Kalibr ``kalibr_calibrate_cameras`` camchain of the rig's true intrinsics (the layout Kalibr documents),
     with a key vical does not know per camera and at the top."""
@@ -214,6 +231,20 @@ def test_intrinsic_task_calibrates_each_camera_and_keeps_the_given_relative_pose
         assert chain[name].T_cam_imu is None
     np.testing.assert_allclose(chain["cam1"].T_cn_cnm1, T_C1_C0, atol=1e-12)  # not estimated: kept as given
     assert "relative poses" in (out / "results.txt").read_text()
+
+
+def test_an_euroc_folder_read_for_some_cameras_decodes_only_theirs(rig, tmp_path):
+    """cam0 (the recording's first camera) and those named: cam1's images are never opened (a broken one would
+    fail the read)."""
+    rec, root, _ = rig
+    copy = tmp_path / "euroc"
+    shutil.copytree(root / "euroc", copy)
+    image = next((copy / "mav0" / "cam1" / "data").glob("*.png"))
+    image.write_bytes(b"not an image")
+    read = open_recording(copy, rec.target, cameras=["cam0"])
+    assert read.camera_names == ["cam0"] and len(read.frames) == len(rec.frames)
+    with pytest.raises(FormatError, match=image.name):
+        open_recording(copy, rec.target, cameras=["cam1"])
 
 
 def test_bad_rig_inputs_fail_in_one_line_naming_the_file_and_camera(rig, tmp_path, capsys):

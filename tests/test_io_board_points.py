@@ -10,7 +10,7 @@ from vical.calib.errors import CalibrationError
 from vical.calib.synthetic import RigCamera, make_recording
 from vical.data import Target
 from vical.io.csvfiles import write_imu_csv
-from vical.io.errors import CsvFormatError
+from vical.io.errors import CsvFormatError, SourceSettingError
 from vical.io.sources import detect_source, open_recording
 
 REALDATA = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "euroc_imu_april_0-36s"
@@ -58,6 +58,18 @@ def test_a_yac_corner_folder_reads_as_the_recording_it_was_written_from(rig, tmp
             np.testing.assert_array_equal(ia, ib)
             np.testing.assert_allclose(a, b, atol=1e-9)
     np.testing.assert_array_equal(rec.imu.t, rig.imu.t)
+
+
+def test_a_corner_folder_reads_only_the_cameras_asked_for(rig, tmp_path):
+    """cam0 (the recording's first camera) and those named; cam1's files unread (a broken one would say so)."""
+    root = write_yac_folder(rig, tmp_path / "yac")
+    next((root / "cam1").glob("*.csv")).write_text("not a corner file\n1,2\n")
+    rec = open_recording(root, rig.target, cameras=["cam0"])
+    assert rec.camera_names == ["cam0"] and len(rec.frames) == len(rig.frames)
+    with pytest.raises(CsvFormatError):
+        open_recording(root, rig.target, cameras=["cam0", "cam1"])
+    with pytest.raises(SourceSettingError, match=r"^cameras names cam2, but .*yac has cam0, cam1 \(its camN folders"):
+        open_recording(root, rig.target, cameras=["cam2"])
 
 
 def test_a_board_of_another_size_is_named_in_one_line(rig, tmp_path):

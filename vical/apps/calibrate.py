@@ -113,6 +113,7 @@ FLAGS = {
     "image_topic": "--image-topic",
     "imu_topic": "--imu-topic",
     "imu_model": "--imu-model",
+    "cameras": "--cameras",
 }
 
 
@@ -266,6 +267,7 @@ def load_source(args: argparse.Namespace, chain: CameraChain | None = None) -> t
         rate_hz=args.rate,
         gyro_unit=args.gyro_unit,
         accel_unit=args.accel_unit,
+        cameras=args.cameras,
     )
     rec = time_window(rec, args.start, args.duration)
     if args.task != "intrinsic" and len(rec.imu) < 2:
@@ -526,7 +528,7 @@ def _rig_setup(args, rec: Recording, names: list[str], chain: CameraChain | None
             f"{', '.join(names)} needs a Kalibr camchain with a section per camera (cam0, cam1, ...)"
         )
     if chain is not None:
-        check_chain_fits(chain, args.intrinsics, rec)
+        check_chain_fits(chain, args.intrinsics, rec, args.cameras)
     known = {n: chain[n] for n in names if chain is not None and n in chain.names}
     setup = {}
     for n in names:

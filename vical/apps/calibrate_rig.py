@@ -26,9 +26,9 @@ from vical.io.kalibr_chain import CameraChain, ChainCamera
 CAMERA_NAME = re.compile(r"cam(\d+)")
 FRAMES_CSV = "frames.csv"  # each camera's, in its folder of the outputs
 # Where each source's cameras come from, for the message that lists them.
+# Where a source's cameras come from (EuRoC and corner folders refuse a camera they lack as they are read:
+# vical.io.board_points.chosen_cameras).
 CAMERAS_OF = {
-    "euroc": "its camN folders",
-    "corner_folder": "its camN folders of per-frame corner files",
     "bag": "one per image topic (--image-topic, or the rostopic of each camera of --intrinsics)",
     "recording": "cam0 and its frames_camN.npz",
     "corners_csv": "a corner CSV holds one camera",

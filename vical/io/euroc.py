@@ -22,6 +22,7 @@ import os
 import re
 import shutil
 import warnings
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +31,7 @@ import numpy as np
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Recording, SensorTruth, Target, median_rate_hz
 from vical.geometry.transforms import invert_transform
 from vical.io.atomic import atomic_directory, atomic_file, check_can_write_dir, write_text_atomic
+from vical.io.board_points import chosen_cameras
 from vical.io.csvfiles import (
     CORNER_HEADER,
     IMU_HEADER,
@@ -245,8 +247,10 @@ def read_euroc(
     keep_images: bool = True,
     gyro_unit: str = "rad/s",
     accel_unit: str = "m/s^2",
+    cameras: Sequence[str] | None = None,
 ) -> Recording:
-    """Read an EuRoC folder (``path`` or ``path/mav0``) with every camera folder in it (``cam0``, ``cam1``, ...).
+    """Read an EuRoC folder (``path`` or ``path/mav0``) with every camera folder in it (``cam0``, ``cam1``, ...), or
+    with cam0 and ``cameras`` (``vical.io.board_points.chosen_cameras``).
 
     Corners come from ``detector`` when given, else from ``camN/corners.csv`` when present,
     else the frames have no detections. Images are checked against the resolution in their
@@ -258,18 +262,19 @@ def read_euroc(
     root = find_euroc_root(path)
     if root is None:
         raise FormatError(f"{path} is not an EuRoC folder: neither it nor its mav0/ holds cam0/data.csv")
-    cameras = {name: _read_camera(root, name, target, detector, keep_images) for name in camera_folders(root)}
-    check_camera_rates(str(root), {name: frames.t for name, (frames, _, _) in cameras.items()})
-    frames, truth, size = cameras.pop("cam0")
-    sizes = {"cam0": size} | {name: c[2] for name, c in cameras.items()}
+    names = chosen_cameras(camera_folders(root), cameras, str(path))
+    read = {name: _read_camera(root, name, target, detector, keep_images) for name in names}
+    check_camera_rates(str(root), {name: frames.t for name, (frames, _, _) in read.items()})
+    frames, truth, size = read.pop("cam0")
+    sizes = {"cam0": size} | {name: c[2] for name, c in read.items()}
     return Recording(
         imu=_read_imu(root, gyro_unit, accel_unit),
         frames=frames,
         target=target,
         truth=truth,
         metadata={"source": "euroc", "path": str(Path(path).resolve()), "image_size": size, "image_sizes": sizes},
-        other_frames={name: c[0] for name, c in cameras.items()},
-        other_truths={name: c[1] for name, c in cameras.items() if c[1] is not None},
+        other_frames={name: c[0] for name, c in read.items()},
+        other_truths={name: c[1] for name, c in read.items() if c[1] is not None},
     )
 
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 import os
 import re
 import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -222,20 +223,24 @@ def _check_chain(chain: CameraChain, path: str) -> None:
             )
 
 
-def check_chain_fits(chain: CameraChain, path: str | os.PathLike, recording: Recording) -> None:
+def check_chain_fits(
+    chain: CameraChain, path: str | os.PathLike, recording: Recording, chosen: Sequence[str] | None = None
+) -> None:
     """Refuse a camchain whose cameras the recording lacks, or whose resolution differs from their images'.
 
-    Image sizes come from ``recording.metadata["image_sizes"]`` (EuRoC folders and bags) or the
-    stored images.
+    ``chosen``: the cameras a user chose to calibrate (the recording was read for those alone); the chain's
+    others are then not looked for. Image sizes come from ``recording.metadata["image_sizes"]`` (EuRoC folders
+    and bags) or the stored images.
     """
-    missing = [name for name in chain.names if name not in recording.camera_names]
+    looked_for = [name for name in chain.names if chosen is None or name in chosen]
+    missing = [name for name in looked_for if name not in recording.camera_names]
     if missing:
         raise FormatError(
             f"{path} names {missing[0]}, but the recording has only {', '.join(recording.camera_names)}; give the "
             "recording every camera of the chain (EuRoC camN folders, one bag topic per camera) or a camchain of these"
         )
     sizes = recording.metadata.get("image_sizes", {})
-    for camera in chain.cameras:
+    for camera in (c for c in chain.cameras if c.name in looked_for):
         images = recording.frames_of(camera.name).images
         size = sizes.get(camera.name) or (None if images is None else [images.shape[2], images.shape[1]])
         expected = [camera.camera.width, camera.camera.height]

@@ -27,6 +27,7 @@ from vical.data import ImuSamples, Recording, Target
 from vical.io.bag import read_bag, read_bag_imu
 from vical.io.board_points import (
     camera_folders,
+    chosen_cameras,
     corner_folder_imu,
     is_corner_folder,
     names_board_points,
@@ -81,6 +82,7 @@ def open_recording(
     keep_images: bool = False,
     gyro_unit: str = "rad/s",
     accel_unit: str = "m/s^2",
+    cameras: Sequence[str] | None = None,
 ) -> Recording:
     """Read whatever ``path`` holds (see ``detect_source``) as a ``Recording``.
 
@@ -95,6 +97,7 @@ def open_recording(
         rate_hz: frame rate [Hz] that timestamps an image folder.
         keep_images: keep decoded images in memory (EuRoC, bag, image folder).
         gyro_unit, accel_unit: units of IMU values in CSVs and bags (``"deg/s"``, ``"g"`` convert).
+        cameras: the camera folders of an EuRoC or corner folder to read (None: all; cam0 is always read).
     """
     kind = detect_source(path)
     if kind == "recording":
@@ -109,11 +112,11 @@ def open_recording(
         )  # fmt: skip
     units = {"gyro_unit": gyro_unit, "accel_unit": accel_unit}
     if kind == "euroc":
-        return read_euroc(path, target, detector, keep_images, **units)
+        return read_euroc(path, target, detector, keep_images, cameras=cameras, **units)
     if kind == "bag":
         return read_bag(path, target, detector, image_topic, imu_topic, keep_images, **units)
     if kind == "corner_folder":
-        return read_corner_folder(path, target, imu_csv, **units)
+        return read_corner_folder(path, target, imu_csv, cameras=cameras, **units)
     if kind == "corners_csv":
         imu = read_imu_csv(imu_csv, **units) if imu_csv is not None else _no_imu()
         frames = read_board_point_csv(path, target) if names_board_points(path) else read_corners_csv(path, target)
@@ -128,15 +131,18 @@ def read_corner_folder(
     imu_csv: str | os.PathLike | None = None,
     gyro_unit: str = "rad/s",
     accel_unit: str = "m/s^2",
+    cameras: Sequence[str] | None = None,
 ) -> Recording:
-    """A corner folder's cameras (``camN/``, cam0 first) and its IMU (``imu_csv``, else its ``imu0.csv``)."""
+    """A corner folder's cameras (``camN/``, cam0 first; ``cameras``: those and cam0, ``chosen_cameras``) and its
+    IMU (``imu_csv``, else its ``imu0.csv``)."""
     root = Path(path)
     imu_path = imu_csv if imu_csv is not None else corner_folder_imu(root)
     imu = read_imu_csv(imu_path, gyro_unit, accel_unit) if imu_path is not None else _no_imu()
-    cameras = {name: read_camera_folder(root / name, target) for name in camera_folders(root)}
-    frames = cameras.pop("cam0")
+    names = chosen_cameras(camera_folders(root), cameras, str(root), "its camN folders of per-frame corner files")
+    read = {name: read_camera_folder(root / name, target) for name in names}
+    frames = read.pop("cam0")
     meta = {"source": "corner_folder", "path": str(root.resolve())}
-    return Recording(imu, frames, target, metadata=meta, other_frames=cameras)
+    return Recording(imu, frames, target, metadata=meta, other_frames=read)
 
 
 def _no_imu() -> ImuSamples:
