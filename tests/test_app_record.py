@@ -21,6 +21,7 @@ from hydra import compose, initialize_config_dir
 
 from vical.apps.record import ClampedStepWarning, FewViewsWarning, record, square_px
 from vical.config_checks import ConfigError
+from vical.io.kalibr import read_imu_yaml
 from vical.io.recording import load_recording
 from vical.sim.settings import BoardConfig
 
@@ -144,3 +145,32 @@ def test_a_recording_killed_while_written_leaves_nothing_that_blocks_the_next_on
     assert [p.name for p in tmp_path.iterdir()] == ["rec"]
     rec = load_recording(out)
     assert sorted(int(p.stem) for p in (out / "images").glob("*.png")) == rec.frames.t.tolist()
+
+
+# The tutorial's deliberately noisy IMU at 50 Hz (tests/imu_streams.py's NOISE): 30 min suffice for its Allan
+# deviation (docs/tutorial-calibrate-your-recording.md).
+NOISY_IMU = [
+    "sensor.imu.rate_hz=50.0", "sensor.imu.accel_noise=0.02", "sensor.imu.accel_random_walk=0.07",
+    "sensor.imu.gyro_noise=0.002", "sensor.imu.gyro_random_walk=0.007",
+]  # fmt: skip
+
+
+def test_a_static_imu_recording_gives_vical_imu_noise_the_sensors_noise(tmp_path, capsys):
+    """mode=static_imu: the drawn sensor's IMU lying still, as an EuRoC folder (imu0 alone) that vical-imu-noise
+    reads; the densities it measures are the sensor's within its 10 % (the Allan fit's accuracy on 30 min)."""
+    from vical.apps import imu_noise
+    from vical.io.sources import open_imu
+
+    out = tmp_path / "static_imu"
+    record(_cfg("mode=static_imu", "static_duration=1800", f"out={out}", "progress=false", *NOISY_IMU))
+    imu = open_imu(out)
+    assert len(imu) == 1800 * 50 and np.all(np.diff(imu.t) == 20_000_000)
+    np.testing.assert_allclose(np.median(imu.accel, axis=0), [0.0, 0.0, 9.81], atol=0.5)  # lying still, z up
+    assert imu_noise.main([str(out), "--out", str(tmp_path / "noise")]) == 0
+    measured = read_imu_yaml(tmp_path / "noise" / "imu.yaml")
+    assert measured.gyro_noise_density == pytest.approx(0.002, rel=0.10)
+    assert measured.gyro_random_walk == pytest.approx(0.007, rel=0.10)
+    assert measured.accel_noise_density == pytest.approx(0.02, rel=0.10)
+    assert measured.accel_random_walk == pytest.approx(0.07, rel=0.10)
+    assert measured.rate_hz == 50.0
+    assert "recording written to" not in capsys.readouterr().out  # record() returns; the console script prints
