@@ -11,6 +11,9 @@ Prints three tables:
 3. IMU sampling: how much of the physics-rate readings lies above the IMU's Nyquist frequency
    (what ``instant`` sampling folds into the 200 Hz stream) and how far ``instant`` samples lie
    from ``average`` samples, next to the white-noise sigma per sample.
+4. A static IMU recording (``vical-record mode=static_imu``): 2 h at 200 Hz generated in closed form and
+   written as an EuRoC folder (target: <= 1 min), next to the simulated arm holding still with its IMU
+   recording (physics + recorder) for 10 s in the same run, scaled to 2 h.
 
 Usage: ``python experiments/bench_sensors.py [--repeats 3]``.
 """
@@ -19,7 +22,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import tempfile
 import time
+from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -29,9 +34,10 @@ import numpy as np
 from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.data import ImuNoise
 from vical.geometry import euler_to_matrix, make_transform
+from vical.io.euroc import write_euroc_imu
 from vical.sim import PandaSim, camera_pose_cv
 from vical.sim.camera import ProjectBackend, RenderBackend
-from vical.sim.imu import ImuSiteReader, discrete_sigmas
+from vical.sim.imu import ImuSiteReader, discrete_sigmas, static_imu
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, sample_sensor
 
@@ -185,6 +191,31 @@ def _above(x: np.ndarray, rate: float, cutoff: float) -> np.ndarray:
     return np.fft.irfft(spectrum, n=len(x), axis=0)
 
 
+def static_table(sim: PandaSim, sampling: SensorSampling) -> list[tuple[str, str]]:
+    truth = sample_sensor(sampling, np.random.default_rng(0))
+    hours = 2.0
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        chunks = static_imu(truth, np.random.default_rng(1), hours * 3600)
+        write_euroc_imu(Path(tmp) / "static", chunks, truth.imu_noise, truth.imu_noise.rate_hz, "bench")
+        closed = time.perf_counter() - start
+        size = (Path(tmp) / "static" / "mav0" / "imu0" / "data.csv").stat().st_size
+    sim.reset()
+    recorder = SensorRecorder(sim, sim.cfg.board.target, sampling)
+    recorder.start(truth, np.random.default_rng(1))
+    held = 10.0
+    start = time.perf_counter()
+    sim.hold(held, observer=recorder)
+    physics = (time.perf_counter() - start) * hours * 3600 / held
+    recorder.close()
+    rate = truth.imu_noise.rate_hz
+    return [
+        (f"closed form + EuRoC CSV, {hours:g} h at {rate:g} Hz [s]", f"{closed:.1f} ({size / 1e6:.0f} MB)"),
+        (f"the arm at rest in physics + recorder, scaled to {hours:g} h [s]", f"{physics:.0f}"),
+        ("ratio", f"{physics / closed:.0f}x"),
+    ]
+
+
 def _print(title: str, rows: list[tuple[str, str]]) -> None:
     width = max(len(k) for k, _ in rows)
     print(f"\n{title}\n" + "-" * (width + 20))
@@ -201,6 +232,7 @@ def main() -> None:
     _print("Physics + IMU + project backend", physics_table(sim, sampling, args.repeats))
     _print("Render backend vs bare mujoco.Renderer (same scene, same run)", render_table(sim, sampling, args.repeats))
     _print("IMU sampling: instant vs interval average (noise-free readings)", imu_sampling_table(sim))
+    _print("A static IMU recording: closed form vs the simulated arm at rest (same run)", static_table(sim, sampling))
 
 
 if __name__ == "__main__":

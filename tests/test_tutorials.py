@@ -5,9 +5,8 @@ compared with the lines below it on the page.
 Comparison: line by line; a page line ``...`` stands for any number of output lines; numbers agree to 1e-6
 relative or 1e-9 absolute (the last digits of full-precision floats may differ between machines); solve times are
 not compared.
-``vical-record`` runs as its console script (Hydra), the other apps through their ``main(argv)``. The static IMU
-recording of the noise step (``static_imu``) is written first: 30 min of a simulated resting IMU
-(``imu_streams.static_stream``).
+``vical-record`` runs as its console script (Hydra), the other apps through their ``main(argv)``; every file a
+page uses is made by a command on it.
 """
 
 from __future__ import annotations
@@ -23,10 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from imu_streams import static_stream
 
 from vical.apps import calibrate, export, imu_noise
-from vical.io.csvfiles import write_imu_csv
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
 PAGES = ("tutorial-export-to-kalibr.md", "tutorial-calibrate-your-recording.md")  # the second uses the first's files
@@ -110,7 +107,6 @@ def matches(shown: list[str], printed: list[str]) -> bool:
 def outputs(tmp_path_factory) -> dict[str, list[tuple[Example, list[str]]]]:
     """Every page's examples with what they printed, run in order in one working directory."""
     cwd = tmp_path_factory.mktemp("tutorial")
-    write_imu_csv(static_stream(1800, 0), cwd / "static_imu" / "mav0" / "imu0" / "data.csv")
     return {page: [(e, run(e.command, cwd).splitlines()) for e in examples(page)] for page in PAGES}
 
 

@@ -33,10 +33,12 @@ from vical.config_checks import ConfigError, require, require_range
 from vical.data import CameraFrames, Recording
 from vical.geometry import CameraModel, matrix_to_euler, step_pose
 from vical.io.atomic import atomic_directory
+from vical.io.euroc import write_euroc_imu
 from vical.io.images import write_png
 from vical.io.recording import write_recording_files
 from vical.sim import MotionResult, PandaSim, SimConfig
 from vical.sim.camera import VisibilityRules
+from vical.sim.imu import STATIC_CHUNK_S, static_imu
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, sample_sensor
 from vical.sim.settings import BoardConfig
@@ -159,10 +161,16 @@ def write_images(recording: Recording, folder: Path) -> None:
         write_png(folder / f"{int(t)}.png", image)
 
 
+MODES = ("steps", "static_imu")
+MAX_STATIC_DURATION = 48 * 3600.0  # [s] two days: longer than any Allan deviation needs
+
+
 @dataclass(frozen=True)
 class RecordSettings:
     """The checked settings of one recording (``conf/record.yaml``)."""
 
+    mode: str
+    static_duration: float  # [s]
     steps: np.ndarray  # (S, 6) pose steps
     seed: int
     out: Path
@@ -181,7 +189,12 @@ def check_settings(cfg: DictConfig) -> RecordSettings:
     overwrite, images, progress = (_require_bool(cfg, key) for key in ("overwrite", "images", "progress"))
     settle_time = cfg.get("settle_time")
     require_range("settle_time", settle_time, 0.0, 60.0)
+    mode, static_duration = cfg.get("mode"), cfg.get("static_duration")
+    require(mode in MODES, "mode", f"one of {list(MODES)}", mode)
+    require_range("static_duration", static_duration, 0.0, MAX_STATIC_DURATION, low_open=True)
     return RecordSettings(
+        mode=mode,
+        static_duration=float(static_duration),
         steps=parse_steps(_plain(cfg.get("steps"))),
         seed=_seed(cfg.get("seed")),
         out=check_out(cfg.get("out"), overwrite),
@@ -197,8 +210,11 @@ def check_settings(cfg: DictConfig) -> RecordSettings:
 
 
 def record(cfg: DictConfig) -> Path:
-    """Run the motion of ``cfg`` with a sampled sensor and write the recording; return its directory."""
+    """Run the motion of ``cfg`` with a sampled sensor and write the recording (``mode=static_imu``: the IMU at
+    rest, ``record_static_imu``); return its directory."""
     s = check_settings(cfg)
+    if s.mode == "static_imu":
+        return record_static_imu(s)
     sim = PandaSim(s.sim)
     rng = np.random.default_rng(s.seed)
     truth = sample_sensor(s.sampling, rng, asymmetric=s.asymmetric_distortion)
@@ -226,6 +242,19 @@ def record(cfg: DictConfig) -> Path:
         if s.images:
             write_images(recording, tmp / "images")
     return s.out
+
+
+def record_static_imu(s: RecordSettings) -> Path:
+    """The drawn sensor's IMU lying still for ``static_duration``, as an IMU-only EuRoC folder (``vical-imu-noise``'s
+    input; ``imu0/sensor.yaml`` holds the true noise). Closed form (``vical.sim.imu.static_imu``), no arm, no
+    camera: hours of data in seconds, generated and written a minute at a time."""
+    truth = sample_sensor(s.sampling, np.random.default_rng(s.seed), asymmetric=s.asymmetric_distortion)
+    noise = truth.imu_noise
+    chunks = static_imu(truth, np.random.default_rng([s.seed, 1]), s.static_duration)
+    minutes = int(np.ceil(s.static_duration / STATIC_CHUNK_S))
+    shown = tqdm(chunks, desc=APP, total=minutes, unit="min", disable=not s.progress)
+    comment = f"written by vical-record mode=static_imu seed={s.seed}: the IMU at rest, its true noise below"
+    return write_euroc_imu(s.out, shown, noise, noise.rate_hz, comment, overwrite=s.overwrite)
 
 
 # An absolute path: the console script imports this module, and Hydra would read a relative

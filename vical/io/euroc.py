@@ -22,7 +22,7 @@ import os
 import re
 import shutil
 import warnings
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -86,6 +86,27 @@ def write_euroc(recording: Recording, path: str | os.PathLike, overwrite: bool =
             dump_yaml(cam / "sensor.yaml", _camera_sensor_yaml(frames, recording.truth_of(name)))
         write_imu_csv(recording.imu, imu / "data.csv")
         dump_yaml(imu / "sensor.yaml", _imu_sensor_yaml(recording))
+    return Path(path)
+
+
+def write_euroc_imu(
+    path: str | os.PathLike,
+    chunks: Iterable[ImuSamples],
+    noise: ImuNoise | None,
+    rate_hz: float,
+    comment: str,
+    overwrite: bool = False,
+) -> Path:
+    """An IMU-only EuRoC folder (``mav0/imu0/data.csv`` and ``sensor.yaml``) from IMU samples given chunk by chunk
+    (hours of them: each chunk is written and dropped), atomically: nothing at ``path`` until it is whole."""
+    with atomic_directory(path, overwrite=overwrite) as tmp:
+        imu = tmp / "mav0" / "imu0"
+        imu.mkdir(parents=True)
+        dump_yaml(imu / "sensor.yaml", _imu_noise_yaml(noise, rate_hz, comment))
+        with open(imu / "data.csv", "w", encoding="utf-8") as f:
+            f.write(IMU_HEADER + "\n")
+            for chunk in chunks:
+                f.write(imu_rows(chunk))
     return Path(path)
 
 

@@ -21,12 +21,13 @@ initial bias.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import mujoco
 import numpy as np
 
-from vical.data import ImuIntrinsics, ImuNoise, ImuSamples
+from vical.data import ImuIntrinsics, ImuNoise, ImuSamples, SensorTruth
 from vical.sim.sampling import IMU_SAMPLING
 
 
@@ -344,3 +345,28 @@ class ImuSimulator:
             self._accel = np.vstack([self._accel, accel])
             self._ideal, self._ideal_t = [], []
         return ImuSamples(self._t.copy(), self._gyro.copy(), self._accel.copy())
+
+
+STATIC_GRAVITY = 9.81  # [m/s^2] the specific force of an IMU at rest (MuJoCo's gravity, the simulated arm's)
+STATIC_CHUNK_S = 60.0  # [s] of samples generated at a time: hours of data in bounded memory
+
+
+def static_imu(truth: SensorTruth, rng: np.random.Generator, duration_s: float) -> Iterator[ImuSamples]:
+    """The IMU of ``truth`` lying still, z axis up, for ``duration_s``, in chunks of ``STATIC_CHUNK_S``.
+
+    Closed form: the true rates are zero and the specific force is gravity along +z; the readings go
+    through the IMU's intrinsics (``ImuIntrinsics.distort``) and its noise (``ImuNoiseProcess``: white noise
+    and bias random walk from the initial biases, drawn in sample order, so the data do not depend on the
+    chunking). The earth's rotation (7.3e-5 rad/s) is left out, as a bias it would hide in the gyro's.
+    Stamps [ns] start at 0, one IMU period apart.
+    """
+    noise = truth.imu_noise
+    period_ns = round(1e9 / noise.rate_hz)
+    total = round(duration_s * noise.rate_hz)
+    gyro, accel = truth.imu_intrinsics.distort(np.zeros((1, 3)), np.array([[0.0, 0.0, STATIC_GRAVITY]]))
+    process = ImuNoiseProcess(noise, rng, truth.gyro_bias, truth.accel_bias)
+    per_chunk = max(1, round(STATIC_CHUNK_S * noise.rate_hz))
+    for start in range(0, total, per_chunk):
+        n = min(per_chunk, total - start)
+        noisy_gyro, noisy_accel, _ = process.apply(np.repeat(gyro, n, axis=0), np.repeat(accel, n, axis=0))
+        yield ImuSamples((start + np.arange(n, dtype=np.int64)) * period_ns, noisy_gyro, noisy_accel)
