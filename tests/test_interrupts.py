@@ -3,11 +3,13 @@ half-written. In process, the interrupt is raised through a hook at a stage (wri
 in the integration tier, a real signal is sent when the command prints the marker of a stage."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from imu_streams import static_stream
 
@@ -83,11 +85,22 @@ def test_imu_noise_interrupted_in_the_allan_computation_writes_nothing(
     assert not out.exists()
 
 
-def signal_at_marker(app: str, args: list[str], marker: str, sig: int) -> tuple[int, list[str], str]:
+PROGRESS_BAR = re.compile(r"\d+%\|")
+
+
+def _default_sigint() -> None:
+    """A shell's background job inherits SIGINT ignored; Ctrl-C reaches the command only with the default action."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def signal_at_marker(
+    app: str, args: list[str], marker: str, sig: int, cwd: Path | None = None
+) -> tuple[int, list[str], str]:
     """Run the console script ``app``, send ``sig`` when its stderr shows ``marker`` (the stage's line, never after a
-    sleep); its exit status, its stderr lines that start with its name, and its whole stderr."""
-    proc = subprocess.Popen([str(Path(sys.executable).parent / app), *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)  # fmt: skip
+    sleep); its exit status, its stderr lines that start with its name (its progress bars left out: they carry its
+    name too), and its whole stderr."""
+    proc = subprocess.Popen([str(Path(sys.executable).parent / app), *args], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, cwd=cwd, preexec_fn=_default_sigint)  # fmt: skip
     seen = ""
     while marker not in seen:
         char = proc.stderr.read(1)
@@ -95,8 +108,16 @@ def signal_at_marker(app: str, args: list[str], marker: str, sig: int) -> tuple[
         seen += char
     os.kill(proc.pid, sig)
     stderr = seen + proc.stderr.read()
-    status = proc.wait(timeout=60)
-    return status, [line for line in stderr.replace("\r", "\n").splitlines() if line.startswith(app)], stderr
+    status = proc.wait(timeout=120)
+    lines = stderr.replace("\r", "\n").splitlines()
+    return status, [line for line in lines if line.startswith(app) and not PROGRESS_BAR.search(line)], stderr
+
+
+SIGNALS = [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")]
+
+
+def as_it_was(app: str, where: str, name: str) -> str:
+    return f"{app}: interrupted ({name}); {where} is as it was: the outputs are written whole or not at all"
 
 
 @pytest.mark.integration
@@ -140,3 +161,62 @@ def test_a_real_signal_during_the_detection_stops_vical_calibrate_in_one_line(si
     assert lines == [f"vical-calibrate: interrupted ({name}); --out {out} is as it was: the outputs are written "
                      "whole or not at all"], stderr  # fmt: skip
     assert "Traceback" not in stderr and not out.exists()
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("sig", "status", "name"), SIGNALS)
+def test_a_real_signal_while_a_static_imu_is_generated_stops_vical_record_in_one_line(sig, status, name, tmp_path):
+    out = tmp_path / "static"
+    status_seen, lines, stderr = signal_at_marker("vical-record", ["mode=static_imu", f"out={out}"], "vical-record:",
+                                                  sig)  # fmt: skip
+    assert status_seen == status
+    assert lines == [as_it_was("vical-record", f"out={out}", name)], stderr
+    assert "Traceback" not in stderr and sorted(tmp_path.iterdir()) == []  # no temporary sibling either
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("sig", "status", "name"), SIGNALS)
+def test_a_real_signal_while_frames_are_rendered_stops_vical_record_in_one_line(sig, status, name, tmp_path):
+    out = tmp_path / "rec"
+    args = ["sensor.backend=render", "images=true", f"out={out}"]
+    status_seen, lines, stderr = signal_at_marker("vical-record", args, "vical-record:", sig)  # the steps' bar
+    assert status_seen == status
+    assert lines == [as_it_was("vical-record", f"out={out}", name)], stderr
+    assert "Traceback" not in stderr and sorted(tmp_path.iterdir()) == []
+
+
+@pytest.fixture(scope="module")
+def recording_with_images(tmp_path_factory):
+    """A recording whose 150 noise images are slow to encode: the export is still writing its bag when signalled."""
+    from dataclasses import replace
+
+    from vical.data import CameraFrames
+
+    rec = make_recording(duration=15.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=3)
+    images = np.random.default_rng(0).integers(0, 256, (len(rec.frames), 480, 640), dtype=np.uint8)
+    frames = CameraFrames(rec.frames.t, rec.frames.corners, rec.frames.ids, images)
+    return save_recording(replace(rec, frames=frames), tmp_path_factory.mktemp("rec") / "rec")
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("sig", "status", "name"), SIGNALS)
+def test_a_real_signal_while_the_bag_is_written_stops_vical_export_in_one_line(
+    sig, status, name, recording_with_images, tmp_path
+):
+    out = tmp_path / "kalibr_in"
+    args = [str(recording_with_images), "--out", str(out)]
+    status_seen, lines, stderr = signal_at_marker("vical-export", args, "writing data.bag", sig)
+    assert status_seen == status
+    assert lines == [as_it_was("vical-export", f"--out {out}", name)], stderr
+    assert "Traceback" not in stderr and not out.exists()
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("sig", "status", "name"), SIGNALS)
+def test_a_real_signal_during_the_episodes_stops_vical_evaluate_in_one_line(sig, status, name, tmp_path):
+    out = tmp_path / "evaluation"
+    args = ["episodes=3", "budgets=[]", f"out={out}"]
+    status_seen, lines, stderr = signal_at_marker("vical-evaluate", args, "episodes:", sig, cwd=tmp_path)
+    assert status_seen == status
+    assert lines == [as_it_was("vical-evaluate", f"out={out}", name)], stderr
+    assert "Traceback" not in stderr and sorted(tmp_path.iterdir()) == []
