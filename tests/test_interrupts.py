@@ -220,3 +220,33 @@ def test_a_real_signal_during_the_episodes_stops_vical_evaluate_in_one_line(sig,
     assert status_seen == status
     assert lines == [as_it_was("vical-evaluate", f"out={out}", name)], stderr
     assert "Traceback" not in stderr and sorted(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("kind", "status", "name"), INTERRUPTS)
+def test_export_interrupted_while_replacing_an_export_keeps_the_old_one_whole(
+    kind, status, name, tmp_path, monkeypatch, capsys
+):
+    """--overwrite over a complete export, stopped while the new bag is written: every old file as it was (the
+    EuRoC folder already written anew included), no temporary left."""
+    from dataclasses import replace
+
+    from vical.apps import export
+    from vical.data import CameraFrames
+
+    def with_images(seed: int) -> Path:
+        rec = make_recording(duration=2.0, imu_noise=ImuNoise(), seed=seed)
+        images = np.random.default_rng(seed).integers(0, 256, (len(rec.frames), 480, 640), dtype=np.uint8)
+        frames = CameraFrames(rec.frames.t, rec.frames.corners, rec.frames.ids, images)
+        return save_recording(replace(rec, frames=frames), tmp_path / f"rec{seed}")
+
+    out = tmp_path / "kalibr_in"
+    assert export.main([str(with_images(5)), "--out", str(out)]) == 0
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    monkeypatch.setattr(export, "write_bag", interrupt(kind))
+    argv = ["vical-export", with_images(6), "--out", out, "--overwrite"]  # another recording's export
+    code, lines = run_entry(entry_point("export"), argv, monkeypatch, capsys)
+    assert code == status
+    assert lines == [as_it_was("vical-export", f"--out {out}", name)]
+    assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert not [p for p in tmp_path.rglob("*") if ".tmp-" in p.name]
