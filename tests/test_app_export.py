@@ -194,16 +194,18 @@ def test_an_export_killed_mid_write_leaves_nothing_that_blocks_the_next_one(tmp_
     command = [str(Path(sys.executable).parent / "vical-export"), str(tmp_path / "rec"), "--out", str(out)]
     proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
-    while not (out.is_dir() and any(".tmp-" in p.name for p in out.iterdir())):
+    # A new --out is built aside, as a hidden temporary sibling, and renamed into place whole.
+    while not any(p.name.startswith(".kalibr_in.tmp-") for p in tmp_path.iterdir()):
         assert proc.poll() is None, "the export ended before it was killed"
         assert time.monotonic() < deadline
         time.sleep(0.001)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
-    assert any(".tmp-" in p.name for p in out.iterdir())  # killed mid-write: a hidden temporary is left
+    assert not out.exists()  # killed mid-write: no --out, a hidden temporary is left beside it
+    assert any(p.name.startswith(".kalibr_in.tmp-") for p in tmp_path.iterdir())
 
     again = subprocess.run([*command, "--overwrite"], capture_output=True, text=True, timeout=120)
     assert again.returncode == 0, again.stderr
-    assert not [p for p in out.rglob("*") if ".tmp-" in p.name]
+    assert not [p for p in tmp_path.rglob("*") if ".tmp-" in p.name]
     back = open_recording(out / "data.bag", rec.target, keep_images=True)
     assert np.array_equal(back.frames.images, images)

@@ -31,7 +31,7 @@ from vical.apps.cli import ArgumentParser, cannot_write, one_line_warnings, repo
 from vical.apps.entry import run as run_command
 from vical.data import DataError, ImuNoise, Recording
 from vical.geometry.transforms import invert_transform
-from vical.io.atomic import remove_stale_temporaries
+from vical.io.atomic import files_together, remove_stale_temporaries
 from vical.io.bag import camera_topics, write_bag
 from vical.io.errors import FormatError
 from vical.io.euroc import write_euroc
@@ -161,22 +161,22 @@ def export(rec: Recording, out: Path, image_topics: Sequence[str], imu_topic: st
     check_images(rec)
     topics = image_topics_of(rec, image_topics)
     check_out(out, overwrite)
-    out.mkdir(parents=True, exist_ok=True)
-    written = [write_euroc(rec, out / "euroc", overwrite=overwrite)]
-    written.append(write_bag(rec, out / "data.bag", topics, imu_topic, overwrite=overwrite))
-    write_target_yaml(out / "target.yaml", rec.target)
-    noise = rec.truth.imu_noise if rec.truth is not None else ImuNoise()
-    write_imu_yaml(out / "imu.yaml", noise, rostopic=imu_topic)
-    written += [out / "target.yaml", out / "imu.yaml"]
-    if knows_every_truth(rec):
-        write_chain(out / "camchain.yaml", truth_chain(rec, topics, with_imu=False))
-        write_chain(out / "camchain-imucam-truth.yaml", truth_chain(rec, topics, with_imu=True))
-        written += [out / "camchain.yaml", out / "camchain-imucam-truth.yaml"]
-    if rec.truth is not None and not rec.truth.imu_intrinsics.is_identity():
-        path = out / "imu-truth.yaml"  # the truth to compare Kalibr's scale-misalignment result with
-        write_imu_yaml(path, noise, rostopic=imu_topic, intrinsics=rec.truth.imu_intrinsics)
-        written.append(path)
-    return written
+    names = ["euroc", "data.bag", "target.yaml", "imu.yaml"]
+    with files_together(out) as path_of:  # every output or none: the old ones stay until the new ones are whole
+        write_euroc(rec, path_of("euroc"))
+        write_bag(rec, path_of("data.bag"), topics, imu_topic)
+        write_target_yaml(path_of("target.yaml"), rec.target)
+        noise = rec.truth.imu_noise if rec.truth is not None else ImuNoise()
+        write_imu_yaml(path_of("imu.yaml"), noise, rostopic=imu_topic)
+        if knows_every_truth(rec):
+            write_chain(path_of("camchain.yaml"), truth_chain(rec, topics, with_imu=False))
+            write_chain(path_of("camchain-imucam-truth.yaml"), truth_chain(rec, topics, with_imu=True))
+            names += ["camchain.yaml", "camchain-imucam-truth.yaml"]
+        if rec.truth is not None and not rec.truth.imu_intrinsics.is_identity():
+            # the truth to compare Kalibr's scale-misalignment result with
+            write_imu_yaml(path_of("imu-truth.yaml"), noise, rostopic=imu_topic, intrinsics=rec.truth.imu_intrinsics)
+            names.append("imu-truth.yaml")
+    return [out / name for name in names]
 
 
 def truth_note(rec: Recording) -> str | None:

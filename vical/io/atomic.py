@@ -107,11 +107,16 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
 
 @contextlib.contextmanager
 def files_together(directory: str | os.PathLike) -> Iterator[Callable[[str], Path]]:
-    """Write several files of ``directory`` as one result: yields ``path_of(name)``, the temporary path to write
-    the file ``name`` to; when the body ends, the files are moved into place one after another (each rename
-    whole), none of them before all are written; if the body raises, none is moved and nothing is left."""
+    """Write several files (or folders) of ``directory`` as one result: yields ``path_of(name)``, the temporary
+    path to write the entry ``name`` to; when the body ends, the entries are moved into place one after another
+    (each rename whole, a folder through ``replace_directory``), none of them before all are written; if the body
+    raises, none is moved and nothing is left. A ``directory`` that does not exist yet is built aside and renamed
+    into place whole (``atomic_directory``): an interrupted run leaves no empty one behind."""
     final = Path(directory)
-    final.mkdir(parents=True, exist_ok=True)
+    if not final.exists():
+        with atomic_directory(final) as built:
+            yield lambda name: built / name
+        return
     staging = Path(tempfile.mkdtemp(prefix=temporary_prefix(final / "files"), dir=final))
     written: list[str] = []
 
@@ -122,7 +127,10 @@ def files_together(directory: str | os.PathLike) -> Iterator[Callable[[str], Pat
     try:
         yield path_of
         for name in written:
-            os.replace(staging / name, final / name)
+            if (staging / name).is_dir():
+                replace_directory(staging / name, final / name)
+            else:
+                os.replace(staging / name, final / name)
     finally:
         shutil.rmtree(staging, ignore_errors=True)
 
