@@ -213,7 +213,7 @@ KILL_ARGS = ["policy=random_moving", "limits.max_steps=40", "calibrate=false", "
 
 
 @pytest.mark.integration
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT])
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT, signal.SIGTERM])
 def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, sig):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "vical.apps.collect", f"out={out}", *KILL_ARGS]
@@ -226,10 +226,14 @@ def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, s
         time.sleep(0.2)
     proc.send_signal(sig)
     _, err = proc.communicate(timeout=60)
-    if sig == signal.SIGINT:
-        assert proc.returncode == 130
-        assert "interrupted (Ctrl-C): the arm is stopped and the recording so far is in" in err
-        assert "interrupted" in (out / "collect.yaml").read_text()
+    if sig != signal.SIGKILL:
+        status, name = (130, "Ctrl-C") if sig == signal.SIGINT else (143, "SIGTERM")
+        assert proc.returncode == status
+        (line,) = [line for line in err.splitlines() if line.startswith("vical-collect")]
+        assert line.startswith(
+            f"vical-collect: interrupted ({name}): the arm is stopped and the recording so far is in"
+        )
+        assert "Traceback" not in err and f"interrupted ({name})" in (out / "collect.yaml").read_text()
     target = read_target_yaml(out / "target.yaml")
     rec = read_euroc(out / "recording", target)
     assert len(rec.frames) >= 100

@@ -226,19 +226,20 @@ def test_overwrite_replaces_a_run_only_once_the_new_run_is_complete(tmp_path):
 
 
 @pytest.mark.integration
-def test_ctrl_c_says_where_the_last_checkpoint_is_and_how_to_resume(tmp_path):
+@pytest.mark.parametrize(("sig", "status", "name"), [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
+def test_ctrl_c_says_where_the_last_checkpoint_is_and_how_to_resume(tmp_path, sig, status, name):
     run = tmp_path / "run"
     proc = run_app(*TINY, "train.total_steps=100000", f"run_dir={run}", cwd=tmp_path)
     deadline = time.monotonic() + 120
     while not (run / CHECKPOINT).exists():
         assert proc.poll() is None and time.monotonic() < deadline, proc.stdout.read()
         time.sleep(0.01)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sig)
     out = proc.communicate(timeout=60)[0]
-    assert proc.returncode == 130, out
+    assert proc.returncode == status, out
     step = load_checkpoint(run / CHECKPOINT)["counters"]["step"]
     assert out.splitlines()[-1] == (
-        f"vical-train: interrupted (Ctrl-C); the last checkpoint (step {step}) is {run / CHECKPOINT}; "
+        f"vical-train: interrupted ({name}); the last checkpoint (step {step}) is {run / CHECKPOINT}; "
         f"continue with: vical-train resume={run}"
     )
     assert "Traceback" not in out and "KeyboardInterrupt" not in out
