@@ -178,28 +178,33 @@ def test_a_static_imu_recording_gives_vical_imu_noise_the_sensors_noise(tmp_path
     assert "recording written to" not in capsys.readouterr().out  # record() returns; the console script prints
 
 
-def test_a_stereo_rig_records_each_camera_from_its_own_pose_on_one_trigger(tmp_path):
-    """sensor=stereo: two fisheye cameras 11 cm apart, each with its own lens, stamped together; calibrated as the
-    README says (vical-calibrate --cameras cam0,cam1 --model ds), the rig's relative pose and lenses come back."""
+@pytest.mark.parametrize("backend", ["project", "render"])
+def test_a_stereo_rig_records_each_camera_from_its_own_pose_on_one_trigger(tmp_path, backend):
+    """sensor=stereo: two cameras 11 cm apart, each with its own lens, stamped together (rendered: each through its
+    own renderer, its PNGs in images_cam1/); calibrated as the README says (vical-calibrate --cameras cam0,cam1),
+    the rig's relative pose and lenses come back (seeds 0-2 measured: 0.02-0.05 deg, 0.4-1.2 mm, focal lengths
+    within 0.11 %)."""
     from vical.apps import calibrate
     from vical.io.kalibr_chain import read_chain
 
     out = tmp_path / "stereo"
-    record(_cfg("sensor=stereo", "task=joint", f"out={out}", "progress=false"))
+    rendered = [f"sensor.backend={backend}", f"images={str(backend == 'render').lower()}"]
+    record(_cfg("sensor=stereo", "task=joint", "workspace=practitioner", f"out={out}", "progress=false", *rendered))
     rec = load_recording(out)
+    if backend == "render":
+        assert len(list((out / "images_cam1").glob("*.png"))) == len(rec.frames_of("cam1")) > 20
     assert rec.camera_names == ["cam0", "cam1"]
     np.testing.assert_array_equal(rec.frames_of("cam1").t, rec.frames.t)  # one trigger
     first, second = rec.truth, rec.truth_of("cam1")
-    assert first.camera.distortion == second.camera.distortion == "ds" and first.camera != second.camera
+    assert first.camera != second.camera  # each its own lens
     T_c1_c0 = second.T_cam_imu @ np.linalg.inv(first.T_cam_imu)
     assert np.linalg.norm(T_c1_c0[:3, 3]) == pytest.approx(0.11, abs=0.01)
-    assert min(rec.frames_of(n).num_detections.astype(bool).sum() for n in rec.camera_names) >= 10
+    assert min(rec.frames_of(n).num_detections.astype(bool).sum() for n in rec.camera_names) >= 20
     calib = tmp_path / "calib"
-    argv = [str(out), "--cameras", "cam0,cam1", "--model", "ds", "--out", str(calib), "--no-report"]
-    assert calibrate.main(argv) == 0
+    assert calibrate.main([str(out), "--cameras", "cam0,cam1", "--out", str(calib), "--no-report"]) == 0
     chain = read_chain(calib / "camchain-imucam.yaml")
     found = chain["cam1"].T_cn_cnm1
     assert np.degrees(np.arccos(np.clip((np.trace(found[:3, :3] @ T_c1_c0[:3, :3].T) - 1) / 2, -1, 1))) < 0.1
     assert np.linalg.norm(found[:3, 3] - T_c1_c0[:3, 3]) < 0.002
     for name, truth in (("cam0", first), ("cam1", second)):
-        assert chain[name].camera.fx == pytest.approx(truth.camera.fx, rel=0.01)
+        assert chain[name].camera.fx == pytest.approx(truth.camera.fx, rel=0.005)

@@ -93,6 +93,7 @@ IDENTITY = np.eye(4).tolist()  # T_flange_tool=None (the robot adapters' default
 PAIRS: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [
     ("sim/default.yaml", (), dataclass_defaults(SimConfig)),
     ("sensor/paper.yaml", (), dataclass_defaults(SensorSampling)),
+    ("sensor/stereo.yaml", (), dataclass_defaults(SensorSampling)),
     ("task/intrinsic.yaml", (), dataclass_defaults(CalibrationTask)),
     ("task/extrinsic.yaml", (), dataclass_defaults(CalibrationTask)),
     ("task/joint.yaml", (), dataclass_defaults(CalibrationTask)),
@@ -135,6 +136,7 @@ NO_COUNTERPART = {
 # Settings a file changes on purpose: (file, dotted key) -> why. Everything else must equal its default.
 PRACTITIONER = "the practitioner's workspace (docs/workspace.md); the dataclasses' defaults are the authors' (paper)"
 DIFFERS = {
+    ("sensor/stereo.yaml", "rig"): "a stereo rig is the point of this file (its other camera); the default has none",
     # The information MDP: conf/env/information.yaml composes from conf/env/calibration.yaml (MdpConfig's defaults,
     # the paper's coverage MDP) and changes the mode, its step limit and its reward.
     ("env/information.yaml", "state"): "the information mode is the point of this file",

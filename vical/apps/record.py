@@ -40,7 +40,7 @@ from vical.sim import MotionResult, PandaSim, SimConfig
 from vical.sim.camera import VisibilityRules
 from vical.sim.imu import STATIC_CHUNK_S, static_imu
 from vical.sim.recorder import SensorRecorder
-from vical.sim.sampling import SensorSampling, sample_sensor
+from vical.sim.sampling import SensorSampling, sample_rig, sample_sensor
 from vical.sim.settings import BoardConfig
 
 APP = "vical-record"
@@ -154,11 +154,14 @@ def square_px(camera: CameraModel, board: BoardConfig) -> float:
     return float(np.linalg.norm(uv[1] - uv[0]))
 
 
-def write_images(recording: Recording, folder: Path) -> None:
-    """Write every frame's image as ``<folder>/<t_ns>.png``."""
-    folder.mkdir()
-    for t, image in zip(recording.frames.t, recording.frames.images, strict=True):
-        write_png(folder / f"{int(t)}.png", image)
+def write_images(recording: Recording, out: Path) -> None:
+    """Write every frame's image as ``<out>/images/<t_ns>.png`` (a rig's other cameras: ``images_camN/``)."""
+    for name in recording.camera_names:
+        folder = out / ("images" if name == "cam0" else f"images_{name}")
+        folder.mkdir()
+        frames = recording.frames_of(name)
+        for t, image in zip(frames.t, frames.images, strict=True):
+            write_png(folder / f"{int(t)}.png", image)
 
 
 MODES = ("steps", "static_imu")
@@ -218,11 +221,12 @@ def record(cfg: DictConfig) -> Path:
     sim = PandaSim(s.sim)
     rng = np.random.default_rng(s.seed)
     truth = sample_sensor(s.sampling, rng, asymmetric=s.asymmetric_distortion)
+    others = sample_rig(s.sampling, rng, truth)  # sensor.rig's cameras (none: nothing drawn)
     detector = detect_aprilgrid if sim.cfg.board.kind == "aprilgrid" else detect_checkerboard
     detector = detector if s.sampling.backend == "render" else None
     recorder = SensorRecorder(sim, sim.cfg.board.target, s.sampling, detector, s.images, render_size=s.render_size)
     try:
-        recorder.start(truth, rng)
+        recorder.start(truth, rng, others)
         for i, step in enumerate(tqdm(s.steps, desc=APP, unit="step", disable=not s.progress)):
             T_start = sim.ee_pose()
             T_goal = step_pose(T_start, step[:3], step[3:])
@@ -240,7 +244,7 @@ def record(cfg: DictConfig) -> Path:
     with atomic_directory(s.out, overwrite=s.overwrite) as tmp:
         write_recording_files(recording, tmp)
         if s.images:
-            write_images(recording, tmp / "images")
+            write_images(recording, tmp)
     return s.out
 
 

@@ -385,6 +385,11 @@ class RenderBackend:
         self.views: WarpViews | None = None
 
     @property
+    def size(self) -> tuple[int, int]:
+        """(W, H) [px] of the undistorted render."""
+        return self._size
+
+    @property
     def pinhole(self) -> CameraModel | None:
         """The pinhole of the renders (one, or each cube face's)."""
         return None if self.views is None else self.views.pinhole

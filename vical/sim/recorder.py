@@ -19,6 +19,7 @@ few physics steps after the motion).
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,6 +27,7 @@ import mujoco
 import numpy as np
 
 from vical.data import CameraFrames, ImuSamples, PathProfile, Recording, SensorTruth, Target, Trajectory
+from vical.geometry import invert_transform
 from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
 from vical.sim.imu import ImuSimulator, ImuSiteReader, SiteReadings, row_dot
 from vical.sim.motion import MotionResult
@@ -88,20 +90,28 @@ class SensorRecorder:
         model = sim.model
         self._reader = ImuSiteReader(model)
         self.truth: SensorTruth | None = None
+        self.others: dict[str, SensorTruth] = {}  # a rig's other cameras (start)
+        self._other_render: dict[str, RenderBackend] = {}
+        self._other_frames: dict[str, dict[str, list]] = {}
 
     # ------------------------------------------------------------------ episode
-    def start(self, truth: SensorTruth, rng: np.random.Generator) -> None:
+    def start(
+        self, truth: SensorTruth, rng: np.random.Generator, others: Mapping[str, SensorTruth] | None = None
+    ) -> None:
         """Begin an episode with sensor ``truth``: places the IMU site, prepares the camera, clears the data.
 
         Call before the first motion of the episode (after ``sim.reset``); ``rng`` draws the IMU
-        and pixel noise.
+        and pixel noise. ``others``: a rig's other cameras by name (``vical.sim.sampling.sample_rig``), exposed
+        with the first one (its stamps, its time offset), each from its own pose through its own lens.
         """
-        if truth.camera.width != self.sampling.camera.width or truth.camera.height != self.sampling.camera.height:
-            raise ValueError(
-                f"sensor camera is {truth.camera.width} x {truth.camera.height} px but the recorder is set up for "
-                f"{self.sampling.camera.width} x {self.sampling.camera.height} (sensor.camera.width/height)"
-            )
+        for camera in [truth.camera] + [o.camera for o in (others or {}).values()]:
+            if camera.width != self.sampling.camera.width or camera.height != self.sampling.camera.height:
+                raise ValueError(
+                    f"sensor camera is {camera.width} x {camera.height} px but the recorder is set up for "
+                    f"{self.sampling.camera.width} x {self.sampling.camera.height} (sensor.camera.width/height)"
+                )
         self.truth = truth
+        self._start_others(dict(others or {}))
         set_imu_pose(self.sim.model, sensor_imu_pose(truth))
         mujoco.mj_forward(self.sim.model, self.sim.data)
         self._reader.reset(self.sim.time_ns)
@@ -121,7 +131,7 @@ class SensorRecorder:
         self._offset_ns = round(truth.time_offset * 1e9)
         self._next_stamp: int | None = None
         self._before: tuple[int, np.ndarray] | None = None
-        self._frames: dict[str, list] = {"t": [], "corners": [], "ids": [], "images": []}
+        self._frames: dict[str, list] = _no_frames()
         self._log = _TruthLog([], [], [], [])
         self._path_length = 0.0
         self._duration = 0.0
@@ -195,7 +205,9 @@ class SensorRecorder:
         imu = self.imu_samples()
         return Recording(
             imu=imu,
-            frames=self._camera_frames(imu),
+            frames=self._camera_frames(self._frames, imu),
+            other_frames={name: self._camera_frames(f, imu) for name, f in self._other_frames.items()},
+            other_truths=dict(self.others),
             target=self.target,
             truth=self.truth,
             trajectory=self._trajectory(imu),
@@ -216,16 +228,35 @@ class SensorRecorder:
         period = self._cam_period_ns
         return -(-(t_ns - self._offset_ns) // period) * period
 
+    def _start_others(self, others: dict[str, SensorTruth]) -> None:
+        """The rig's other cameras: their truths, a renderer each where images are made, their frames cleared."""
+        for render in self._other_render.values():
+            render.close()
+        self.others = others
+        self._other_render = {}
+        if self.render is not None:
+            for name, other in others.items():
+                self._other_render[name] = RenderBackend(self.sim.model, self.target, self.render.detector,
+                                                         self.render.size)  # fmt: skip
+                self._other_render[name].set_camera(other.camera)
+        self._other_frames = {name: _no_frames() for name in others}
+
     def _observe(self, stamp: int, T_world_cam: np.ndarray) -> None:
-        camera = self.truth.camera
+        self._observe_camera(self._frames, self.truth.camera, self.render, stamp, T_world_cam)
+        for name, other in self.others.items():
+            T_cam0_cam = self.truth.T_cam_imu @ invert_transform(other.T_cam_imu)
+            frames, render = self._other_frames[name], self._other_render.get(name)
+            self._observe_camera(frames, other.camera, render, stamp, T_world_cam @ T_cam0_cam)
+
+    def _observe_camera(self, frames: dict[str, list], camera, render, stamp: int, T_world_cam: np.ndarray) -> None:
+        """One camera's exposure at pose ``T_world_cam``: its corners (and image) appended to ``frames``."""
         image = None
         if self.sampling.backend == "render":
-            corners, ids, image = self.render.observe(self.sim.data, T_world_cam)
+            corners, ids, image = render.observe(self.sim.data, T_world_cam)
         else:
             corners, ids = self.project.observe(camera, T_world_cam, self._cam_rng)
             if self.keep_images:
-                image = self.render.image(self.sim.data, T_world_cam)
-        frames = self._frames
+                image = render.image(self.sim.data, T_world_cam)
         frames["t"].append(stamp)
         frames["corners"].append(corners)
         frames["ids"].append(ids)
@@ -282,8 +313,7 @@ class SensorRecorder:
             omega_imu=_joined(log.omega_imu, float, (3,))[take],
         )
 
-    def _camera_frames(self, imu: ImuSamples) -> CameraFrames:
-        f = self._frames
+    def _camera_frames(self, f: dict[str, list], imu: ImuSamples) -> CameraFrames:
         images = np.asarray(f["images"], dtype=np.uint8) if self.keep_images and f["images"] else None
         frames = CameraFrames(np.asarray(f["t"], dtype=np.int64), f["corners"], f["ids"], images)
         if not len(imu):
@@ -292,9 +322,14 @@ class SensorRecorder:
         return frames.select((exposure >= imu.t[0]) & (exposure <= imu.t[-1]))
 
     def close(self) -> None:
-        """Free the renderer's GL context."""
-        if self.render is not None:
-            self.render.close()
+        """Free the renderers' GL contexts."""
+        for render in [self.render, *self._other_render.values()]:
+            if render is not None:
+                render.close()
+
+
+def _no_frames() -> dict[str, list]:
+    return {"t": [], "corners": [], "ids": [], "images": []}
 
 
 def _joined(chunks: list[np.ndarray], dtype: type, row: tuple[int, ...] = ()) -> np.ndarray:

@@ -13,7 +13,7 @@ extrinsic the calibrator estimates is ``T_cam_imu = T_cam_body @ T_body_imu``.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -146,6 +146,48 @@ class ExtrinsicSampling:
             object.__setattr__(self, name, tuple(float(v) for v in value))
 
 
+RIG_KEY = "sensor.rig[]"  # a rig camera's settings in messages, before its index is known
+
+
+@dataclass(frozen=True)
+class RigCameraSampling:
+    """Another camera of a rig (cam1, cam2, ...), on cam0's trigger: its pose in cam0's camera (OpenCV) frame,
+    position [m] (x right, y down, z along the optical axis) and Euler angles [roll, pitch, yaw] [rad] of its
+    axes in cam0's; its lens is drawn from the same distribution as cam0's (``SensorSampling.camera``)."""
+
+    position_mean: tuple[float, float, float] = (0.11, 0.0, 0.0)
+    position_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy_mean: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        for name in ("position_mean", "position_std", "rpy_mean", "rpy_std"):
+            value = np.asarray(getattr(self, name), dtype=float)
+            key = f"{RIG_KEY}.{name}"
+            require(value.shape == (3,) and bool(np.all(np.isfinite(value))), key, "3 finite numbers", value.tolist())
+            if name.endswith("std"):
+                require(bool(np.all(value >= 0)), key, "non-negative", value.tolist())
+            object.__setattr__(self, name, tuple(float(v) for v in value))
+
+
+def _rig(cameras: Any) -> tuple[RigCameraSampling, ...]:
+    """``sensor.rig`` as ``RigCameraSampling`` items (a list of mappings in a config)."""
+    require(isinstance(cameras, list | tuple), "sensor.rig", "a list of the rig's other cameras ([] for none)", cameras)
+    rig = []
+    for index, camera in enumerate(cameras):
+        key = f"sensor.rig[{index}]"
+        if isinstance(camera, RigCameraSampling):
+            rig.append(camera)
+            continue
+        require(isinstance(camera, Mapping), key, "a mapping of position_mean, position_std, rpy_mean, rpy_std",
+                camera)  # fmt: skip
+        try:
+            rig.append(from_mapping(RigCameraSampling, camera, key))
+        except ConfigError as err:  # its checks name the item generically: name it by its index
+            raise ConfigError(str(err).replace(RIG_KEY, key)) from None
+    return tuple(rig)
+
+
 @dataclass(frozen=True)
 class ImuSampling:
     """IMU rate, noise and biases.
@@ -233,6 +275,7 @@ class SensorSampling:
         pixel_noise_px: sigma [px] of the Gaussian corner noise of the ``project`` backend.
         backend: camera observation backend, ``project`` (analytic) or ``render`` (MuJoCo image +
             detector).
+        rig: a rig's other cameras (cam1, ...; ``RigCameraSampling``), none by default.
     """
 
     camera: CameraSampling = field(default_factory=CameraSampling)
@@ -241,8 +284,10 @@ class SensorSampling:
     time_offset: Normal = field(default_factory=Normal)
     pixel_noise_px: float = 0.25
     backend: str = "project"
+    rig: tuple[RigCameraSampling, ...] = ()
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "rig", _rig(self.rig))
         self.time_offset.check("sensor.time_offset")
         require_range("sensor.pixel_noise_px", self.pixel_noise_px, 0.0)
         require(self.backend in CAMERA_BACKENDS, "sensor.backend", f"one of {CAMERA_BACKENDS}", self.backend)
@@ -343,6 +388,20 @@ def sample_sensor(cfg: SensorSampling, rng: np.random.Generator, asymmetric: boo
         accel_bias=accel_bias,
         imu_intrinsics=intrinsics,
     )
+
+
+def sample_rig(cfg: SensorSampling, rng: np.random.Generator, first: SensorTruth) -> dict[str, SensorTruth]:
+    """The truths of the rig's other cameras (``cam1``, ...) beside the drawn ``first`` camera's: each its own lens
+    (drawn like cam0's, centred) and its pose from ``cfg.rig``; the IMU, its noise and the time offset (one
+    trigger) are the first camera's. Drawn after ``sample_sensor``'s draws: a sensor without a rig is unchanged."""
+    others = {}
+    for index, rig in enumerate(cfg.rig, start=1):
+        camera = sample_camera(cfg.camera, rng)
+        position = np.asarray(rig.position_mean) + np.asarray(rig.position_std) * rng.standard_normal(3)
+        rpy = np.asarray(rig.rpy_mean) + np.asarray(rig.rpy_std) * rng.standard_normal(3)
+        T_cam0_cam = make_transform(euler_to_matrix(rpy), position)
+        others[f"cam{index}"] = replace(first, camera=camera, T_cam_imu=np.linalg.inv(T_cam0_cam) @ first.T_cam_imu)
+    return others
 
 
 def mean_sensor(cfg: SensorSampling) -> SensorTruth:
