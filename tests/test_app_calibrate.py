@@ -358,16 +358,17 @@ def test_a_failed_solve_with_overwrite_never_replaces_a_good_result(slow_deg_per
 
 def test_a_lens_model_that_does_not_fit_is_named_with_the_one_that_does_in_the_failure(tmp_path, capsys):
     """--model ds on an ordinary ~60 deg lens (the joint task), and the extrinsic task with a ds camchain of it: the
-    failure names the model that fits these corners (as the intrinsic task's comparison does) and the option."""
+    failure names a model that fits these corners (as the intrinsic task's comparison does) and the option."""
     rec = make_recording(duration=12.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=4)
     path = save_recording(rec, tmp_path / "rec")
     status = main([str(path), "--task", "joint", "--model", "ds", "--out", str(tmp_path / "joint"), "--no-report"])
     lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("vical-calibrate: error")]
     assert status == 2 and len(lines) == 1
-    assert re.search(
-        r"likely cause: the lens model: radtan fits these corners with 0\.\d+ px rms against ds's \d+", lines[0]
-    )
-    assert "pass --model radtan" in lines[0]
+    # Of the models that fit equally well (radtan, equidistant, omni: a pinhole lens) the comparison names the one
+    # with the fewest coefficients (vical.calib.solve.intrinsics.best_model)
+    found = re.search(r"likely cause: the lens model: ([\w-]+) fits these corners with 0\.\d+ px rms against ds's "
+                      r"[\d.]+ px: pass --model ([\w-]+)", lines[0])  # fmt: skip
+    assert found and found[1] == found[2] and found[1] in ("radtan", "equidistant", "omni", "omni-radtan"), lines[0]
 
     ds = CameraModel.from_hfov(1.0, rec.truth.camera.width, rec.truth.camera.height, [-0.2, 0.6], "ds")
     chain = tmp_path / "ds.yaml"
@@ -376,4 +377,7 @@ def test_a_lens_model_that_does_not_fit_is_named_with_the_one_that_does_in_the_f
                    "--no-report"])  # fmt: skip
     lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("vical-calibrate: error")]
     assert status == 2 and len(lines) == 1
-    assert "likely cause: the lens model: radtan fits these corners" in lines[0] and "--model radtan" in lines[0]
+    cause = (r"likely cause: the lens model: ([\w-]+) fits these corners .* against ds's [\d.]+ px: calibrate the "
+             r"intrinsics with --task intrinsic --model ([\w-]+) and give them as --intrinsics")  # fmt: skip
+    found = re.search(cause, lines[0])
+    assert found and found[1] == found[2] and found[1] != "ds", lines[0]

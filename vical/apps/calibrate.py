@@ -65,7 +65,7 @@ from vical.calib.detection.board_size import MAX_SAMPLE, board_size_hint
 from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.errors import CalibrationError
 from vical.calib.result import CalibrationResult
-from vical.calib.solve.intrinsics import MIN_VIEWS
+from vical.calib.solve.intrinsics import MIN_VIEWS, best_model, calibrate_intrinsics
 from vical.calib.solve.nominal import nominal_T_cam_imu
 from vical.calib.solve.pipeline import (
     RigCalibration,
@@ -574,20 +574,59 @@ def _failure_line(results: dict[str, CalibrationResult], guesses: dict, rec: Rec
     first = next(iter(results))
     proven = wrong_settings(results[first], rec.frames_of(first), rec, args)
     if one:
-        return _failure(implausibilities(results[first], guesses.get(first, nominal_T_cam_imu())), proven)
-    found = rig_problems(results, guesses)
-    return _failure([] if found is None else [found[0]], proven)
+        problems = implausibilities(results[first], guesses.get(first, nominal_T_cam_imu()))
+    else:
+        found = rig_problems(results, guesses)
+        problems = [] if found is None else [found[0]]
+    if not problems and not proven:
+        return None
+    lens = (
+        None if proven else next(filter(None, (lens_cause(r, rec.frames_of(n), rec) for n, r in results.items())), None)
+    )
+    return _failure(problems, proven, lens)
 
 
-def _failure(problems: list[str], proven: list[str]) -> str | None:
+def _failure(problems: list[str], proven: list[str], lens: str | None = None) -> str | None:
     """The failure line: what the data prove wrong, each with its fix, and what makes the result untrustworthy
-    (with the likely causes when nothing was proven); None when nothing is wrong."""
+    (with the likely cause when nothing was proven: ``lens`` where another lens model fits, else the usual ones);
+    None when nothing is wrong."""
     if not problems and not proven:
         return None
     if proven:
         return f"the calibration failed: {'; '.join(proven + problems)}"
-    causes = "likely causes: the lens model (--model), or a --target file that does not describe the board"
+    causes = (
+        f"likely cause: {lens}"
+        if lens
+        else "likely causes: the lens model (--model), or a --target file that does not describe the board"
+    )
     return f"the calibration failed: {'; '.join(problems)}; {causes}"
+
+
+def lens_cause(result: CalibrationResult, frames, rec: Recording) -> str | None:
+    """Where the result's lens model does not fit its corners and another does: which, with both fits and the
+    option that uses it; None otherwise. The intrinsic stage compared the models where its model did not fit
+    (``CalibrationResult.model_fits``); the extrinsic task, which has none, compares them on its frames now."""
+    fits = result.model_fits
+    if fits is None and result.task == "extrinsic":
+        camera = result.camera
+        try:
+            fits = calibrate_intrinsics(frames, rec.target, camera.distortion, (camera.width, camera.height)).model_fits
+        except (CalibrationError, CameraModelError):
+            return None
+    if not fits:
+        return None
+    used, best = result.camera.distortion, best_model(fits)
+    if best == used:
+        return None
+    fix = (
+        f"calibrate the intrinsics with --task intrinsic --model {best} and give them as --intrinsics"
+        if result.task == "extrinsic"
+        else f"pass --model {best}"
+    )
+    return (
+        f"the lens model: {best} fits these corners with {fits[best]:.3g} px rms against {used}'s "
+        f"{fits[used]:.3g} px: {fix}"
+    )
 
 
 def wrong_settings(result: CalibrationResult, frames, rec: Recording, args) -> list[str]:

@@ -209,6 +209,12 @@ class CalibrationResult:
     time_offset_trace: TimeOffsetTrace | None = None
     imu_intrinsics: ImuIntrinsics | None = None
     frame_poses: FramePoses | None = None
+    # Reprojection rms [px] of every lens model calibrated on these corners, where the one used did not fit
+    # (vical.calib.solve.model_fit); None where it fit, or nothing was compared.
+    model_fits: dict[str, float] | None = None
+    # (residual field, corner noise) [px per axis]: how far the corners' residuals depend on their image position,
+    # the same in every view, beside their noise (vical.calib.solve.model_fit.lens_misfit); None where not measured.
+    lens_misfit: tuple[float, float] | None = None
 
     @property
     def sigmas(self) -> dict[str, float]:

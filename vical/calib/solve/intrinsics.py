@@ -31,7 +31,7 @@ from vical.calib.solve.initialization import (
     opencv_camera,
     starting_camera,
 )
-from vical.calib.solve.model_fit import COMPARISON, misfit_warnings
+from vical.calib.solve.model_fit import COMPARISON, lens_misfit, misfit_warnings
 from vical.calib.solve.observations import FrameObservation, collect_observations, image_size
 from vical.calib.solve.outliers import Rejection, reject_outliers
 from vical.calib.solve.solver import covariance_or_unobservable, optimize
@@ -213,10 +213,13 @@ def calibrate_intrinsics(
     decided = left_out(every, observations, rejection.dropped)
     min_corners = min(MIN_INIT_CORNERS, target.num_points)
     comparison = None
-    if compare_models and not joint_start:
+    if compare_models:  # (only calibrated where the model does not fit: a joint start's too, for its failure)
         comparison = {"frames": frames, "target": target, "image_size_px": size, "pixel_sigma": pixel_sigma,
                       "huber_k": huber_k, "max_iterations": max_iterations, "frame_stride": frame_stride}  # fmt: skip
     estimate = np.concatenate([camera.intrinsics, camera.dist])
+    model_notes, model_fits = _model_warnings(camera, observations, T_cam_target, residuals, comparison)
+    points = np.concatenate([observations[k].points for k in T_cam_target])
+    misfit = lens_misfit(camera, points, pixels, residuals, frame_index)
     return CalibrationResult(
         task="intrinsic",
         camera=camera,
@@ -242,13 +245,15 @@ def calibrate_intrinsics(
         warnings=rejection.warnings
         + ([] if joint_start else image_coverage_warnings(observations, size))
         + assessment.warnings
-        + _model_warnings(camera, observations, T_cam_target, residuals, comparison),
+        + model_notes,
         frame_log=build_frame_log(frames, frame_index, min_corners, decided),
         reprojection_pixels=pixels,
         frame_poses=FramePoses(
             np.array([observations[k].t_ns for k in T_cam_target], dtype=np.int64),
             np.array(list(T_cam_target.values())),
         ),
+        model_fits=model_fits,
+        lens_misfit=misfit,
     )
 
 
@@ -302,7 +307,7 @@ def _add_unplaced_frames(solve: _Solve, camera, T_cam_target, graph, solution, m
     return solve(camera, T_cam_target | {k: T for k, (T, _) in placed.items()})
 
 
-def _best_model(rms: dict[str, float]) -> str:
+def best_model(rms: dict[str, float]) -> str:
     """The model that fits best: of those within ``SAME_FIT`` of the lowest rms, the one with the fewest coefficients
     (a model that nests another, omni-radtan in omni, fits the same corners a hair better by its extra terms)."""
     finite = {m: v for m, v in rms.items() if np.isfinite(v)}
@@ -313,21 +318,22 @@ def _best_model(rms: dict[str, float]) -> str:
     return min(close, key=lambda m: (DISTORTION_MODELS[m], finite[m]))
 
 
-def _model_warnings(camera, observations, T_cam_target, residuals, compare) -> list[str]:
+def _model_warnings(camera, observations, T_cam_target, residuals, compare) -> tuple[list[str], dict | None]:
     """``model_fit.misfit_warnings`` and, where the model does not fit and ``compare`` holds the calibration's
-    settings, the other models' fit on the same corners."""
+    settings, the other models' fit on the same corners: the notes, and the models' reprojection rms [px] (None
+    where nothing was compared)."""
     frames = [observations[k] for k in T_cam_target]
     misfit = misfit_warnings(
         camera, frames, [obs.residuals(camera, T_cam_target[k]) for k, obs in zip(T_cam_target, frames, strict=True)]
     )
     if not misfit or not compare:
-        return misfit
+        return misfit, None
     rms = {camera.distortion: ResidualStats.of(residuals).rms}
     for other in (m for m in MODELS if m != camera.distortion):
         try:
             rms[other] = calibrate_intrinsics(**compare, model=other, compare_models=False).reprojection.rms
         except (CalibrationError, CameraModelError):
             rms[other] = np.nan
-    best = _best_model(rms)
+    best = best_model(rms)
     listed = ", ".join(f"{m} {v:.3f} px" + (" (used)" if m == camera.distortion else "") for m, v in rms.items())
-    return [*misfit, f"{COMPARISON}, reprojection rms: {listed}; {best} fits best"]
+    return [*misfit, f"{COMPARISON}, reprojection rms: {listed}; {best} fits best"], rms

@@ -29,7 +29,8 @@ MIN_CELL_CORNERS = 10
 MIN_PAIRS = 50  # neighbour pairs needed for a noise estimate
 FIELD_NOISE_RATIO = 0.25  # a field beyond a quarter of the corner noise is a model error ...
 MIN_FIELD_PX = 0.15  # [px] ... and one below this hardly matters for the calibration
-MISFIT = "model does not fit this lens"  # in every warning this module gives
+MISFIT = "model does not fit this lens"  # in every warning this module gives about a calibrated model
+MISFIT_FAIL_PX = 0.5  # [px per axis] a residual field this large is no detector's noise: the calibration fails
 
 
 def neighbour_noise(observations: list[FrameObservation], residuals: list[np.ndarray]) -> float | None:
@@ -39,11 +40,16 @@ def neighbour_noise(observations: list[FrameObservation], residuals: list[np.nda
     Args:
         observations: the frames' corners; residuals: (K_i, 2) [px] per frame, in the corners' order.
     """
+    return _neighbour_noise([o.points for o in observations], residuals)
+
+
+def _neighbour_noise(points: list[np.ndarray], residuals: list[np.ndarray]) -> float | None:
+    """``neighbour_noise`` of each frame's board points (K_i, 3) [m] and residuals (K_i, 2) [px]."""
     differences = []
-    for obs, res in zip(observations, residuals, strict=True):
-        if len(obs.ids) < 2:
+    for board, res in zip(points, residuals, strict=True):
+        if len(board) < 2:
             continue
-        distance = np.linalg.norm(obs.points[:, None, :] - obs.points[None, :, :], axis=2)
+        distance = np.linalg.norm(board[:, None, :] - board[None, :, :], axis=2)
         np.fill_diagonal(distance, np.inf)
         differences.append(res - res[np.argmin(distance, axis=1)])
     if not differences or sum(len(d) for d in differences) < MIN_PAIRS:
@@ -73,6 +79,22 @@ def residual_field(camera: CameraModel, uv: np.ndarray, residuals: np.ndarray) -
     return None if corners == 0 else float(np.sqrt(max(weighted / corners, 0.0) / 2.0))
 
 
+def lens_misfit(
+    camera: CameraModel, points: np.ndarray, uv: np.ndarray, residuals: np.ndarray, frame_of: np.ndarray
+) -> tuple[float, float] | None:
+    """(residual field, corner noise) [px per axis] of a solve's corners, or None where either cannot be measured.
+
+    Args:
+        camera: the camera; points: (N, 3) [m] the corners' board points; uv: (N, 2) [px] as measured;
+        residuals: (N, 2) [px]; frame_of: (N,) each corner's frame (any labels, the corners of a frame together
+            or not).
+    """
+    frames = [np.flatnonzero(frame_of == f) for f in np.unique(frame_of)]
+    noise = _neighbour_noise([points[k] for k in frames], [residuals[k] for k in frames])
+    field = residual_field(camera, uv, residuals)
+    return None if noise is None or field is None else (field, noise)
+
+
 def misfit_warnings(
     camera: CameraModel, observations: list[FrameObservation], residuals: list[np.ndarray]
 ) -> list[str]:
@@ -84,13 +106,31 @@ def misfit_warnings(
     """
     noise = neighbour_noise(observations, residuals)
     field = residual_field(camera, np.concatenate([o.uv for o in observations]), np.concatenate(residuals))
-    if noise is None or field is None or field <= max(FIELD_NOISE_RATIO * noise, MIN_FIELD_PX):
+    if noise is None or field is None or not is_misfit(field, noise):
         return []
     others = ", ".join(m for m in CAMERA_MODELS if m != camera.distortion)
     return [
         f"the {camera.distortion} {MISFIT}: its residuals depend on where a corner lies in the image "
         f"(a systematic {field:.2f} px per axis, the same in every view, beside {noise:.2f} px of corner noise "
         f"between neighbouring corners); try another lens model ({others})"
+    ]
+
+
+def is_misfit(field: float, noise: float) -> bool:
+    """Whether a residual field [px per axis] beside the corner noise [px] says the model does not fit the lens."""
+    return field > max(FIELD_NOISE_RATIO * noise, MIN_FIELD_PX)
+
+
+def given_intrinsics_warnings(camera: CameraModel, misfit: tuple[float, float] | None) -> list[str]:
+    """A warning when known intrinsics (the extrinsic task's ``--intrinsics``) leave a residual field."""
+    if misfit is None or not is_misfit(*misfit):
+        return []
+    field, noise = misfit
+    return [
+        f"the given {camera.distortion} intrinsics do not fit these corners: the residuals depend on where a corner "
+        f"lies in the image (a systematic {field:.2f} px per axis, the same in every view, beside {noise:.2f} px of "
+        "corner noise between neighbouring corners); calibrate the intrinsics on these corners (--task joint) or "
+        "check the --intrinsics file and its lens model"
     ]
 
 

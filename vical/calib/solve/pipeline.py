@@ -154,7 +154,7 @@ def _intrinsic_stage(
     # The joint task's start: a hundred views spread over the recording are plenty (a real 30 s recording has
     # 600, whose own solve and outlier screen took 1.9 s of the joint task's 3.6 s). The joint graph starts from
     # the poses it solves (each view posed once), screens every view for outliers once and judges the image
-    # coverage on all of them; the other models are not fitted for it.
+    # coverage on all of them; the other models are fitted on these views only where the model does not fit.
     stride = max(opts.frame_stride, len(frames) // JOINT_START_VIEWS)
     return calibrate_intrinsics(
         frames, target, model, size, known, opts.pixel_sigma, opts.huber_k, frame_stride=stride,
@@ -172,10 +172,10 @@ def _with_joint_warnings(
     result: CalibrationResult, observations: list[FrameObservation], start: CalibrationResult
 ) -> CalibrationResult:
     """The joint result with the image coverage of every view and the start's warning that the lens model does not
-    fit (if any) before its own warnings."""
+    fit (if any, with the other models' fit) before its own warnings."""
     coverage = image_coverage_warnings(observations, (result.camera.width, result.camera.height))
     lens = [w for w in start.warnings if is_model_warning(w)]
-    return replace(result, warnings=coverage + lens + result.warnings)
+    return replace(result, warnings=coverage + lens + result.warnings, model_fits=start.model_fits)
 
 
 def _combine(intrinsic: CalibrationResult, extrinsic: CalibrationResult, elapsed: float) -> CalibrationResult:

@@ -28,6 +28,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from vical.calib.result import CalibrationResult, FramePoses
 from vical.calib.solve.imu_integration import cumulative_angle, interpolate
 from vical.calib.solve.initialization import frame_poses
+from vical.calib.solve.model_fit import MISFIT_FAIL_PX
 from vical.calib.solve.observations import collect_observations
 from vical.calib.solve.time_alignment import rotation_increments
 from vical.calib.solve.visual_inertial import GRAVITY_MAGNITUDE
@@ -74,6 +75,13 @@ def implausibilities(
         found.append("the solve made no step from its initial guess (0 iterations)")
     elif guessed and np.array_equal(result.T_cam_imu[:3, 3], np.asarray(initial_T_cam_imu)[:3, 3]):
         found.append("the camera-IMU translation is exactly its initial guess")
+    if result.lens_misfit is not None and result.lens_misfit[0] > MISFIT_FAIL_PX:
+        field, noise = result.lens_misfit
+        found.append(
+            f"the corners keep a systematic {field:.2f} px per axis from where the {camera.distortion} camera puts "
+            f"them, the same in every view (beside {noise:.2f} px of corner noise): the camera model or its "
+            "intrinsics do not describe the lens"
+        )
     sigma = DEFAULT_PIXEL_SIGMA if pixel_sigma is None else pixel_sigma
     rms = result.reprojection.rms
     if rms > NOISE_LIMIT * sigma:

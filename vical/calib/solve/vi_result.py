@@ -15,6 +15,7 @@ from vical.calib.result import CalibrationResult, FramePoses, ImuResiduals, Resi
 from vical.calib.solve.imu_intrinsics import IntrinsicImuFactor
 from vical.calib.solve.initialization import MIN_INIT_CORNERS
 from vical.calib.solve.intrinsics import intrinsic_names
+from vical.calib.solve.model_fit import given_intrinsics_warnings, lens_misfit
 from vical.calib.solve.observations import FrameObservation
 from vical.calib.solve.rig import OtherCamera
 from vical.calib.solve.time_alignment import increment_mismatch, rotation_increments
@@ -124,6 +125,9 @@ def first_camera_result(
         + ([] if est.imu_theta is None else [est.imu_theta])
     )
     residuals, frame_index = _reprojection(problem, g, values)
+    misfit = lens_misfit(camera, g.corners.points, g.corners.measured, residuals, g.corners.frame_of)
+    if not joint:  # the joint task's start judged its own model (with the other models' fit)
+        problem.warnings += given_intrinsics_warnings(camera, misfit)
     gravity = np.asarray(values.atUnit3(G_KEY).point3()) * problem.options.gravity_magnitude
     return CalibrationResult(
         task=task,
@@ -158,6 +162,7 @@ def first_camera_result(
             np.array([problem.observations[k].t_ns for k in problem.frame_ids], dtype=np.int64),
             np.linalg.inv(problem.T_target_cam),
         ),
+        lens_misfit=misfit,
     )
 
 
@@ -196,6 +201,9 @@ def other_camera_result(
         + [np.zeros(3), other.T_cam_imu[:3, 3], [other.tau0], est.accel_bias, est.gyro_bias]
     )
     residuals = factors.residuals(values)
+    misfit = lens_misfit(camera, factors.points, factors.measured, residuals, factors.frame_of)
+    if not joint:
+        notes += [f"{other.name}: {w}" for w in given_intrinsics_warnings(camera, misfit)]
     used_frames = frame_index[factors.frame_of]
     trace = _time_offset_trace(problem, other.frame_times, other.T_target_cam, other.T_cam_imu, other.tau0,
                                est.gyro_bias)  # fmt: skip
@@ -220,6 +228,7 @@ def other_camera_result(
         frame_poses=FramePoses(
             np.array([o.t_ns for o in other.observations], dtype=np.int64), np.linalg.inv(other.T_target_cam)
         ),
+        lens_misfit=misfit,
     )
 
 
