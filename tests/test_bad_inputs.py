@@ -228,6 +228,11 @@ CASES = [
     Case(CALIBRATE, "{inputs}/rec --out {inputs}/full", "--out {inputs}/full already holds files"),
     Case(CALIBRATE, "{inputs}/rec --out {inputs} --overwrite", "holds the input"),
     # vical-export
+    Case(
+        "vical-calibrate",
+        "{inputs}/euroc --target {inputs}/target.yaml --cameras cam0,cam1",
+        "--cameras names cam1, but {inputs}/euroc has cam0 (its camN folders); name cameras it has",
+    ),
     Case("vical-export", "{inputs}/small_no_images --out out", "the recording has no images"),
     Case("vical-export", "{inputs}/euroc --out out", "euroc is not a vical recording directory"),
     Case("vical-export", "{inputs}/small_truncated --out out", "small_truncated/imu.npz has 100 bytes"),
@@ -257,6 +262,16 @@ CASES = [
         "vical-record",
         "sensor.camera.distortion=eucm sensor.camera.beta.mean=-1",
         "sensor.camera.beta.mean must be > 0 for the eucm model, got -1",
+    ),
+    Case("vical-record", "mode=static", "mode must be one of ['steps', 'static_imu'], got 'static'"),
+    Case("vical-record", "mode=static_imu static_duration=0", "static_duration must be a number in (0.0, 172800.0]"),
+    Case("vical-record", "mode=static_imu static_duration=1e9", "static_duration must be a number in (0.0, 172800.0]"),
+    Case("vical-record", "sensor=stereo sensor.rig=5", "sensor.rig must be a list of the rig's other cameras"),
+    Case("vical-record", "+sensor.rig=[{baseline:0.1}]", "sensor.rig[0]: unknown setting(s) ['baseline']"),
+    Case(
+        "vical-record",
+        "sensor=stereo sensor.rig.0.position_std=[0.1,-1,0]",
+        "sensor.rig[0].position_std must be non-negative, got [0.1, -1.0, 0.0]",
     ),
     Case("vical-record", "nokey=1", "Could not override 'nokey'. To append to your config use +nokey=1"),
     Case("vical-record", "sim=nope", "Could not find 'sim/nope'; the available options in 'sim' are: default"),
