@@ -250,3 +250,25 @@ def test_export_interrupted_while_replacing_an_export_keeps_the_old_one_whole(
     assert lines == [as_it_was("vical-export", f"--out {out}", name)]
     assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
     assert not [p for p in tmp_path.rglob("*") if ".tmp-" in p.name]
+
+
+@pytest.mark.parametrize("kind", ["KeyboardInterrupt", "Terminated"])
+def test_record_interrupted_while_replacing_a_recording_keeps_the_old_one_whole(kind, tmp_path, monkeypatch):
+    """overwrite=true over a complete recording, stopped while the new one is written: the old one as it was."""
+    from hydra import compose, initialize_config_dir
+
+    from vical.apps import record as app
+
+    def config(*overrides):
+        with initialize_config_dir(config_dir=str(Path(app.CONF_DIR)), version_base="1.3"):
+            return compose(config_name="record", overrides=list(overrides))
+
+    out = tmp_path / "rec"
+    short = ["steps=[[0.0,0.04,0.0,0.0,0.0,0.1]]", "settle_time=0.05", "progress=false", f"out={out}"]
+    app.record(config(*short, "seed=1"))
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    monkeypatch.setattr(app, "write_recording_files", interrupt(kind))
+    with pytest.raises(KeyboardInterrupt):
+        app.record(config(*short, "seed=2", "overwrite=true"))
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]  # no temporary left beside it
