@@ -272,3 +272,18 @@ def test_record_interrupted_while_replacing_a_recording_keeps_the_old_one_whole(
         app.record(config(*short, "seed=2", "overwrite=true"))
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["rec"]  # no temporary left beside it
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("sig", "status", "name"), SIGNALS)
+def test_a_real_signal_during_the_steps_stops_vical_sim_demo_in_one_line(sig, status, name):
+    """Signalled once it printed its start (the marker: 'Panda at home', on stdout), while it moves 200 steps."""
+    proc = subprocess.Popen([str(Path(sys.executable).parent / "vical-sim-demo"), "--steps", "200"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)  # fmt: skip
+    assert proc.stdout.readline().startswith("Panda at home")
+    os.kill(proc.pid, sig)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == status
+    lines = [line for line in stderr.replace("\r", "\n").splitlines() if line]  # the line starts with a \r
+    assert lines == [f"vical-sim-demo: interrupted ({name}); nothing was written"], stderr
