@@ -287,3 +287,21 @@ def test_a_real_signal_during_the_steps_stops_vical_sim_demo_in_one_line(sig, st
     assert proc.returncode == status
     lines = [line for line in stderr.replace("\r", "\n").splitlines() if line]  # the line starts with a \r
     assert lines == [f"vical-sim-demo: interrupted ({name}); nothing was written"], stderr
+
+
+@pytest.mark.parametrize(("kind", "status", "name"), INTERRUPTS)
+def test_train_interrupted_before_its_first_checkpoint_says_to_start_again(
+    kind, status, name, tmp_path, monkeypatch, capsys
+):
+    """The interrupt raised where training runs (vical.apps.train.train), Hydra and the env started for real."""
+    from test_app_train import TINY
+
+    from vical.apps import train
+
+    monkeypatch.setattr(train, "train", interrupt(kind))
+    monkeypatch.chdir(tmp_path)
+    run = tmp_path / "run"
+    code, lines = run_entry(entry_point("train"), ["vical-train", *TINY, f"run_dir={run}"], monkeypatch, capsys)
+    assert code == status
+    assert lines[-1] == (f"vical-train: interrupted ({name}) before the run's first checkpoint; nothing to resume in "
+                         f"{run}: start it again")  # fmt: skip
