@@ -158,13 +158,16 @@ def atomic_directory(path: str | os.PathLike, overwrite: bool = False) -> Iterat
     final = check_can_write_dir(path, overwrite)
     final.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(final.parent, final.name)
-    tmp = Path(tempfile.mkdtemp(prefix=temporary_prefix(final), dir=final.parent))
-    try:
+    tmp = None
+    try:  # from its creation on: an interrupt right after it still removes it (one inside mkdtemp leaves it, named
+        # as stale for the next run: remove_stale_temporaries)
+        tmp = Path(tempfile.mkdtemp(prefix=temporary_prefix(final), dir=final.parent))
         _give_default_permissions(tmp, 0o777)
         yield tmp
         _replace_directory(tmp, final, overwrite)
     except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
         raise
 
 
