@@ -301,18 +301,11 @@ def test_a_real_signal_during_the_steps_stops_vical_sim_demo_in_one_line(sig, st
 
 
 @pytest.mark.parametrize(("kind", "status", "name"), INTERRUPTS)
-def test_train_interrupted_before_its_first_checkpoint_says_to_start_again(
-    kind, status, name, tmp_path, monkeypatch, capsys
-):
-    """The interrupt raised where training runs (vical.apps.train.train), Hydra and the env started for real."""
-    from test_app_train import TINY
+def test_an_interrupt_while_the_command_is_imported_ends_in_one_line(kind, status, name, monkeypatch, capsys):
+    """The entry point handles Ctrl-C and SIGTERM before the command's heavy imports (torch, GTSAM, MuJoCo)."""
+    import vical.apps.entry
 
-    from vical.apps import train
-
-    monkeypatch.setattr(train, "train", interrupt(kind))
-    monkeypatch.chdir(tmp_path)
-    run = tmp_path / "run"
-    code, lines = run_entry(entry_point("train"), ["vical-train", *TINY, f"run_dir={run}"], monkeypatch, capsys)
+    monkeypatch.setattr(vical.apps.entry.importlib, "import_module", interrupt(kind))
+    code, lines = run_entry(entry_point("calibrate"), ["vical-calibrate", "rec", "--out", "out"], monkeypatch, capsys)
     assert code == status
-    assert lines[-1] == (f"vical-train: interrupted ({name}) before the run's first checkpoint; nothing to resume in "
-                         f"{run}: start it again")  # fmt: skip
+    assert lines == [as_it_was("vical-calibrate", "--out out", name)]
