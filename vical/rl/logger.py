@@ -13,6 +13,7 @@ against the step index.
 from __future__ import annotations
 
 import numbers
+import time
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,8 @@ class TrainLogger:
     """
 
     def __init__(self, log_dir: str | Path, info_prefixes: Iterable[str], purge_step: int | None = None) -> None:
+        if purge_step is not None:
+            _after_existing_events(Path(log_dir))
         self.writer = SummaryWriter(str(log_dir), purge_step=purge_step)
         self.info_prefixes = tuple(info_prefixes)
 
@@ -73,6 +76,26 @@ class TrainLogger:
 
     def close(self) -> None:
         self.writer.close()
+
+
+MAX_EVENT_WAIT = 2.0  # [s] a resumed run waits at most this long for its event file to sort last
+
+
+def _after_existing_events(log_dir: Path) -> None:
+    """Wait until the current second is past that of every event file in ``log_dir``.
+
+    TensorBoard reads a folder's event files in the order of their names (``events.out.tfevents.<second>.<host>.
+    <pid>.<counter>``), and a resumed run's purge applies to the events read before it: a file made in the same
+    second as the interrupted run's sorts by its counter as text (10 before 9), and was read first. A file of a
+    later second sorts after (the seconds have ten digits until the year 2286). A resume rarely comes within a
+    second of the run it continues; when it does, this costs at most ``MAX_EVENT_WAIT``.
+    """
+    seconds = [
+        int(p.name.split(".")[3]) for p in log_dir.glob("events.out.tfevents.*") if p.name.split(".")[3].isdigit()
+    ]
+    deadline = time.monotonic() + MAX_EVENT_WAIT
+    while seconds and int(time.time()) <= max(seconds) and time.monotonic() < deadline:
+        time.sleep(0.02)
 
 
 def _is_scalar(value: Any) -> bool:
