@@ -137,13 +137,18 @@ class ExtrinsicSampling:
     rpy_std: tuple[float, float, float] = (0.1, 0.1, 0.1)
 
     def __post_init__(self) -> None:
-        for name in ("position_mean", "position_std", "rpy_mean", "rpy_std"):
-            value = np.asarray(getattr(self, name), dtype=float)
-            key = f"sensor.extrinsic.{name}"
-            require(value.shape == (3,) and bool(np.all(np.isfinite(value))), key, "3 finite numbers", value.tolist())
-            if name.endswith("std"):
-                require(bool(np.all(value >= 0)), key, "non-negative", value.tolist())
-            object.__setattr__(self, name, tuple(float(v) for v in value))
+        _check_pose_distribution(self, "sensor.extrinsic")
+
+
+def _check_pose_distribution(cfg: Any, key: str) -> None:
+    """A pose distribution's position and Euler angle means and spreads: 3 finite numbers each, spreads >= 0."""
+    for name in ("position_mean", "position_std", "rpy_mean", "rpy_std"):
+        value = np.asarray(getattr(cfg, name), dtype=float)
+        where = f"{key}.{name}"
+        require(value.shape == (3,) and bool(np.all(np.isfinite(value))), where, "3 finite numbers", value.tolist())
+        if name.endswith("std"):
+            require(bool(np.all(value >= 0)), where, "non-negative", value.tolist())
+        object.__setattr__(cfg, name, tuple(float(v) for v in value))
 
 
 RIG_KEY = "sensor.rig[]"  # a rig camera's settings in messages, before its index is known
@@ -161,13 +166,7 @@ class RigCameraSampling:
     rpy_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        for name in ("position_mean", "position_std", "rpy_mean", "rpy_std"):
-            value = np.asarray(getattr(self, name), dtype=float)
-            key = f"{RIG_KEY}.{name}"
-            require(value.shape == (3,) and bool(np.all(np.isfinite(value))), key, "3 finite numbers", value.tolist())
-            if name.endswith("std"):
-                require(bool(np.all(value >= 0)), key, "non-negative", value.tolist())
-            object.__setattr__(self, name, tuple(float(v) for v in value))
+        _check_pose_distribution(self, RIG_KEY)
 
 
 def _rig(cameras: Any) -> tuple[RigCameraSampling, ...]:
@@ -358,8 +357,9 @@ def mean_coefficients(cfg: CameraSampling) -> list[float]:
     return [cfg.k1.mean, cfg.k2.mean, 0.0, 0.0]
 
 
-def sample_imu_pose(cfg: ExtrinsicSampling, rng: np.random.Generator) -> np.ndarray:
-    """Draw ``T_body_imu`` (4, 4): the IMU pose in the camera body frame."""
+def sample_pose(cfg: ExtrinsicSampling | RigCameraSampling, rng: np.random.Generator) -> np.ndarray:
+    """Draw a pose (4, 4) of a pose distribution: ``T_body_imu``, the IMU in the camera body frame, of
+    ``sensor.extrinsic``; ``T_cam0_cam``, another camera in cam0's frame, of a ``sensor.rig`` item."""
     position = np.asarray(cfg.position_mean) + np.asarray(cfg.position_std) * rng.standard_normal(3)
     rpy = np.asarray(cfg.rpy_mean) + np.asarray(cfg.rpy_std) * rng.standard_normal(3)
     return make_transform(euler_to_matrix(rpy), position)
@@ -373,7 +373,7 @@ def sample_sensor(cfg: SensorSampling, rng: np.random.Generator, asymmetric: boo
     they always gave.
     """
     camera = sample_camera(cfg.camera, rng, asymmetric)
-    T_body_imu = sample_imu_pose(cfg.extrinsic, rng)
+    T_body_imu = sample_pose(cfg.extrinsic, rng)
     time_offset = cfg.time_offset.draw(rng)
     gyro_bias = cfg.imu.gyro_bias_std * rng.standard_normal(3)
     accel_bias = cfg.imu.accel_bias_std * rng.standard_normal(3)
@@ -397,9 +397,7 @@ def sample_rig(cfg: SensorSampling, rng: np.random.Generator, first: SensorTruth
     others = {}
     for index, rig in enumerate(cfg.rig, start=1):
         camera = sample_camera(cfg.camera, rng)
-        position = np.asarray(rig.position_mean) + np.asarray(rig.position_std) * rng.standard_normal(3)
-        rpy = np.asarray(rig.rpy_mean) + np.asarray(rig.rpy_std) * rng.standard_normal(3)
-        T_cam0_cam = make_transform(euler_to_matrix(rpy), position)
+        T_cam0_cam = sample_pose(rig, rng)
         others[f"cam{index}"] = replace(first, camera=camera, T_cam_imu=np.linalg.inv(T_cam0_cam) @ first.T_cam_imu)
     return others
 
