@@ -217,9 +217,9 @@ def calibrate_intrinsics(
         comparison = {"frames": frames, "target": target, "image_size_px": size, "pixel_sigma": pixel_sigma,
                       "huber_k": huber_k, "max_iterations": max_iterations, "frame_stride": frame_stride}  # fmt: skip
     estimate = np.concatenate([camera.intrinsics, camera.dist])
-    model_notes, model_fits = _model_warnings(camera, observations, T_cam_target, residuals, comparison)
     points = np.concatenate([observations[k].points for k in T_cam_target])
     misfit = lens_misfit(camera, points, pixels, residuals, frame_index)
+    model_notes, model_fits = _model_warnings(camera, misfit, residuals, comparison)
     return CalibrationResult(
         task="intrinsic",
         camera=camera,
@@ -318,16 +318,13 @@ def best_model(rms: dict[str, float]) -> str:
     return min(close, key=lambda m: (DISTORTION_MODELS[m], finite[m]))
 
 
-def _model_warnings(camera, observations, T_cam_target, residuals, compare) -> tuple[list[str], dict | None]:
-    """``model_fit.misfit_warnings`` and, where the model does not fit and ``compare`` holds the calibration's
-    settings, the other models' fit on the same corners: the notes, and the models' reprojection rms [px] (None
-    where nothing was compared)."""
-    frames = [observations[k] for k in T_cam_target]
-    misfit = misfit_warnings(
-        camera, frames, [obs.residuals(camera, T_cam_target[k]) for k, obs in zip(T_cam_target, frames, strict=True)]
-    )
-    if not misfit or not compare:
-        return misfit, None
+def _model_warnings(camera, misfit, residuals, compare) -> tuple[list[str], dict | None]:
+    """``model_fit.misfit_warnings`` of the corners' ``lens_misfit`` and, where the model does not fit and ``compare``
+    holds the calibration's settings, the other models' fit on the same corners: the notes, and the models'
+    reprojection rms [px] (None where nothing was compared)."""
+    notes = misfit_warnings(camera, misfit)
+    if not notes or not compare:
+        return notes, None
     rms = {camera.distortion: ResidualStats.of(residuals).rms}
     for other in (m for m in MODELS if m != camera.distortion):
         try:
@@ -336,4 +333,4 @@ def _model_warnings(camera, observations, T_cam_target, residuals, compare) -> t
             rms[other] = np.nan
     best = best_model(rms)
     listed = ", ".join(f"{m} {v:.3f} px" + (" (used)" if m == camera.distortion else "") for m, v in rms.items())
-    return [*misfit, f"{COMPARISON}, reprojection rms: {listed}; {best} fits best"], rms
+    return [*notes, f"{COMPARISON}, reprojection rms: {listed}; {best} fits best"], rms

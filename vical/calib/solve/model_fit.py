@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from vical.calib.solve.observations import FrameObservation
 from vical.geometry import CAMERA_MODELS, CameraModel
 
 GRID = (8, 6)  # cells across and down the image
@@ -33,18 +32,13 @@ MISFIT = "model does not fit this lens"  # in every warning this module gives ab
 MISFIT_FAIL_PX = 0.5  # [px per axis] a residual field this large is no detector's noise: the calibration fails
 
 
-def neighbour_noise(observations: list[FrameObservation], residuals: list[np.ndarray]) -> float | None:
+def neighbour_noise(points: list[np.ndarray], residuals: list[np.ndarray]) -> float | None:
     """Corner noise [px] per image axis from the residual differences of neighbouring corners, or None
     when fewer than ``MIN_PAIRS`` pairs exist.
 
     Args:
-        observations: the frames' corners; residuals: (K_i, 2) [px] per frame, in the corners' order.
+        points: each frame's board points (K_i, 3) [m]; residuals: (K_i, 2) [px] per frame, in the same order.
     """
-    return _neighbour_noise([o.points for o in observations], residuals)
-
-
-def _neighbour_noise(points: list[np.ndarray], residuals: list[np.ndarray]) -> float | None:
-    """``neighbour_noise`` of each frame's board points (K_i, 3) [m] and residuals (K_i, 2) [px]."""
     differences = []
     for board, res in zip(points, residuals, strict=True):
         if len(board) < 2:
@@ -90,24 +84,20 @@ def lens_misfit(
             or not).
     """
     frames = [np.flatnonzero(frame_of == f) for f in np.unique(frame_of)]
-    noise = _neighbour_noise([points[k] for k in frames], [residuals[k] for k in frames])
+    noise = neighbour_noise([points[k] for k in frames], [residuals[k] for k in frames])
     field = residual_field(camera, uv, residuals)
     return None if noise is None or field is None else (field, noise)
 
 
-def misfit_warnings(
-    camera: CameraModel, observations: list[FrameObservation], residuals: list[np.ndarray]
-) -> list[str]:
+def misfit_warnings(camera: CameraModel, misfit: tuple[float, float] | None) -> list[str]:
     """A warning when the residuals depend on the image position (the model does not fit the lens), else none.
 
     Args:
-        camera: the calibrated camera; observations and residuals (measured minus predicted, (K_i, 2)
-            [px]) per frame.
+        camera: the calibrated camera; misfit: its corners' (residual field, corner noise) (``lens_misfit``).
     """
-    noise = neighbour_noise(observations, residuals)
-    field = residual_field(camera, np.concatenate([o.uv for o in observations]), np.concatenate(residuals))
-    if noise is None or field is None or not is_misfit(field, noise):
+    if misfit is None or not is_misfit(*misfit):
         return []
+    field, noise = misfit
     others = ", ".join(m for m in CAMERA_MODELS if m != camera.distortion)
     return [
         f"the {camera.distortion} {MISFIT}: its residuals depend on where a corner lies in the image "
