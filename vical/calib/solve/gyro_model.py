@@ -110,10 +110,11 @@ def gyro_model_error(
         B = reading_jacobian(factor, A, mean_rates[n])
         index = system.factor_columns(linear.at(n))
         s = system.variance_scale[n]
-        C[index] += A.T @ B
-        Cs[index] += s * (A.T @ B)
-        BtB += B.T @ B
-        BtBs += s * (B.T @ B)
+        AtB, BtB_n = A.T @ B, B.T @ B
+        C[index] += AtB
+        Cs[index] += s * AtB
+        BtB += BtB_n
+        BtBs += s * BtB_n
         Btb += B.T @ b
         if system.window[n] >= 0:
             window_pulls[system.window[n]] += B.T @ b
