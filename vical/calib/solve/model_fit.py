@@ -20,6 +20,7 @@ neighbour noise; 0.00 for the right models; at most 0.034 px with a 5-30 ms roll
 from __future__ import annotations
 
 import numpy as np
+import scipy.spatial
 
 from vical.geometry import CAMERA_MODELS, CameraModel
 
@@ -32,23 +33,27 @@ MISFIT = "model does not fit this lens"  # in every warning this module gives ab
 MISFIT_FAIL_PX = 0.5  # [px per axis] a residual field this large is no detector's noise: the calibration fails
 
 
-def neighbour_noise(points: list[np.ndarray], residuals: list[np.ndarray]) -> float | None:
+def neighbour_noise(points: np.ndarray, residuals: np.ndarray, frame_of: np.ndarray) -> float | None:
     """Corner noise [px] per image axis from the residual differences of neighbouring corners, or None
     when fewer than ``MIN_PAIRS`` pairs exist.
 
+    Each corner is paired with its nearest corner on the board in the same view (one k-d tree over all
+    views, each lifted apart from the others along a fourth axis; among equally near corners the tree picks
+    one). Corners alone in their view have no pair.
+
     Args:
-        points: each frame's board points (K_i, 3) [m]; residuals: (K_i, 2) [px] per frame, in the same order.
+        points: (N, 3) [m] the corners' board points; residuals: (N, 2) [px]; frame_of: (N,) each corner's view.
     """
-    differences = []
-    for board, res in zip(points, residuals, strict=True):
-        if len(board) < 2:
-            continue
-        distance = np.linalg.norm(board[:, None, :] - board[None, :, :], axis=2)
-        np.fill_diagonal(distance, np.inf)
-        differences.append(res - res[np.argmin(distance, axis=1)])
-    if not differences or sum(len(d) for d in differences) < MIN_PAIRS:
+    if len(points) < 2:
         return None
-    d = np.concatenate(differences)
+    _, view = np.unique(frame_of, return_inverse=True)
+    apart = 10.0 * (float(np.ptp(points, axis=0).max()) + 1.0)  # [m] further than any two corners of one view
+    lifted = np.column_stack([points, view * apart])
+    distance, nearest = scipy.spatial.cKDTree(lifted, balanced_tree=False, compact_nodes=False).query(lifted, k=2)
+    paired = distance[:, 1] < apart / 10.0
+    if paired.sum() < MIN_PAIRS:
+        return None
+    d = residuals[paired] - residuals[nearest[paired, 1]]
     return float(np.sqrt(np.mean(np.sum(d * d, axis=1)) / 4.0))
 
 
@@ -83,8 +88,7 @@ def lens_misfit(
         residuals: (N, 2) [px]; frame_of: (N,) each corner's frame (any labels, the corners of a frame together
             or not).
     """
-    frames = [np.flatnonzero(frame_of == f) for f in np.unique(frame_of)]
-    noise = neighbour_noise([points[k] for k in frames], [residuals[k] for k in frames])
+    noise = neighbour_noise(points, residuals, frame_of)
     field = residual_field(camera, uv, residuals)
     return None if noise is None or field is None else (field, noise)
 
