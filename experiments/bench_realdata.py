@@ -230,17 +230,37 @@ def consistency_rows(label: str, windows: list[dict]) -> list[str]:
     """Do the 10 s windows agree within their own sigmas, and do the sigmas explain their spread?
 
     Per parameter: the largest difference between two windows over its 1-sigma (sqrt(s_a^2 + s_b^2)), and the
-    windows' mean 1-sigma over the standard deviation of their estimates (honest: near 1; over 2: too wide)."""
+    windows' mean 1-sigma over the standard deviation of their estimates (honest: near 1; over 2: too wide).
+    Three windows give a spread of 2 degrees of freedom, so one parameter's ratio is a weak reading: with
+    honest sigmas it exceeds 2 in 22 % of parameters (P(chi2_2 / 2 < 1/4)). The last row pools the
+    parameters (``pooled_ratio``)."""
     reference = np.array(windows[0]["T_cam_imu"])[:3, :3]
     values = [window_values(w, reference) for w in windows]
-    rows = []
+    rows, spreads, sigmas = [], [], []
     for name in windows[0]["sigmas"]:
         x = np.array([v[name] for v in values])
         s = np.array([w["sigmas"][name] for w in windows])
         z = max(abs(x[a] - x[b]) / np.hypot(s[a], s[b]) for a in range(len(x)) for b in range(a + 1, len(x)))
         spread = float(np.std(x, ddof=1))
+        spreads.append(spread)
+        sigmas.append(float(np.sqrt(np.mean(s**2))))
         rows.append(f"{label} {name:11} max |diff| / sigma {z:5.2f}   mean sigma / spread {np.mean(s) / spread:5.2f}")
+    ratio, low, high = pooled_ratio(np.array(spreads), np.array(sigmas), len(windows))
+    rows.append(f"{label} pooled      sigma / spread {ratio:5.2f}   (honest sigmas: {low:.2f}-{high:.2f}, 95 %)")
     return rows
+
+
+def pooled_ratio(spreads: np.ndarray, sigmas: np.ndarray, windows: int) -> tuple[float, float, float]:
+    """The parameters' sigma over their windows' spread, pooled, and the range 95 % of honest sigmas give.
+
+    With honest sigmas each (windows - 1) s^2 / sigma^2 is chi-square with windows - 1 degrees of freedom;
+    their sum over P parameters has P (windows - 1) (treating the parameters as independent), and
+    sqrt(dof / sum) estimates sigma / spread."""
+    from scipy.stats import chi2
+
+    dof = len(spreads) * (windows - 1)
+    total = float(np.sum((windows - 1) * spreads**2 / sigmas**2))
+    return np.sqrt(dof / total), np.sqrt(dof / chi2.ppf(0.975, dof)), np.sqrt(dof / chi2.ppf(0.025, dof))
 
 
 HEADER = (

@@ -4,18 +4,20 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "experiments"))
 import bench_realdata  # noqa: E402
 
-pytestmark = pytest.mark.skipif(
+needs_realdata = pytest.mark.skipif(
     not bench_realdata.DATA.is_dir(),
     reason=f"the real dev set is not at {bench_realdata.DATA} (it lies beside the repo)",
 )
 
 
+@needs_realdata
 def test_ten_real_seconds_calibrate_near_both_published_extrinsics_beside_the_peers(tmp_path, capsys):
     assert bench_realdata.main(["--quick", "--out", str(tmp_path)]) == 0
     text = capsys.readouterr().out
@@ -29,3 +31,20 @@ def test_ten_real_seconds_calibrate_near_both_published_extrinsics_beside_the_pe
     assert plain and float(plain.group(1)) < 0.5 and float(plain.group(2)) < 20
     opencv = re.search(r"OpenCV calibrateCamera cam0 0-10 s: fx ([+-][\d.]+) % fy ([+-][\d.]+) %", text)
     assert opencv and abs(float(opencv.group(1))) < 1 and abs(float(opencv.group(2))) < 1
+
+
+def test_the_pooled_sigma_over_spread_is_one_and_inside_its_range_for_honest_sigmas():
+    """Windows drawn with known sigmas: the pooled ratio is near 1 and within its 95 % range 95 % of the time;
+    sigmas twice too wide read near 2."""
+    rng = np.random.default_rng(0)
+    inside, ratios, wide = 0, [], []
+    for _ in range(1000):
+        sigma = rng.uniform(0.5, 2.0, 9)
+        x = rng.normal(0.0, 1.0, (3, 9)) * sigma
+        ratio, low, high = bench_realdata.pooled_ratio(x.std(axis=0, ddof=1), sigma, 3)
+        inside += low < ratio < high
+        ratios.append(ratio)
+        wide.append(bench_realdata.pooled_ratio(x.std(axis=0, ddof=1), 2 * sigma, 3)[0])
+    assert 0.93 < inside / 1000 < 0.97
+    assert abs(np.median(ratios) - 1.0) < 0.05
+    assert abs(np.median(wide) - 2.0) < 0.1

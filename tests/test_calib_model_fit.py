@@ -56,4 +56,3 @@ def test_residual_field_is_zero_for_noise_and_the_offset_of_a_shared_error():
     noise = rng.normal(0.0, 0.3, uv.shape)
     assert residual_field(camera, uv, noise) < 0.02
     assert abs(residual_field(camera, uv, noise + [0.4, -0.4]) - 0.4) < 0.02
-
