@@ -26,6 +26,7 @@ from vical.io.bag import read_bag
 from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.base import Policy
+from vical.policies.expert import expert_policy
 from vical.policies.learned import PAPER_POLICY_DIR, learned_policy
 from vical.robot import MotionRefused, SensorStreamError
 
@@ -203,6 +204,17 @@ def test_collect_records_and_calibrates_with_a_random_policy(tmp_path):
     assert (out / "calibration" / "camchain-imucam.yaml").is_file()
     summary = (out / "collect.yaml").read_text()
     assert "steps: 12" in summary and "done: the step limit" in summary
+
+
+def test_a_trajectory_baseline_stops_on_the_arm_by_the_learned_policys_rule(tmp_path):
+    """stop=information: the expert's motion, ended by the shipped policy's information state at its goal."""
+    out = tmp_path / "out"
+    args = [f"out={out}", "policy=expert_long", "task=intrinsic", "calibrate=false", "seed=3", "progress=false"]
+    assert collect(config(*args, "stop=information")) == 0
+    summary = yaml.safe_load((out / "collect.yaml").read_text())
+    assert summary["goal_reached"] and "every parameter group within tolerance" in summary["outcome"]
+    trajectory = expert_policy("intrinsic", "long")
+    assert summary["steps"] < trajectory.max_steps // trajectory.STEPS_PER_WAYPOINT  # before its last waypoint
 
 
 def _default_sigint() -> None:

@@ -354,6 +354,9 @@ SUBPROCESS_CASES = [
     # the output checked before the first of 50 episodes (minutes of work): the timeout would catch it later
     Case("vical-evaluate", "out={inputs}/a_file/x episodes=50", "out={inputs}/a_file/x cannot be created"),
     Case("vical-evaluate", "out={inputs}/full/mine.txt", "out={inputs}/full/mine.txt exists and is not a directory"),
+    Case("vical-evaluate", "stop.rule=maybe", "stop.rule must be one of ('policy', 'information')"),
+    Case("vical-evaluate", "stop=information stop.run_dir={inputs}/nowhere", "stop=information: no trained agent at"),
+    Case("vical-evaluate", "stop=information workspace=paper", ("paper_policy", "trained on the coverage state")),
 ]
 
 

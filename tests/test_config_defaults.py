@@ -29,6 +29,7 @@ from vical.env.settings import MdpConfig, Workspace
 from vical.evaluation.harness import PolicySpec
 from vical.parallel import ParallelConfig
 from vical.policies.learned import learned_policy
+from vical.policies.stopping import StopRule
 from vical.rl.run_settings import TrainConfig
 from vical.rl.sac import SACConfig
 from vical.robot.franka import FrankaArm
@@ -111,6 +112,8 @@ PAIRS: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [
     ("collect.yaml", ("align",), dataclass_defaults(Alignment)),
     ("collect.yaml", ("limits",), dataclass_defaults(Limits)),
     ("robot/sim.yaml", ("faults",), dataclass_defaults(RigFaults)),
+    ("stop/policy.yaml", (), dataclass_defaults(StopRule)),
+    ("stop/information.yaml", (), dataclass_defaults(StopRule)),
     *((f"policy/{path.name}", (), POLICY) for path in sorted((CONF / "policy").glob("*.yaml"))),
     ("robot/franka.yaml", ("arm",), argument_defaults(FrankaArm, T_flange_tool=IDENTITY)),
     ("robot/franka.yaml", ("sensor",), argument_defaults(RealSenseSensor)),
@@ -149,6 +152,7 @@ DIFFERS = {
     ("agent/sac_authors.yaml", "batch_size"): "the authors' code's setting",
     ("agent/sac_authors.yaml", "n_q"): "the authors' code's setting",
     ("agent/sac_authors.yaml", "alpha"): "the authors' code's setting",
+    ("stop/information.yaml", "rule"): "the information state's rule for every baseline is the point of this option",
     # A Ray cluster instead of local processes.
     ("parallel/ray.yaml", "workers"): "a cluster runs more than one worker",
     ("parallel/ray.yaml", "backend"): "the point of this option",

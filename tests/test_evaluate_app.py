@@ -115,3 +115,22 @@ def test_an_evaluation_stopped_while_writing_leaves_the_previous_results_whole(t
         run("episodes=1", "seed=6", "overwrite=true")
     assert {name: (out / name).read_bytes() for name in before} == before
     assert sorted(p.name for p in out.iterdir()) == sorted(before)  # no temporary left
+
+
+def test_stop_information_ends_the_baselines_by_the_information_state_and_the_summary_says_so(tmp_path):
+    from hydra import compose, initialize_config_dir
+
+    from vical.apps import evaluate as app
+
+    out = tmp_path / "eval"
+    overrides = [f"out={out}", "progress=false", "budgets=[]", "episodes=2", "seed=3", "workspace=practitioner"]
+    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose("evaluate", overrides=[*overrides, "policies=[expert_long]", "stop=information"])
+    _, (stopped,), _ = app.evaluate(cfg, None)
+    with initialize_config_dir(str(ROOT / "conf"), version_base="1.3"):
+        cfg = compose("evaluate", overrides=[*overrides, "policies=[expert_long]", f"out={tmp_path / 'own'}"])
+    _, (own,), _ = app.evaluate(cfg, None)
+    assert stopped.coverage_rate == 1.0 and own.coverage_rate == 0.0  # a trajectory has no goal of its own
+    assert stopped.path_length_m < 0.5 * own.path_length_m
+    assert "Every baseline stops by the learned policy's information state" in (out / "summary.md").read_text()
+    assert "Each policy stops by its own rule" in (tmp_path / "own" / "summary.md").read_text()

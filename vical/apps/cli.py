@@ -85,6 +85,13 @@ def argparse_main(
     return 0
 
 
+def plain(node: Any) -> Any:
+    """A config node as plain dicts and lists, interpolations resolved (anything else as it is)."""
+    from omegaconf import OmegaConf  # here: the entry point imports this module before the heavy imports
+
+    return OmegaConf.to_container(node, resolve=True) if OmegaConf.is_config(node) else node
+
+
 def _one_line(message, category, filename, lineno, line=None) -> str:
     return f"warning: {' '.join(str(message).split())}\n"
 

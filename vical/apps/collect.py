@@ -23,10 +23,10 @@ from typing import Any
 
 import hydra
 from hydra.errors import InstantiationException
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from vical.apps import calibrate
-from vical.apps.cli import check_then_run, fail, report_error
+from vical.apps.cli import check_then_run, fail, plain, report_error
 from vical.apps.entry import interrupted_by, interrupted_status
 from vical.apps.entry import run as run_command
 from vical.calib.errors import CalibrationError
@@ -45,6 +45,7 @@ from vical.io.euroc import EurocStreamWriter, read_euroc
 from vical.io.kalibr import read_camchain, read_imu_yaml, write_imu_yaml, write_target_yaml
 from vical.io.yamlfile import dump_yaml
 from vical.policies.base import Policy
+from vical.policies.stopping import StopRule, with_stop
 from vical.robot import MotionRefused, SensorStreamError
 from vical.sim.sampling import SensorSampling
 from vical.sim.settings import SimConfig
@@ -67,10 +68,6 @@ class CollectSettings:
     limits: Limits
     camchain: Path | None
     imu_yaml: Path | None
-
-
-def _plain(node: Any) -> Any:
-    return OmegaConf.to_container(node, resolve=True) if OmegaConf.is_config(node) else node
 
 
 def _existing_file(value: Any, key: str) -> Path | None:
@@ -104,13 +101,13 @@ def check_settings(cfg: DictConfig) -> CollectSettings:
     if path.exists() and not overwrite and (not path.is_dir() or any(path.iterdir())):
         raise FileExistsError(f"out={out} already exists; choose another directory or pass overwrite=true")
     task = cfg.task.name
-    guess = _plain(cfg.get("guess")) or {}
+    guess = plain(cfg.get("guess")) or {}
     camchain = _readable_file(guess.get("camchain"), "guess.camchain", read_camchain)
     if task == "extrinsic" and camchain is None:
         raise ConfigError("the extrinsic task calibrates with known intrinsics: pass guess.camchain=<camchain.yaml>")
     try:
-        align = from_mapping(Alignment, _plain(cfg.align), "align")
-        limits = from_mapping(Limits, _plain(cfg.limits), "limits")
+        align = from_mapping(Alignment, plain(cfg.align), "align")
+        limits = from_mapping(Limits, plain(cfg.limits), "limits")
     except ValueError as err:
         raise ConfigError(str(err)) from None
     return CollectSettings(path, overwrite, task, align, limits, camchain,
@@ -119,7 +116,7 @@ def check_settings(cfg: DictConfig) -> CollectSettings:
 
 def mdp_config(cfg: DictConfig, policy: Policy) -> MdpConfig:
     """The MDP the policy runs in: the ``env`` group's, with what the policy brings (as ``vical-evaluate`` does)."""
-    env = {k: v for k, v in _plain(cfg.env).items() if k not in ("_target_", "sim", "sensor", "task")}
+    env = {k: v for k, v in plain(cfg.env).items() if k not in ("_target_", "sim", "sensor", "task")}
     return MdpConfig.from_config({**env, **policy_mdp(policy)})
 
 
@@ -165,7 +162,8 @@ def _aside(out: Path) -> Path:
 def collect(cfg: DictConfig) -> int:
     """Collect and calibrate as ``cfg`` says; the exit status (module doc)."""
     s = check_settings(cfg)
-    policy = instantiate_policy(_plain(cfg.policy)[s.task], cfg.policy.get("name", "policy"))
+    policy = instantiate_policy(plain(cfg.policy)[s.task], cfg.policy.get("name", "policy"))
+    policy = with_stop(policy, StopRule.from_config(plain(cfg.get("stop"))))
     mdp = mdp_config(cfg, policy)
     policy.check(RobotEpisode(mdp))  # before connecting: a policy of another workspace or state
     rig = build_robot(cfg.robot)
@@ -211,14 +209,14 @@ def build_collector(
 
 def lens_spread(cfg: DictConfig, mdp: MdpConfig, nominal: SensorTruth) -> LensSpread | None:
     """The decentred lens the policy's state considers, as in its training env (the ``sensor`` group's spreads)."""
-    sampling = SensorSampling.from_config(_plain(cfg.sensor)).camera
-    task = CalibrationTask.from_config(_plain(cfg.task))
+    sampling = SensorSampling.from_config(plain(cfg.sensor)).camera
+    task = CalibrationTask.from_config(plain(cfg.task))
     return declared_lens_spread(mdp.information, nominal.camera, sampling, task)
 
 
 def board(cfg: DictConfig):
     """The calibration target: the board the workspace group describes (``sim.board``)."""
-    return SimConfig.from_mapping(_plain(cfg.sim)).board.target
+    return SimConfig.from_mapping(plain(cfg.sim)).board.target
 
 
 def _dry_run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth):

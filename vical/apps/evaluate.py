@@ -13,6 +13,7 @@ value) print one line ``vical-evaluate: error: ...`` and exit with status 2, as 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import math
 import os
@@ -33,6 +34,7 @@ from vical.apps.cli import (
     fail,
     one_line_warnings,
     override_value,
+    plain,
     quiet_library_logs,
 )
 from vical.apps.entry import run as run_command
@@ -58,6 +60,7 @@ from vical.evaluation.harness import (
 from vical.evaluation.yardstick import PROTOCOL_KEYS, fingerprint
 from vical.io.atomic import files_together
 from vical.parallel import ParallelConfig, WorkerCrashed
+from vical.policies.stopping import StopRule, with_stop
 
 # An absolute path: the console script imports this module from anywhere.
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
@@ -219,6 +222,17 @@ def effort_table(summaries: Sequence[BudgetSummary]) -> str:
     return "\n".join(lines)
 
 
+def stop_sentence(rule: StopRule) -> str:
+    """How the episodes ended, in the summary's words (``conf/stop/``)."""
+    if rule.rule == "policy":
+        return "Each policy stops by its own rule (stop=policy)."
+    source = rule.run_dir or f"the policy shipped for workspace {rule.workspace}"
+    return (
+        "Every baseline stops by the learned policy's information state (stop=information: the tolerances, "
+        f"confidence and goal groups of {source}); `coverage` counts the episodes it stopped."
+    )
+
+
 def summary_markdown(
     cfg: DictConfig,
     summaries: Sequence[Summary],
@@ -230,7 +244,8 @@ def summary_markdown(
     header = (
         f"# vical-evaluate: {task} task, workspace {cfg.env.workspace.name}\n\n"
         f"{len(seeds)} sensors per policy (reset seeds {seeds[0]}..{seeds[-1]}); error = the task's "
-        f"{cfg.task.error_metric} metric.\n\n## Whole episodes\n\n"
+        f"{cfg.task.error_metric} metric. {stop_sentence(StopRule.from_config(plain(cfg.get('stop'))))}"
+        "\n\n## Whole episodes\n\n"
         "Errors over successful calibrations, path length and calibration time over all episodes; absolute "
         "errors are means (intrinsics: ||[fx, fy, cx, cy] - truth||).\n\n"
     )
@@ -269,7 +284,8 @@ def unapplied_override_warnings(specs: Sequence[PolicySpec], env_cfg: dict, over
     task = CalibrationTask.from_config(env_cfg["task"])
     lines = []
     for spec in specs:
-        carried = {key for s in spec.for_task(task) for key in instantiate_policy(s, spec.name).env_settings}
+        policies = [with_stop(instantiate_policy(s, spec.name), spec.stop) for s in spec.for_task(task)]
+        carried = {key for policy in policies for key in policy.env_settings}
         replaced = [k for k in keys if k.split(".")[1] in carried]
         if replaced:
             lines.append(
@@ -288,7 +304,8 @@ def evaluate(
     budgets = check_budgets(cfg.get("budgets") or [])
     env_cfg = OmegaConf.to_container(cfg.env, resolve=True)
     configs = policy_configs(cfg, chosen)
-    specs = [PolicySpec.from_config(c, "policy") for c in configs]
+    stop = StopRule.from_config(plain(cfg.get("stop")))
+    specs = [dataclasses.replace(PolicySpec.from_config(c, "policy"), stop=stop) for c in configs]
     reference = reference_policy(cfg, specs, configs)
     paper = bool(cfg.get("paper_protocol", False))
     parallel = ParallelConfig.from_config(cfg.get("parallel"))

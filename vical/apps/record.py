@@ -24,7 +24,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
-from vical.apps.cli import check_then_run, fail
+from vical.apps.cli import check_then_run, fail, plain
 from vical.apps.entry import run as run_command
 from vical.calib.detection.aprilgrid import detect_aprilgrid
 from vical.calib.detection.checkerboard import detect_checkerboard
@@ -84,11 +84,6 @@ def check_out(out, overwrite: bool) -> Path:
     if not os.access(existing, os.W_OK | os.X_OK):
         raise FileExistsError(f"out={out} cannot be created: {existing} is not writable")
     return path
-
-
-def _plain(value):
-    """A config node as plain lists and dicts (scalars as they are)."""
-    return OmegaConf.to_container(value, resolve=True) if OmegaConf.is_config(value) else value
 
 
 def _require_bool(cfg: DictConfig, key: str) -> bool:
@@ -198,13 +193,13 @@ def check_settings(cfg: DictConfig) -> RecordSettings:
     return RecordSettings(
         mode=mode,
         static_duration=float(static_duration),
-        steps=parse_steps(_plain(cfg.get("steps"))),
+        steps=parse_steps(plain(cfg.get("steps"))),
         seed=_seed(cfg.get("seed")),
         out=check_out(cfg.get("out"), overwrite),
         overwrite=overwrite,
         images=images,
         progress=progress,
-        render_size=_render_size(_plain(cfg.get("render_size"))),
+        render_size=_render_size(plain(cfg.get("render_size"))),
         settle_time=float(settle_time),
         sampling=SensorSampling.from_config(OmegaConf.to_container(cfg.sensor, resolve=True)),
         sim=SimConfig.from_mapping(cfg.sim),

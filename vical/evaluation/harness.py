@@ -25,7 +25,7 @@ import json
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import hydra.utils
@@ -42,6 +42,7 @@ from vical.env.calibration import CalibrationEnv
 from vical.geometry import CameraModel
 from vical.parallel import ParallelConfig, connect_ray, imap_ordered
 from vical.policies.base import Policy
+from vical.policies.stopping import StopRule, with_stop
 from vical.sim.sampling import mean_sensor
 
 SPEC_KEYS = ("intrinsic", "extrinsic", "joint")
@@ -59,6 +60,7 @@ class PolicySpec:
             (None: the policy has none for that task).
         paper_two_trajectories: under the paper's protocol the joint task runs the intrinsic then
             the extrinsic policy (two trajectories), as the paper's trajectory baselines did.
+        stop: when its episodes end (``vical.policies.stopping``; the ``stop`` group, not the policy config).
     """
 
     name: str
@@ -66,6 +68,7 @@ class PolicySpec:
     extrinsic: Mapping[str, Any] | None
     joint: Mapping[str, Any] | None = None
     paper_two_trajectories: bool = False
+    stop: StopRule = field(default_factory=StopRule)
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any], key: str = "policy") -> PolicySpec:
@@ -344,7 +347,9 @@ class PolicyEvaluator:
         self.task = CalibrationTask.from_config(env_cfg["task"])
         self.budgets = check_budgets(budgets)
         self.paper_protocol = paper_protocol
-        self.policies = [instantiate_policy(s, spec.name) for s in spec.for_task(self.task, paper_protocol)]
+        self.policies = [
+            with_stop(instantiate_policy(s, spec.name), spec.stop) for s in spec.for_task(self.task, paper_protocol)
+        ]
         self.envs = [build_env(env_cfg, p) for p in self.policies]
         for policy, env in zip(self.policies, self.envs, strict=True):
             policy.check(env)

@@ -32,12 +32,16 @@ class Policy(ABC):
         env_settings: MDP settings the policy's episodes run with, over the evaluation env's
             (a learned policy's state and stopping rule: ``state``, ``information``); empty for
             policies that act in any env.
+        reads_state: its actions depend on the env's state (a learned policy): it runs only in the state
+            it was trained on. The baselines' actions do not, so any state's stopping rule can end their
+            episodes (``vical.policies.stopping``).
     """
 
     name: str = "policy"
     stop_at_coverage: bool = True
     max_steps: int | None = None
     env_settings: Mapping[str, Any] = MappingProxyType({})
+    reads_state: bool = False
 
     def check(self, env: CalibrationEnv) -> None:  # noqa: B027 (optional hook)
         """Raise ``ConfigError`` (one line: what and what to do) when the policy cannot run in ``env``.

@@ -69,6 +69,24 @@ def _check_run(state: dict[str, Any], path: Path) -> None:
         )
 
 
+def load_run(run_dir: str | Path) -> tuple[Path, dict[str, Any]]:
+    """``<run_dir>/agent.pt`` and its checkpoint (model, agent and run config); ``ConfigError`` unless it is a
+    calibration-env agent written by vical-train."""
+    path = Path(run_dir) / AGENT
+    if not path.is_file():
+        raise ConfigError(
+            f"no trained agent at {path}: policy.run_dir must be a finished vical-train run; {TRAIN_HINT}"
+        )
+    state = load_checkpoint(path)
+    _check_run(state, path)
+    return path, state
+
+
+def carried_settings(env: dict[str, Any]) -> dict[str, Any]:
+    """The MDP settings (``CARRIED_SETTINGS``) of an information-state run's env config."""
+    return {key: env[key] for key in CARRIED_SETTINGS if key in env}
+
+
 class LearnedPolicy(Policy):
     """Acts with a trained SAC agent's mean action, mapped to env units.
 
@@ -82,6 +100,7 @@ class LearnedPolicy(Policy):
     """
 
     stop_at_coverage = True
+    reads_state = True
 
     def __init__(
         self,
@@ -103,13 +122,7 @@ class LearnedPolicy(Policy):
     @classmethod
     def from_run(cls, run_dir: str | Path, **kwargs: Any) -> LearnedPolicy:
         """Load ``<run_dir>/agent.pt`` of a ``vical-train env=calibration`` run; ``ConfigError`` otherwise."""
-        path = Path(run_dir) / AGENT
-        if not path.is_file():
-            raise ConfigError(
-                f"no trained agent at {path}: policy.run_dir must be a finished vical-train run; {TRAIN_HINT}"
-            )
-        state = load_checkpoint(path)
-        _check_run(state, path)
+        path, state = load_run(run_dir)
         env = state["config"]["env"]
         kind = env.get("state", "coverage")
         agent = SAC(STATE_SIZES[kind], ACT_SIZE, SACConfig(**state["agent_config"]), seed=0)
@@ -119,7 +132,7 @@ class LearnedPolicy(Policy):
         workspace = from_mapping(Workspace, env.get("workspace", {}), f"{path}: env.workspace")
         policy = cls(agent, np.asarray(scale, dtype=float), workspace, path, **kwargs)
         if kind == "information":
-            policy.env_settings = {key: env[key] for key in CARRIED_SETTINGS if key in env}
+            policy.env_settings = carried_settings(env)
         return policy
 
     def check(self, env: CalibrationEnv) -> None:

@@ -1,0 +1,113 @@
+"""When a policy's episode ends: by its own rule (``stop=policy``) or by the information state (``stop=information``).
+
+Each policy has its own rule: a learned policy of the information state stops when it predicts every
+parameter group within its tolerance; the random moving policy at the coverage; a fixed trajectory at its
+last waypoint. With their own rules the policies differ in when they stop as much as in how they move.
+``stop=information`` gives every policy whose actions do not read the env's state (the baselines) the
+learned policy's rule: the same information state, tolerances, confidence and goal groups, read from the
+learned run (``stop.run_dir``; by default the policy shipped for the workspace). Its motion is unchanged;
+the episode ends at the first step after which every group is predicted within tolerance, at the policy's
+own end (a trajectory's last waypoint) or at its step limit (the policy's own, else the learned run's),
+whichever comes first. A learned policy of the information state keeps its own rule; one trained on
+another state is refused (its actions need the state it was trained on).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from vical.config_checks import ConfigError, from_mapping, require
+from vical.env.calibration import CalibrationEnv
+from vical.policies.base import Policy
+from vical.policies.learned import DEFAULT_WORKSPACE, carried_settings, load_run, shipped_policy_dir
+
+RULES = ("policy", "information")
+
+
+@dataclass(frozen=True)
+class StopRule:
+    """The ``stop`` config group (``conf/stop/``).
+
+    Attributes:
+        rule: ``policy`` (each policy's own) or ``information`` (the information state's, for every baseline).
+        run_dir: the learned run (``vical-train env=information``) whose information settings the rule uses;
+            None: the policy shipped for ``workspace``.
+        workspace: the workspace the policies run in (the shipped policy is chosen by it).
+    """
+
+    rule: str = "policy"
+    run_dir: str | None = None
+    workspace: str = DEFAULT_WORKSPACE
+
+    def __post_init__(self) -> None:
+        require(self.rule in RULES, "stop.rule", f"one of {RULES} (stop=policy or stop=information)", self.rule)
+        require(self.run_dir is None or isinstance(self.run_dir, str), "stop.run_dir", "null or a path", self.run_dir)
+
+    @classmethod
+    def from_config(cls, cfg: Mapping[str, Any] | None) -> StopRule:
+        """The rule of a ``stop`` config node (None: each policy's own)."""
+        return cls() if cfg is None else from_mapping(cls, cfg, "stop")
+
+
+def information_settings(rule: StopRule) -> dict[str, Any]:
+    """The information state, tolerances, confidence, goal groups and step limit of the rule's learned run."""
+    try:
+        path, state = load_run(rule.run_dir or shipped_policy_dir(rule.workspace))
+    except ConfigError as err:
+        raise ConfigError(f"stop=information: {err}") from None
+    env = state["config"]["env"]
+    kind = env.get("state", "coverage")
+    if kind != "information":
+        raise ConfigError(
+            f"stop=information takes its rule from a learned run of the information state, but {path} was trained "
+            f"on the {kind} state: name one with stop.run_dir=<a vical-train env=information run>"
+        )
+    return carried_settings(env)
+
+
+class InformationStop(Policy):
+    """``policy``'s motion, its episodes ended by the information state (module doc).
+
+    Args:
+        policy: a policy whose actions do not read the env's state.
+        settings: the learned run's ``state``, ``information`` and ``max_steps`` (``information_settings``).
+    """
+
+    stop_at_coverage = True
+
+    def __init__(self, policy: Policy, settings: Mapping[str, Any]) -> None:
+        self.policy = policy
+        self.name = policy.name
+        self.env_settings = MappingProxyType({k: v for k, v in settings.items() if k != "max_steps"})
+        self.max_steps = policy.max_steps if policy.max_steps is not None else settings.get("max_steps")
+
+    def check(self, env: CalibrationEnv) -> None:
+        self.policy.check(env)
+
+    def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
+        self.policy.reset(env, rng)
+
+    @property
+    def finished(self) -> bool:
+        return self.policy.finished
+
+    def act(self, obs: np.ndarray, env: CalibrationEnv) -> np.ndarray:
+        return self.policy.act(obs, env)
+
+
+def with_stop(policy: Policy, rule: StopRule) -> Policy:
+    """``policy`` with the stopping rule ``rule`` (module doc); ``ConfigError`` for a policy that cannot take it."""
+    if rule.rule == "policy" or policy.env_settings.get("state") == "information":
+        return policy
+    if policy.reads_state:
+        raise ConfigError(
+            f"stop=information: policy {policy.name!r} acts on the env state it was trained on "
+            f"({policy.env_settings.get('state', 'coverage')}), not the information state; evaluate it with "
+            "stop=policy, or train one on the information state (vical-train env=information)"
+        )
+    return InformationStop(policy, information_settings(rule))
