@@ -217,6 +217,14 @@ def test_a_trajectory_baseline_stops_on_the_arm_by_the_learned_policys_rule(tmp_
     assert summary["steps"] < trajectory.max_steps // trajectory.STEPS_PER_WAYPOINT  # before its last waypoint
 
 
+def test_the_greedy_planner_plans_on_the_arm_from_the_runners_state_and_reaches_the_goal(tmp_path):
+    out = tmp_path / "out"
+    args = [f"out={out}", "policy=greedy_information", "task=intrinsic", "calibrate=false", "seed=3", "progress=false"]
+    assert collect(config(*args)) == 0
+    summary = yaml.safe_load((out / "collect.yaml").read_text())
+    assert summary["goal_reached"] and summary["steps"] < 20
+
+
 def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 

@@ -28,6 +28,7 @@ from vical.collection.runner import Alignment, Limits
 from vical.env.settings import MdpConfig, Workspace
 from vical.evaluation.harness import PolicySpec
 from vical.parallel import ParallelConfig
+from vical.policies.greedy import greedy_information_policy
 from vical.policies.learned import learned_policy
 from vical.policies.stopping import StopRule
 from vical.rl.run_settings import TrainConfig
@@ -85,10 +86,15 @@ def _plain(value: Any) -> Any:
 # `workspace` node the env's Workspace and action scale (conf/env/calibration.yaml interpolates them).
 WORKSPACE = dataclass_defaults(Workspace, action_scale=_plain(MdpConfig.action_scale))
 # A policy file: PolicySpec's name, per-task factory specs and protocol flag, and the parameters the specs
-# interpolate (the learned policy's run directory: learned_policy's argument; the workspace's name). The specs
+# interpolate (the learned policy's and the planner's run directory: learned_policy's argument; the workspace's
+# name; the planner's random candidates: greedy_information_policy's argument). The specs
 # are what each policy is, no settings with a default (PolicySpec's joint=None: a policy without a joint spec).
 POLICY = dataclass_defaults(
-    PolicySpec, joint=NO_DEFAULT, run_dir=argument_defaults(learned_policy)["run_dir"], workspace=NO_DEFAULT
+    PolicySpec,
+    joint=NO_DEFAULT,
+    run_dir=argument_defaults(learned_policy)["run_dir"],
+    workspace=NO_DEFAULT,
+    samples=argument_defaults(greedy_information_policy)["samples"],
 )
 IDENTITY = np.eye(4).tolist()  # T_flange_tool=None (the robot adapters' default) is the identity the YAML writes
 PAIRS: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [

@@ -36,18 +36,19 @@ from vical.calib.detection.aprilgrid import detect_aprilgrid, make_aprilgrid_det
 from vical.calib.solve.initialization import pnp
 from vical.calib.solve.observations import FrameObservation
 from vical.data import NS_PER_S, ImuSamples, Target
-from vical.env.actions import action_to_step
+from vical.env.actions import goal_offset
 from vical.env.information import Guess
 from vical.env.settings import MdpConfig
 from vical.env.state import EpisodeState
 from vical.env.workspace import PoseFrame, look_at_rotation
-from vical.geometry import make_transform, rotation_angle, transform_points
+from vical.geometry import R_CAM_BODY, make_transform, rotation_angle, transform_points
 from vical.io.euroc import EurocStreamWriter
 from vical.policies.base import Policy
 from vical.robot import Arm, MotionRefused, SensorData, SensorStreamError, StampedPose, ViSensor
 
-# The camera's optical frame (z forward, x right, y down) in the tool frame (x forward, y left, z up).
-R_TOOL_CAMERA = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+# The camera's optical frame (z forward, x right, y down) in the tool frame (x forward, y left, z up): the tool
+# frame is the camera body's.
+R_TOOL_CAMERA = R_CAM_BODY.T
 
 
 # How far beyond the workspace bounds a reached pose may end ([m] x 3, [rad] x 3) before the run stops:
@@ -140,7 +141,8 @@ class CollectResult:
 
 
 class RobotEpisode:
-    """What a policy reads of its episode (``config``, ``action_space``, ``pose_offset``, ``steps``), off the env."""
+    """What a policy reads of its episode, off the env: ``config``, ``action_space``, ``pose_offset``, ``steps``, and
+    the episode's ``state`` and workspace ``frame`` (a planner predicts from them; set when the episode starts)."""
 
     def __init__(self, config: MdpConfig) -> None:
         self.config = config
@@ -148,6 +150,8 @@ class RobotEpisode:
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
         self.pose_offset = np.zeros(6)
         self.steps = 0
+        self.state: EpisodeState | None = None
+        self.frame: PoseFrame | None = None
 
 
 class SensorStream:
@@ -299,6 +303,7 @@ class Collector:
         self._rest(self.mdp.reset_hold)
         self._update_state()
         episode = self.episode
+        episode.state, episode.frame = self.state, frame
         self.policy.reset(episode, np.random.default_rng(seed))
         max_steps = self.limits.max_steps or self.policy.max_steps or self.mdp.max_steps
         reason = f"the step limit ({max_steps})"
@@ -327,9 +332,8 @@ class Collector:
         episode = self.episode
         space = episode.action_space
         a = np.clip(np.asarray(action, dtype=float).reshape(-1), space.low, space.high)
-        translation, euler_increment = action_to_step(a)
         bound = self.mdp.workspace.bound
-        goal = np.clip(episode.pose_offset + np.r_[translation, euler_increment], -bound, bound)
+        goal = goal_offset(episode.pose_offset, a, bound)
         before = self.arm.pose()
         reached = self._move(frame, episode.pose_offset, goal)
         episode.steps += 1

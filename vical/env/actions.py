@@ -28,6 +28,13 @@ def action_to_step(action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a[0] * direction(a[1], a[2]), a[3:].copy()
 
 
+def goal_offset(offset: np.ndarray, action: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """(6,) the workspace offset ``action`` (6,) heads for from ``offset`` (6,), clipped to the workspace ``bound`` (6,)
+    (what the env and the collection runner execute)."""
+    translation, euler_increment = action_to_step(action)
+    return np.clip(np.asarray(offset, dtype=float) + np.r_[translation, euler_increment], -bound, bound)
+
+
 def step_to_action(translation: np.ndarray, euler_increment: np.ndarray) -> np.ndarray:
     """The action (6,) whose step is ``translation`` (3) [m] and ``euler_increment`` (3) [rad].
 

@@ -32,10 +32,10 @@ from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask, run_task
 from vical.config_checks import ConfigError
 from vical.data import Recording, SensorTruth
-from vical.env.actions import action_to_step
+from vical.env.actions import goal_offset
 from vical.env.information import GROUPS, TASK_GROUPS, Guess, LensSpread
 from vical.env.plots import episode_figure, information_figure
-from vical.env.rewards import step_reward_terms, terminal_reward_terms
+from vical.env.rewards import information_reward_terms, step_reward_terms, terminal_reward_terms
 from vical.env.settings import InformationSettings, MdpConfig
 from vical.env.state import EpisodeState
 from vical.env.workspace import check_workspace, pose_frame
@@ -190,15 +190,11 @@ class CalibrationEnv(gym.Env):
 
     def _information_step(self, excess_before: float, motion: MotionResult) -> tuple[dict[str, float], bool]:
         """Reward terms and termination of the information state (the new frames already added)."""
-        s = self.config.information
-        terms = {
-            "information": s.information_weight * (excess_before - self.state.excess),
-            "path": -self.config.reward.path_weight * float(motion.path_length),
-            "time": -s.time_weight * float(motion.duration),
-        }
         terminated = self.config.terminate_on_coverage and self.goal_reached
-        if terminated:
-            terms["terminal"] = self.config.reward.terminal_bonus
+        terms = information_reward_terms(
+            excess_before, self.state.excess, motion.path_length, motion.duration, terminated,
+            self.config.information, self.config.reward,
+        )  # fmt: skip
         return terms, terminated
 
     # ------------------------------------------------------------------ episode data
@@ -247,8 +243,7 @@ class CalibrationEnv(gym.Env):
     # ------------------------------------------------------------------ internals
     def _goal_pose(self, action: np.ndarray) -> np.ndarray:
         """World pose of the action's target, clipped to the workspace around the start pose."""
-        translation, euler_increment = action_to_step(action)
-        return self.frame.pose(np.clip(self._offset + np.r_[translation, euler_increment], -self._bound, self._bound))
+        return self.frame.pose(goal_offset(self._offset, action, self._bound))
 
     def _current_offset(self) -> np.ndarray:
         return self.frame.offset(self.sim.ee_pose())

@@ -40,6 +40,7 @@ rotation [deg] and translation [mm] (largest axis), time offset [ms].
 
 from __future__ import annotations
 
+import copy
 import functools
 from dataclasses import dataclass
 
@@ -182,6 +183,7 @@ class InformationTracker:
         self._sigma_px = self._measured_pixel_sigma()
         self._t0: int | None = None
         self.frames_used = 0
+        self.last_pose: np.ndarray | None = None  # T_target_cam (4, 4) of the last frame added (PnP, guessed camera)
 
     @property
     def estimated(self) -> list[str]:
@@ -194,21 +196,47 @@ class InformationTracker:
 
     def add_frames(self, observations: list[FrameObservation], imu: ImuSamples) -> None:
         """Add frames (in time order, after every frame added before) and the IMU samples recorded so far."""
-        poses = []
+        posed = []
         for obs in observations:
             if len(obs.ids) < min(MIN_INIT_CORNERS, self.target.num_points):
                 continue
             fit = pnp(self.guess.camera, obs, refine=False)  # a linearisation point: the plane's pose suffices
             if fit is not None:
-                poses.append((obs, fit[0]))
+                posed.append((obs, fit[0]))
                 self._residual_norms.append(np.linalg.norm(obs.residuals(self.guess.camera, fit[0]), axis=1))
         self._sigma_px = self._measured_pixel_sigma()
-        for obs, T_cam_target in poses:
+        self.add_posed_frames(posed, imu)
+
+    def add_posed_frames(self, posed: list[tuple[FrameObservation, np.ndarray]], imu: ImuSamples) -> None:
+        """Add frames with their target poses ``T_cam_target`` (4, 4) (``add_frames`` after PnP; a prediction's
+        frames, which leave the measured corner noise as it is)."""
+        for obs, T_cam_target in posed:
+            T_target_cam = invert_transform(T_cam_target)
             if self.uses_imu:
-                self._add_inertial_frame(obs, invert_transform(T_cam_target), imu)
+                self._add_inertial_frame(obs, T_target_cam, imu)
             else:
-                self._add_camera_frame(obs, invert_transform(T_cam_target))
+                self._add_camera_frame(obs, T_target_cam)
+            self.last_pose = T_target_cam
             self.frames_used += 1
+
+    def fork(self, frame_weight: float = 1.0) -> InformationTracker:
+        """An independent copy of the current information (what a prediction adds to it leaves this one as it is),
+        in which every frame added stands for ``frame_weight`` frames (its corner noise divided by its root)."""
+        other = copy.copy(self)
+        other.information = self.information.copy()
+        other._residual_norms = list(self._residual_norms)
+        other._sigma_px = self._sigma_px / np.sqrt(frame_weight)
+        return other
+
+    @property
+    def last_time(self) -> float | None:
+        """[s] the IMU time (since the recording's first sample) of the last frame's state; None without one."""
+        return None if self._state is None else self._state[0]
+
+    @property
+    def first_stamp(self) -> int | None:
+        """[ns] the stamp the IMU times count from (None before the first frame with IMU data)."""
+        return self._t0
 
     @property
     def pixel_sigma(self) -> float:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from vical.env.settings import RewardWeights
+from vical.env.settings import InformationSettings, RewardWeights
 from vical.sim.motion import MotionResult
 
 
@@ -33,6 +33,27 @@ def step_reward_terms(
         "path": -w.path_weight * float(motion.path_length),
         "rotation": -w.rotation_weight * float(motion.rotation_length),
     }
+
+
+def information_reward_terms(
+    excess_before: float,
+    excess_after: float,
+    path_length: float,
+    duration: float,
+    goal_reached: bool,
+    s: InformationSettings,
+    w: RewardWeights,
+) -> dict[str, float]:
+    """The information MDP's step reward by term (docs/env.md): the e-folds of excess shed (``excess_*``), the
+    path [m] and motion time [s] charged, the bonus when every goal group is within tolerance after the step."""
+    terms = {
+        "information": s.information_weight * (excess_before - excess_after),
+        "path": -w.path_weight * float(path_length),
+        "time": -s.time_weight * float(duration),
+    }
+    if goal_reached:
+        terms["terminal"] = w.terminal_bonus
+    return terms
 
 
 def accuracy_reward(error_pct: float | None, w: RewardWeights) -> float:

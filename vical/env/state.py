@@ -17,6 +17,8 @@ from vical.env.coverage import Coverage, view_features
 from vical.env.information import SCORED_GROUPS, Guess, InformationTracker, excess, features, tolerance_ratios
 from vical.env.settings import MdpConfig
 
+RATE_FRAMES = 20  # latest frames whose stamps give the camera's frame rate
+
 
 class EpisodeState:
     """Coverage and (``state: information``) predicted uncertainty of one episode.
@@ -36,6 +38,7 @@ class EpisodeState:
         self.ratios: dict[str, float] = {}
         self.path_length = 0.0
         self.frames = 0
+        self._stamps: list[int] = []
 
     def reset(self, task: str, guess: Guess | None) -> None:
         """Start an episode of ``task`` (``intrinsic``, ``extrinsic``, ``joint``); ``guess`` linearises the
@@ -43,6 +46,7 @@ class EpisodeState:
         self.coverage.reset()
         self.path_length = 0.0
         self.frames = 0
+        self._stamps = []
         self.information = None
         self.ratios = {}
         if self.config.state == "information":
@@ -62,11 +66,19 @@ class EpisodeState:
             if view is not None:
                 self.coverage.add_view(view)
         self.frames += len(corners)
+        self._stamps = (self._stamps + [int(t) for t in stamps])[-RATE_FRAMES:]
         if self.information is not None:
             points = self.target.points
             seen = zip(stamps, corners, ids, strict=True)
             self.information.add_frames([FrameObservation(-1, int(t), c, i, points[i]) for t, c, i in seen], imu)
             self._update_ratios()
+
+    @property
+    def frame_rate(self) -> float | None:
+        """[Hz] the camera's frame rate over the latest frames (None before two)."""
+        if len(self._stamps) < 2 or self._stamps[-1] <= self._stamps[0]:
+            return None
+        return (len(self._stamps) - 1) / ((self._stamps[-1] - self._stamps[0]) / 1e9)
 
     def add_motion(self, offset_step: np.ndarray, path_length: float) -> None:
         """Account a motion: the pose offset it changed (6,) and its path [m]."""
@@ -74,23 +86,36 @@ class EpisodeState:
         self.path_length += float(path_length)
 
     def _update_ratios(self) -> None:
+        self.ratios = self.ratios_of(self.information)
+
+    def goal_of(self, ratios: dict[str, float]) -> dict[str, float]:
+        """The groups of ``ratios`` (group: predicted error over tolerance) the goal needs
+        (``env.information.goal_groups``)."""
+        if self.config.information.goal_groups == "all":
+            return ratios
+        scored = SCORED_GROUPS[self.information.task]
+        return {g: r for g, r in ratios.items() if g in scored}
+
+    def excess_of(self, ratios: dict[str, float]) -> float:
+        """E-folds the goal's groups of ``ratios`` have to shrink by (capped and floored as the reward counts)."""
         s = self.config.information
-        self.ratios = tolerance_ratios(self.information.sigmas(), s.tolerances, s.confidence)
+        return excess(self.goal_of(ratios), s.excess_cap, s.excess_floor, s.outside_weight)
+
+    def ratios_of(self, tracker: InformationTracker) -> dict[str, float]:
+        """Each group's predicted error over its tolerance (at the goal's confidence) from ``tracker``."""
+        s = self.config.information
+        return tolerance_ratios(tracker.sigmas(), s.tolerances, s.confidence)
 
     @property
     def goal_ratios(self) -> dict[str, float]:
         """The ratios of the groups the goal needs (``env.information.goal_groups``)."""
-        if self.config.information.goal_groups == "all":
-            return self.ratios
-        scored = SCORED_GROUPS[self.information.task]
-        return {g: r for g, r in self.ratios.items() if g in scored}
+        return self.goal_of(self.ratios)
 
     @property
     def excess(self) -> float:
         """E-folds the goal's predicted errors still have to shrink by (ratios capped and floored as the reward
         counts)."""
-        s = self.config.information
-        return excess(self.goal_ratios, s.excess_cap, s.excess_floor, s.outside_weight)
+        return self.excess_of(self.ratios)
 
     @property
     def goal_reached(self) -> bool:

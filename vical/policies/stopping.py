@@ -57,15 +57,21 @@ class StopRule:
 def information_settings(rule: StopRule) -> dict[str, Any]:
     """The information state, tolerances, confidence, goal groups and step limit of the rule's learned run."""
     try:
-        path, state = load_run(rule.run_dir or shipped_policy_dir(rule.workspace))
+        return learned_information_settings(rule.run_dir, rule.workspace)
     except ConfigError as err:
         raise ConfigError(f"stop=information: {err}") from None
+
+
+def learned_information_settings(run_dir: str | None, workspace: str, key: str = "stop.run_dir") -> dict[str, Any]:
+    """The MDP settings (state, information, max_steps) of the learned run ``run_dir`` of the information state
+    (None: the policy shipped for ``workspace``); ``ConfigError`` naming the config ``key`` for another state."""
+    path, state = load_run(run_dir or shipped_policy_dir(workspace))
     env = state["config"]["env"]
     kind = env.get("state", "coverage")
     if kind != "information":
         raise ConfigError(
-            f"stop=information takes its rule from a learned run of the information state, but {path} was trained "
-            f"on the {kind} state: name one with stop.run_dir=<a vical-train env=information run>"
+            f"the information state's rule is read from a learned run of the information state, but {path} was "
+            f"trained on the {kind} state: name one with {key}=<a vical-train env=information run>"
         )
     return carried_settings(env)
 

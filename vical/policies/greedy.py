@@ -1,0 +1,142 @@
+"""The information-greedy planner: each step, the candidate action whose predicted step earns the most.
+
+It plans on the information state the learned policy was trained on (the same tolerances, confidence, goal
+groups and step limit, read from the learned run as ``stop=information`` reads them) and looks one step ahead:
+
+- **candidates** (``candidate_actions``): the 12 moves along one workspace axis at the action box's full scale
+  (+-x, +-y, +-z by the translation scale; +-roll, +-pitch, +-yaw by theirs) and ``samples`` actions drawn
+  uniformly from the box with the episode's generator (12 by default: 24 candidates); a candidate the workspace
+  clips to no motion is left out;
+- **prediction** (``vical.env.lookahead``): the views each would give (the board's corners projected with the
+  current estimate where the detector reports them) and its IMU excitation, added to a fork of the information
+  state; the data so far and the sensor's guess, never the truth;
+- **score**: the information MDP's step reward of the prediction (``vical.env.rewards.information_reward_terms``):
+  ``information_weight`` per e-fold of excess shed, less ``path_weight`` per metre and ``time_weight`` per second
+  of motion, plus the terminal bonus when it reaches the goal: the information state's excess reduction per
+  second of motion and per metre, at the prices the learned policy was trained with.
+
+Before any frame has posed the board it heads back toward the start pose (where the alignment put the board
+ahead). ``decision_times`` keeps each step's planning time [s] (``experiments/bench_greedy.py``).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from vical.config_checks import ConfigError, require
+from vical.env.actions import step_to_action
+from vical.env.calibration import CalibrationEnv
+from vical.env.lookahead import Lookahead, Prediction
+from vical.env.rewards import information_reward_terms
+from vical.policies.base import Policy
+from vical.policies.learned import DEFAULT_WORKSPACE
+from vical.policies.stopping import learned_information_settings
+
+DEFAULT_SAMPLES = 12
+
+
+def axis_actions(scale: np.ndarray) -> np.ndarray:
+    """(12, 6) the moves along one workspace axis, both ways, at the action ``scale`` (6,)."""
+    moves = []
+    for axis in range(6):
+        for sign in (1.0, -1.0):
+            step = np.zeros(6)
+            step[axis] = sign * (scale[0] if axis < 3 else scale[axis])
+            moves.append(step_to_action(step[:3], step[3:]))
+    return np.array(moves)
+
+
+def candidate_actions(scale: np.ndarray, samples: int, rng: np.random.Generator) -> np.ndarray:
+    """(12 + samples, 6) the planner's candidates: the axis moves, then ``samples`` uniform draws from the box; all
+    within the box, as the env clips them (a horizontal move's polar angle of pi/2 to an angle scale of 1.57)."""
+    scale = np.asarray(scale, dtype=float)
+    return np.clip(np.vstack([axis_actions(scale), rng.uniform(-scale, scale, (samples, 6))]), -scale, scale)
+
+
+class GreedyInformationPolicy(Policy):
+    """The information-greedy planner (module doc).
+
+    Args:
+        settings: the learned run's ``state``, ``information`` and ``max_steps`` (its MDP).
+        samples: random candidates per step beside the 12 axis moves.
+        name: shown in evaluation tables.
+    """
+
+    stop_at_coverage = True
+
+    def __init__(self, settings: dict, samples: int = DEFAULT_SAMPLES, name: str = "greedy information planner"):
+        ok = isinstance(samples, int) and not isinstance(samples, bool) and samples >= 0
+        require(ok, "policy.samples", "an integer >= 0 (random candidates beside the 12 axis moves)", samples)
+        self.env_settings = {k: v for k, v in settings.items() if k != "max_steps"}
+        self.max_steps = settings.get("max_steps")
+        self.samples = samples
+        self.name = name
+        self.decision_times: list[float] = []
+        self._rng = np.random.default_rng(0)
+
+    def check(self, env: CalibrationEnv) -> None:
+        if env.config.state != "information":
+            raise ConfigError(
+                f"the greedy planner plans on the information state, but the env has env.state={env.config.state}; "
+                "vical-evaluate and vical-collect bring it with the planner's settings"
+            )
+
+    def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
+        self.check(env)
+        self._rng = rng
+
+    def act(self, obs: np.ndarray, env: CalibrationEnv) -> np.ndarray:
+        start = time.perf_counter()
+        try:
+            lookahead = Lookahead(env.state, env.frame, env.pose_offset, env.config)
+        except ValueError:  # no frame has posed the board yet
+            action = self._toward_start(env)
+        else:
+            action = self._best(lookahead, env)
+        self.decision_times.append(time.perf_counter() - start)
+        return action
+
+    def _best(self, lookahead: Lookahead, env: CalibrationEnv) -> np.ndarray:
+        excess = env.state.excess
+        best, best_score = None, -np.inf
+        for action in candidate_actions(env.action_space.high, self.samples, self._rng):
+            prediction = lookahead.predict(action)
+            if np.allclose(prediction.goal, lookahead.offset, atol=1e-9):
+                continue  # clipped to no motion at the workspace's edge
+            score = self.score(prediction, excess, env)
+            if score > best_score:
+                best, best_score = action, score
+        return best if best is not None else self._toward_start(env)
+
+    @staticmethod
+    def score(prediction: Prediction, excess: float, env: CalibrationEnv) -> float:
+        """The information MDP's reward of the predicted step from the current ``excess``."""
+        terms = information_reward_terms(
+            excess, prediction.excess, prediction.path_length, prediction.motion_time, prediction.goal_reached,
+            env.config.information, env.config.reward,
+        )  # fmt: skip
+        return float(sum(terms.values()))
+
+    @staticmethod
+    def _toward_start(env: CalibrationEnv) -> np.ndarray:
+        """The action toward the start pose (offset 0), within the action box."""
+        scale = env.action_space.high
+        back = -np.asarray(env.pose_offset, dtype=float)
+        distance = np.linalg.norm(back[:3])
+        if distance > scale[0]:
+            back[:3] *= scale[0] / distance
+        return step_to_action(back[:3], np.clip(back[3:], -scale[3:], scale[3:]))
+
+
+def greedy_information_policy(
+    run_dir: str | None = None,
+    workspace: str = DEFAULT_WORKSPACE,
+    samples: int = DEFAULT_SAMPLES,
+    name: str = "greedy information planner",
+) -> GreedyInformationPolicy:
+    """The factory ``conf/policy/greedy_information.yaml`` names: the planner on the information state of the
+    learned run ``run_dir`` (None: the policy shipped for the workspace named ``workspace``)."""
+    settings = learned_information_settings(run_dir, workspace, key="policy.run_dir")
+    return GreedyInformationPolicy(settings, samples, name)
