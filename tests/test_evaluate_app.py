@@ -132,5 +132,8 @@ def test_stop_information_ends_the_baselines_by_the_information_state_and_the_su
     _, (own,), _ = app.evaluate(cfg, None)
     assert stopped.coverage_rate == 1.0 and own.coverage_rate == 0.0  # a trajectory has no goal of its own
     assert stopped.path_length_m < 0.5 * own.path_length_m
-    assert "Every baseline stops by the learned policy's information state" in (out / "summary.md").read_text()
-    assert "Each policy stops by its own rule" in (tmp_path / "own" / "summary.md").read_text()
+    summary = (out / "summary.md").read_text()
+    assert "Every baseline stops by the learned policy's information state" in summary
+    assert "## Time to the tolerances" in summary and "| expert (long) | 2 | 100% |" in summary
+    own_summary = (tmp_path / "own" / "summary.md").read_text()
+    assert "Each policy stops by its own rule" in own_summary and "Time to the tolerances" not in own_summary

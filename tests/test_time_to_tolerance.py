@@ -1,0 +1,48 @@
+"""Time to the tolerances: stops, right stops, time and path at the stop, paired differences to a reference."""
+
+import math
+
+import numpy as np
+import pytest
+
+from vical.evaluation.harness import END, EpisodeRow
+from vical.evaluation.intervals import paired_difference
+from vical.evaluation.time_to_tolerance import summarize_stops
+
+TOLERANCES = {"rotation_deg": 0.1, "translation_mm": 2.0, "time_offset_ms": 0.1, "focal_px": 0.35}
+
+
+def row(policy, seed, stopped, time, path, rotation=0.05, failed=False, budget=END):
+    return EpisodeRow(policy, seed, budget_m=budget, coverage_reached=stopped, recording_time_s=time,
+                      path_length_m=path, rotation_deg=rotation, translation_mm=1.0, time_offset_ms=0.05,
+                      focal_px=5.0, failed=failed)  # fmt: skip
+
+
+def test_stops_right_stops_and_the_paired_differences_are_counted_from_the_whole_episodes():
+    rng = np.random.default_rng(0)
+    seeds = range(12)
+    ref_time, ref_path = rng.uniform(15, 25, 12), rng.uniform(0.8, 1.2, 12)
+    reference = [row("expert", s, True, t, p) for s, t, p in zip(seeds, ref_time, ref_path, strict=True)]
+    mine = [
+        row("planner", s, s != 0, ref_time[s] - 3, ref_path[s] - 0.2, rotation=0.2 if s == 1 else 0.05, failed=s == 2)
+        for s in seeds
+    ]
+    mine.append(row("planner", 5, True, 1.0, 0.1, budget=0.5))  # a budget's row: not an episode's end
+    expert, planner = summarize_stops({"expert": reference, "planner": mine}, "joint", TOLERANCES, "expert")
+    assert (planner.sensors, planner.stopped) == (12, pytest.approx(11 / 12))
+    # Of the 11 stopped, seed 1 is off by 0.2 deg and seed 2's calibration failed; focal_px is not scored here.
+    assert planner.right == pytest.approx(9 / 11)
+    assert planner.time_s == pytest.approx(np.mean(ref_time - 3))
+    assert planner.time_versus.estimate == pytest.approx(-3.0) and planner.time_versus.high < 0
+    expected = paired_difference(ref_path - 0.2, ref_path)
+    assert planner.path_versus.estimate == pytest.approx(expected.estimate)
+    assert expert.time_versus is None and expert.right == 1.0
+
+
+def test_no_interval_on_too_few_sensors_and_no_right_without_a_stop():
+    rows = {"a": [row("a", s, False, 30.0, 2.0) for s in range(3)], "b": [row("b", s, True, 10, 1) for s in range(3)]}
+    a, b = summarize_stops(rows, "joint", TOLERANCES, "b")
+    assert b.stopped == 1 and b.right == 1.0
+    assert a.stopped == 0 and math.isnan(a.right) and a.time_versus is None  # 3 sensors: no 95 % interval
+    with pytest.raises(ValueError, match="task must be one of"):
+        summarize_stops(rows, "two_stage", TOLERANCES, None)

@@ -1,0 +1,90 @@
+"""Time to the tolerances: how soon each policy stops by the information state, and whether its stop was right.
+
+With one stopping rule for every policy (``stop=information``) the policies differ only in their motion, and
+the practitioner's question is how long each takes to a calibration within the tolerances. Per policy, over its
+whole episodes:
+
+- **stopped**: the share that ended at the goal (every goal group predicted within tolerance) within the step
+  limit; the others ran to their end (the step limit, or a trajectory's last waypoint);
+- **right**: of the stopped, the share whose true errors of the task's scored groups are within the tolerances
+  (``vical.evaluation.seed_choice.stopped_right``; a failed calibration is not right);
+- **time** and **path**: recording time [s] and end-effector path [m] at the stop; an episode that never stopped
+  counts with its whole recording (at the step limit), so a policy gains nothing by not stopping;
+- the paired difference of time and path to the reference policy's on the same sensors, with its 95 % bootstrap
+  interval (``vical.evaluation.intervals``; none on fewer than ``MIN_SENSORS`` sensors).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from vical.evaluation.harness import END, EpisodeRow
+from vical.evaluation.intervals import MIN_SENSORS, Interval, paired_difference
+from vical.evaluation.seed_choice import SCORED_GROUPS, stopped_right
+
+
+@dataclass(frozen=True)
+class StopSummary:
+    """One policy's stops (module doc).
+
+    Attributes:
+        policy: the table row; sensors: whole episodes.
+        stopped: share that stopped at the goal; right: share of those whose stop was right (nan: none stopped).
+        time_s, median_time_s: mean and median recording time at the stop [s]; path_m: mean path [m].
+        time_versus, path_versus: paired differences to the reference (None for the reference itself, or too few
+            common sensors).
+    """
+
+    policy: str
+    sensors: int
+    stopped: float
+    right: float
+    time_s: float
+    median_time_s: float
+    path_m: float
+    time_versus: Interval | None
+    path_versus: Interval | None
+
+
+def _paired(rows: Sequence[EpisodeRow], reference: Sequence[EpisodeRow], key: str) -> Interval | None:
+    mine = {r.seed: getattr(r, key) for r in rows}
+    theirs = {r.seed: getattr(r, key) for r in reference}
+    common = sorted(set(mine) & set(theirs))
+    if len(common) < MIN_SENSORS:
+        return None
+    return paired_difference(np.array([mine[s] for s in common]), np.array([theirs[s] for s in common]))
+
+
+def summarize_stops(
+    rows: Mapping[str, Sequence[EpisodeRow]], task: str, tolerances: Mapping[str, float], reference: str | None
+) -> list[StopSummary]:
+    """Every policy's stops from its rows (``{policy: rows}``, every budget; the whole episodes are used)."""
+    if task not in SCORED_GROUPS:
+        raise ValueError(f"task must be one of {sorted(SCORED_GROUPS)}, got {task!r}")
+    ends = {name: [r for r in rs if r.budget_m == END] for name, rs in rows.items()}
+    summaries = []
+    for name, mine in ends.items():
+        if not mine:
+            continue
+        stopped = [r for r in mine if r.coverage_reached]
+        right = [stopped_right(r, task, tolerances) for r in stopped]
+        versus = reference is not None and name != reference and reference in ends
+        times = [r.recording_time_s for r in mine]
+        summaries.append(
+            StopSummary(
+                policy=name,
+                sensors=len(mine),
+                stopped=len(stopped) / len(mine),
+                right=float(np.mean(right)) if right else math.nan,
+                time_s=float(np.mean(times)),
+                median_time_s=float(np.median(times)),
+                path_m=float(np.mean([r.path_length_m for r in mine])),
+                time_versus=_paired(mine, ends[reference], "recording_time_s") if versus else None,
+                path_versus=_paired(mine, ends[reference], "path_length_m") if versus else None,
+            )
+        )
+    return summaries
