@@ -357,6 +357,7 @@ SUBPROCESS_CASES = [
     Case("vical-evaluate", "stop.rule=maybe", "stop.rule must be one of ('policy', 'information')"),
     Case("vical-evaluate", "stop=information stop.run_dir={inputs}/nowhere", "stop=information: no trained agent at"),
     Case("vical-evaluate", "stop=information workspace=paper", ("paper_policy", "trained on the coverage state")),
+    Case("vical-evaluate", "policy=greedy_information policy.samples=-1", "policy.samples must be an integer >= 0"),
 ]
 
 
