@@ -241,13 +241,14 @@ def summary_markdown(
     seeds: Sequence[int],
     effort: Sequence[BudgetSummary],
     reference: str | None,
+    stop: StopRule,
     stops: Sequence[StopSummary] = (),
 ) -> str:
     task = cfg.task.name
     header = (
         f"# vical-evaluate: {task} task, workspace {cfg.env.workspace.name}\n\n"
         f"{len(seeds)} sensors per policy (reset seeds {seeds[0]}..{seeds[-1]}); error = the task's "
-        f"{cfg.task.error_metric} metric. {stop_sentence(StopRule.from_config(plain(cfg.get('stop'))))}"
+        f"{cfg.task.error_metric} metric. {stop_sentence(stop)}"
         "\n\n## Whole episodes\n\n"
         "Errors over successful calibrations, path length and calibration time over all episodes; absolute "
         "errors are means (intrinsics: ||[fx, fy, cx, cy] - truth||).\n\n"
@@ -360,7 +361,7 @@ def evaluate(
         stops = summarize_stops(rows, cfg.task.name, tolerances, reference)
     with files_together(out) as path_of:  # overwrite=true: the old set stays until the new one is whole
         path_of(RESULTS).write_text(results_csv(evaluations))
-        path_of(SUMMARY).write_text(summary_markdown(cfg, summaries, seeds, effort, reference, stops))
+        path_of(SUMMARY).write_text(summary_markdown(cfg, summaries, seeds, effort, reference, stop, stops))
         if budgets:
             write_effort_figure(path_of(FIGURE), effort, cfg.task.name)
     return out, summaries, effort

@@ -198,7 +198,7 @@ class InformationTracker:
         """Add frames (in time order, after every frame added before) and the IMU samples recorded so far."""
         posed = []
         for obs in observations:
-            if len(obs.ids) < min(MIN_INIT_CORNERS, self.target.num_points):
+            if len(obs.ids) < self.min_corners:
                 continue
             fit = pnp(self.guess.camera, obs, refine=False)  # a linearisation point: the plane's pose suffices
             if fit is not None:
@@ -227,6 +227,11 @@ class InformationTracker:
         other._residual_norms = list(self._residual_norms)
         other._sigma_px = self._sigma_px / np.sqrt(frame_weight)
         return other
+
+    @property
+    def min_corners(self) -> int:
+        """Corners a frame needs to be posed and added (``MIN_INIT_CORNERS``, or the whole of a smaller target)."""
+        return min(MIN_INIT_CORNERS, self.target.num_points)
 
     @property
     def last_time(self) -> float | None:

@@ -27,7 +27,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from vical.calib.solve.initialization import MIN_INIT_CORNERS
 from vical.calib.solve.observations import FrameObservation
 from vical.data import ImuSamples
 from vical.env.actions import goal_offset
@@ -114,7 +113,6 @@ class Lookahead:
         self.T_world_target = T_world_cam @ invert_transform(tracker.last_pose)
         self.board = ProjectBackend(tracker.target, self.T_world_target, pixel_noise_px=0.0)
         self.rate = state.frame_rate or DEFAULT_FRAME_RATE
-        self.min_corners = min(MIN_INIT_CORNERS, tracker.target.num_points)
 
     def _camera(self, offset: np.ndarray) -> np.ndarray:
         """(4, 4) ``T_world_cam`` (optical frame) at the workspace ``offset``."""
@@ -151,7 +149,7 @@ class Lookahead:
         for t, offset in zip(times, offsets, strict=True):
             T_world_cam = self._camera(offset)
             uv, ids = self.board.ideal_observation(self.tracker.guess.camera, T_world_cam)
-            if len(ids) < self.min_corners:
+            if len(ids) < self.tracker.min_corners:
                 continue
             stamp = t0 + round((t_last + t - self.tracker.guess.time_offset) * 1e9)
             obs = FrameObservation(-1, int(stamp), uv, ids, self.tracker.target.points[ids])

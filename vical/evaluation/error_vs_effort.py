@@ -22,7 +22,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from vical.evaluation.harness import END, EpisodeRow
-from vical.evaluation.intervals import LEVEL, MIN_SENSORS, Interval, paired_difference
+from vical.evaluation.intervals import LEVEL, MIN_SENSORS, Interval, paired_by_sensor
 from vical.io.atomic import atomic_file
 
 
@@ -75,15 +75,9 @@ def _median(rows: Sequence[EpisodeRow], key: str) -> float | None:
     return float(np.median(values)) if values else None
 
 
-def _versus(chosen: dict[int, EpisodeRow], reference: dict[int, EpisodeRow] | None) -> Interval | None:
-    if reference is None or set(chosen) != set(reference) or len(chosen) < MIN_SENSORS:
-        return None
-    seeds = sorted(chosen)
-    mine = np.array([chosen[s].effective_score_pct for s in seeds])
-    theirs = np.array([reference[s].effective_score_pct for s in seeds])
-    if not (np.all(np.isfinite(mine)) and np.all(np.isfinite(theirs))):
-        return None
-    return paired_difference(mine, theirs)
+def _versus(chosen: dict[int, EpisodeRow], reference: dict[int, EpisodeRow]) -> Interval | None:
+    score = {s: r.effective_score_pct for s, r in chosen.items()}
+    return paired_by_sensor(score, {s: r.effective_score_pct for s, r in reference.items()})
 
 
 def summarize_budget(

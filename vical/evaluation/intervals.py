@@ -14,6 +14,7 @@ interval: 44 right stops of 50 read 88 %, but any rate from 76 to 95 % explains 
 from __future__ import annotations
 
 import numbers
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,6 +80,18 @@ def paired_difference(
     if a.shape != b.shape:
         raise ValueError(f"paired samples must have the same shape, got {a.shape} and {b.shape}")
     return bootstrap_mean(a - b, level, resamples, seed)
+
+
+def paired_by_sensor(policy: Mapping[int, float], reference: Mapping[int, float]) -> Interval | None:
+    """``paired_difference`` of two policies' values by sensor seed (``{seed: value}``); None unless both hold the
+    same sensors, at least ``MIN_SENSORS`` of them, every value finite."""
+    if set(policy) != set(reference) or len(policy) < MIN_SENSORS:
+        return None
+    seeds = sorted(policy)
+    mine, theirs = np.array([policy[s] for s in seeds]), np.array([reference[s] for s in seeds])
+    if not (np.all(np.isfinite(mine)) and np.all(np.isfinite(theirs))):
+        return None
+    return paired_difference(mine, theirs)
 
 
 def _is_count(n) -> bool:

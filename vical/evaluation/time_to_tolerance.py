@@ -11,7 +11,8 @@ whole episodes:
 - **time** and **path**: recording time [s] and end-effector path [m] at the stop; an episode that never stopped
   counts with its whole recording (at the step limit), so a policy gains nothing by not stopping;
 - the paired difference of time and path to the reference policy's on the same sensors, with its 95 % bootstrap
-  interval (``vical.evaluation.intervals``; none on fewer than ``MIN_SENSORS`` sensors).
+  interval (``vical.evaluation.intervals.paired_by_sensor``: none unless both ran the same sensors, at least
+  ``MIN_SENSORS`` of them).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vical.evaluation.harness import END, EpisodeRow
-from vical.evaluation.intervals import MIN_SENSORS, Interval, paired_difference
+from vical.evaluation.intervals import Interval, paired_by_sensor
 from vical.evaluation.seed_choice import SCORED_GROUPS, stopped_right
 
 
@@ -51,12 +52,7 @@ class StopSummary:
 
 
 def _paired(rows: Sequence[EpisodeRow], reference: Sequence[EpisodeRow], key: str) -> Interval | None:
-    mine = {r.seed: getattr(r, key) for r in rows}
-    theirs = {r.seed: getattr(r, key) for r in reference}
-    common = sorted(set(mine) & set(theirs))
-    if len(common) < MIN_SENSORS:
-        return None
-    return paired_difference(np.array([mine[s] for s in common]), np.array([theirs[s] for s in common]))
+    return paired_by_sensor({r.seed: getattr(r, key) for r in rows}, {r.seed: getattr(r, key) for r in reference})
 
 
 def summarize_stops(
