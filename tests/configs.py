@@ -22,8 +22,10 @@ def env_config(task: str = "intrinsic", workspace: str = "practitioner", *overri
     return composed("evaluate", [f"task={task}", f"workspace={workspace}", *overrides])["env"]
 
 
-def env_parts(task: str = "intrinsic", workspace: str = "practitioner") -> tuple[dict, dict, dict, dict]:
+def env_parts(
+    task: str = "intrinsic", workspace: str = "practitioner", *overrides: str
+) -> tuple[dict, dict, dict, dict]:
     """``(sim, sensor, task, mdp)``: the arguments of ``CalibrationEnv`` for ``task`` in ``workspace``."""
-    env = env_config(task, workspace)
+    env = env_config(task, workspace, *overrides)
     mdp = {k: v for k, v in env.items() if k not in ("_target_", "sim", "sensor", "task")}
     return env["sim"], env["sensor"], env["task"], mdp

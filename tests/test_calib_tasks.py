@@ -64,7 +64,8 @@ def test_bad_task_settings_are_refused_by_name():
         CalibrationTask.from_config({"name": "x", "metric": "intrinsic_relative"})
     with pytest.raises(
         ConfigError,
-        match=r"task\.camera_model must be one of \('radtan', 'equidistant', 'ds', 'eucm', 'omni', 'omni-radtan'\)",
+        match=r"task\.camera_model must be one of \['radtan', 'equidistant', 'ds', 'eucm', 'omni', 'omni-radtan', "
+        r"'sensor'\]",
     ):
         CalibrationTask(camera_model="kb4")
     assert CalibrationTask(camera_model="ds").camera_model == "ds"

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import fields, is_dataclass
+from dataclasses import MISSING, fields, is_dataclass
 from types import UnionType
 from typing import Any, get_args, get_type_hints
 
@@ -102,6 +102,9 @@ def from_mapping(cls: type, cfg: Mapping[str, Any], key: str) -> Any:
     unknown = sorted(set(cfg) - set(known))
     if unknown:
         raise ConfigError(f"{key}: unknown setting(s) {unknown}; known settings are {sorted(known)}")
+    missing = [name for name, f in known.items() if name not in cfg and f.default is f.default_factory is MISSING]
+    if missing:
+        raise ConfigError(f"{key}: missing setting(s) {missing}; give each a value")
     hints = get_type_hints(cls)
     kwargs = {}
     for name, value in cfg.items():

@@ -33,7 +33,7 @@ from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask
 from vical.collection.runner import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
 from vical.config_checks import ConfigError, from_mapping, require
-from vical.data import SensorTruth
+from vical.data import SensorTruth, Target
 from vical.env.calibration import declared_lens_spread
 from vical.env.information import Guess, LensSpread
 from vical.env.settings import MdpConfig
@@ -42,7 +42,7 @@ from vical.io.atomic import replace_directory, unused_sibling
 from vical.io.bag import write_bag
 from vical.io.errors import FormatError
 from vical.io.euroc import EurocStreamWriter, read_euroc
-from vical.io.kalibr import read_camchain, read_imu_yaml, write_imu_yaml, write_target_yaml
+from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_imu_yaml, write_target_yaml
 from vical.io.yamlfile import dump_yaml
 from vical.policies.base import Policy
 from vical.policies.stopping import StopRule, with_stop
@@ -204,7 +204,8 @@ def build_collector(
                   mdp.information.pixel_sigma, lens_spread(cfg, mdp, nominal))  # fmt: skip
     if progress is None:
         progress = print if cfg.get("progress") else (lambda line: None)
-    return Collector(rig.arm, sensor, policy, mdp, s.task, board(cfg), guess, writer, s.align, s.limits, progress)
+    return Collector(rig.arm, sensor, policy, mdp, s.task, board(cfg, rig), guess, writer, s.align, s.limits,
+                     progress)  # fmt: skip
 
 
 def lens_spread(cfg: DictConfig, mdp: MdpConfig, nominal: SensorTruth) -> LensSpread | None:
@@ -214,9 +215,11 @@ def lens_spread(cfg: DictConfig, mdp: MdpConfig, nominal: SensorTruth) -> LensSp
     return declared_lens_spread(mdp.information, nominal.camera, sampling, task)
 
 
-def board(cfg: DictConfig):
-    """The calibration target: the board the workspace group describes (``sim.board``)."""
-    return SimConfig.from_mapping(plain(cfg.sim)).board.target
+def board(cfg: DictConfig, rig: Any) -> Target:
+    """The calibration target: the rig's when it knows it (a simulated rig's drawn board, ``sensor.products``),
+    else the board the workspace group describes (``sim.board``)."""
+    target = getattr(rig, "target", None)
+    return target if target is not None else SimConfig.from_mapping(plain(cfg.sim)).board.target
 
 
 def _dry_run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth):
@@ -229,7 +232,7 @@ def _dry_run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp:
 def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth):
     """The collection; None when it stopped on a fault (reported), the result otherwise."""
     s.out.mkdir(parents=True, exist_ok=True)
-    write_target_yaml(s.out / "target.yaml", board(cfg))
+    write_target_yaml(s.out / "target.yaml", board(cfg, rig))
     write_imu_yaml(s.out / "imu.yaml", nominal.imu_noise)
     collector = build_collector(cfg, s, rig, policy, mdp, nominal, s.out / "recording")
     writer = collector.stream.writer
@@ -258,7 +261,7 @@ def _write_bag(cfg: DictConfig, s: CollectSettings) -> None:
     if not cfg.get("bag") or not (s.out / "recording" / "mav0" / "cam0" / "data.csv").is_file():
         return
     try:
-        recording = read_euroc(s.out / "recording", board(cfg))
+        recording = read_euroc(s.out / "recording", read_target_yaml(s.out / "target.yaml"))
     except FormatError as err:  # no frame recorded yet
         print(f"{APP}: no bag written: {err}", file=sys.stderr)
         return

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import os
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import hydra
@@ -39,8 +39,9 @@ from vical.io.recording import write_recording_files
 from vical.sim import MotionResult, PandaSim, SimConfig
 from vical.sim.camera import VisibilityRules
 from vical.sim.imu import STATIC_CHUNK_S, static_imu
+from vical.sim.products import replace_board
 from vical.sim.recorder import SensorRecorder
-from vical.sim.sampling import SensorSampling, sample_rig, sample_sensor
+from vical.sim.sampling import SensorSampling, draw_product, sample_rig, sample_sensor
 from vical.sim.settings import BoardConfig
 
 APP = "vical-record"
@@ -213,10 +214,11 @@ def record(cfg: DictConfig) -> Path:
     s = check_settings(cfg)
     if s.mode == "static_imu":
         return record_static_imu(s)
-    sim = PandaSim(s.sim)
+    product = draw_product(s.sampling, s.seed)
+    sim = PandaSim(replace(s.sim, board=replace_board(s.sim.board, product.board)))
     rng = np.random.default_rng(s.seed)
-    truth = sample_sensor(s.sampling, rng, asymmetric=s.asymmetric_distortion)
-    others = sample_rig(s.sampling, rng, truth)  # sensor.rig's cameras (none: nothing drawn)
+    truth = sample_sensor(product.sampling, rng, asymmetric=s.asymmetric_distortion)
+    others = sample_rig(product.sampling, rng, truth)  # sensor.rig's cameras (none: nothing drawn)
     detector = detect_aprilgrid if sim.cfg.board.kind == "aprilgrid" else detect_checkerboard
     detector = detector if s.sampling.backend == "render" else None
     recorder = SensorRecorder(sim, sim.cfg.board.target, s.sampling, detector, s.images, render_size=s.render_size)
@@ -247,7 +249,8 @@ def record_static_imu(s: RecordSettings) -> Path:
     """The drawn sensor's IMU lying still for ``static_duration``, as an IMU-only EuRoC folder (``vical-imu-noise``'s
     input; ``imu0/sensor.yaml`` holds the true noise). Closed form (``vical.sim.imu.static_imu``), no arm, no
     camera: hours of data in seconds, generated and written a minute at a time."""
-    truth = sample_sensor(s.sampling, np.random.default_rng(s.seed), asymmetric=s.asymmetric_distortion)
+    sampling = draw_product(s.sampling, s.seed).sampling
+    truth = sample_sensor(sampling, np.random.default_rng(s.seed), asymmetric=s.asymmetric_distortion)
     noise = truth.imu_noise
     chunks = static_imu(truth, np.random.default_rng([s.seed, 1]), s.static_duration)
     minutes = int(np.ceil(s.static_duration / STATIC_CHUNK_S))

@@ -22,6 +22,7 @@ from vical.geometry import CAMERA_MODELS
 
 SOLVES = ("intrinsic", "extrinsic", "joint", "two_stage")
 ERROR_METRICS = ("intrinsic_relative", "extrinsic_relative")
+SENSOR_MODEL = "sensor"  # task.camera_model: the recording's own lens model
 
 
 @dataclass(frozen=True)
@@ -33,7 +34,8 @@ class CalibrationTask:
         calibrate: the solve: ``intrinsic``; ``extrinsic`` (intrinsics known: the truth's);
             ``joint`` (one graph); ``two_stage`` (intrinsics first, then the extrinsic).
         camera_model: lens model estimated: one of ``vical.geometry.CAMERA_MODELS`` (``radtan``, ``equidistant``,
-            ``ds``, ``eucm``, ``omni``, ``omni-radtan``).
+            ``ds``, ``eucm``, ``omni``, ``omni-radtan``), or ``sensor``: the recording's own lens model (a user knows
+            their lens family; the practitioner's sensors draw one per episode, ``sensor.products.lenses``).
         estimate_time_offset: estimate the camera-IMU time offset (camera-IMU solves).
         error_metric: the paper's score, ``intrinsic_relative`` or ``extrinsic_relative`` [%].
         asymmetric_distortion: the sensor's distortion centre is drawn away from the principal
@@ -49,7 +51,8 @@ class CalibrationTask:
 
     def __post_init__(self) -> None:
         require(self.calibrate in SOLVES, "task.calibrate", f"one of {SOLVES}", self.calibrate)
-        require(self.camera_model in CAMERA_MODELS, "task.camera_model", f"one of {CAMERA_MODELS}", self.camera_model)
+        require(self.camera_model in (*CAMERA_MODELS, SENSOR_MODEL), "task.camera_model",
+                f"one of {[*CAMERA_MODELS, SENSOR_MODEL]}", self.camera_model)  # fmt: skip
         require(self.error_metric in ERROR_METRICS, "task.error_metric", f"one of {ERROR_METRICS}", self.error_metric)
         if self.error_metric == "extrinsic_relative" and self.calibrate == "intrinsic":
             raise ConfigError(
@@ -60,6 +63,15 @@ class CalibrationTask:
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> CalibrationTask:
         return from_mapping(cls, cfg, "task")
+
+    def model_of(self, recording: Recording) -> str:
+        """The lens model to estimate for ``recording`` (``sensor``: its truth's model, which a user knows)."""
+        if self.camera_model != SENSOR_MODEL:
+            return self.camera_model
+        if recording.truth is None:
+            raise ConfigError(f"task.camera_model={SENSOR_MODEL} takes the recording's lens model, but it carries "
+                              "no sensor truth; name the model (e.g. task.camera_model=radtan)")  # fmt: skip
+        return recording.truth.camera.distortion
 
 
 @dataclass(frozen=True)
@@ -105,7 +117,7 @@ def calibrate_task(
         raise ConfigError(f"task {task.name}: the recording carries no sensor truth (known intrinsics, IMU noise)")
     known = {"cam0": truth.camera} if task.calibrate == "extrinsic" else None
     return calibrate_rig(
-        {"cam0": recording.frames}, recording.imu, recording.target, task.calibrate, task.camera_model,
+        {"cam0": recording.frames}, recording.imu, recording.target, task.calibrate, task.model_of(recording),
         {"cam0": size}, truth.imu_noise if truth else None, known, options=opts,
         intrinsic_frames=None if intrinsic_frames is None else {"cam0": intrinsic_frames},
     ).results["cam0"]  # fmt: skip

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
+from dataclasses import replace
 from typing import Any, ClassVar
 
 import gymnasium as gym
@@ -38,12 +39,14 @@ from vical.env.plots import episode_figure, information_figure
 from vical.env.rewards import information_reward_terms, step_reward_terms, terminal_reward_terms
 from vical.env.settings import InformationSettings, MdpConfig
 from vical.env.state import EpisodeState
-from vical.env.workspace import check_workspace, pose_frame
+from vical.env.workspace import board_in_sight, check_workspace, pose_frame, sight_range
 from vical.geometry import CameraModel
 from vical.sim import PandaSim, SimConfig
 from vical.sim.motion import MotionResult
+from vical.sim.products import replace_board
 from vical.sim.recorder import SensorRecorder
-from vical.sim.sampling import CameraSampling, SensorSampling, mean_sensor, sample_sensor
+from vical.sim.sampling import CameraSampling, Product, SensorSampling, draw_product, sample_sensor
+from vical.sim.settings import BoardConfig
 
 OBS_SIZE = 24  # the coverage state: 18 coverage terms and the pose offset
 INFO_OBS_SIZE = len(GROUPS) + 7  # the information state: a value per group, the pose offset, the step fraction
@@ -68,8 +71,8 @@ def declared_lens_spread(
     sensor distribution's where ``task`` draws decentred lenses) with the distribution's spread of the distortion
     coefficients; None when no offset is declared. ``ConfigError`` where no intrinsics are estimated."""
     std = settings.center_offset_std
-    if std is None:
-        std = sampling.center_offset_std if task.asymmetric_distortion else 0.0
+    if std is None:  # the distribution's: it decentres pinhole lenses only (vical.sim.sampling.sample_camera)
+        std = sampling.center_offset_std if task.asymmetric_distortion and not camera.is_wide_angle else 0.0
     if std == 0:
         return None
     if task.calibrate == "extrinsic" or camera.is_wide_angle:
@@ -108,23 +111,39 @@ class CalibrationEnv(gym.Env):
         self.tasks = [CalibrationTask.from_config(task), *mixed_tasks(task_mix)]
         self.task = self.tasks[0]
         self.sampling = SensorSampling.from_config(sensor)
-        self.sim = PandaSim(SimConfig.from_mapping(sim))
-        self.target = self.sim.cfg.board.target
+        self._sim_config = SimConfig.from_mapping(sim)
+        self.recorder: SensorRecorder | None = None
+        self._build_scene(self._sim_config.board)
+        scale = np.asarray(self.config.action_scale, dtype=np.float32)
+        self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
+        size = INFO_OBS_SIZE if self.config.state == "information" else OBS_SIZE
+        self.observation_space = gym.spaces.Box(0.0, 1.0, (size,), dtype=np.float32)
+        self._bound = self.config.workspace.bound
+        self.truth: SensorTruth | None = None
+        self.product = draw_product(self.sampling, 0)  # each reset draws the episode's own
+        self._steps = 0
+
+    def _usable(self, product: Product) -> bool:
+        """Whether the product's camera (its datasheet) can detect its board from somewhere in the workspace."""
+        board = replace_board(self._sim_config.board, product.board)
+        near, far = sight_range(board.distance, self.config.workspace)
+        return board_in_sight(board.target, product.datasheet.camera, near, far)
+
+    def _build_scene(self, board: BoardConfig) -> None:
+        """The simulator, recorder, episode state and pose frame in front of ``board`` (again at a reset whose
+        product prints another board: ``sensor.products.boards``)."""
+        if self.recorder is not None:
+            self.recorder.close()
+        self.sim = PandaSim(replace(self._sim_config, board=board))
+        self.target = board.target
         detector = detect_aprilgrid if self.target.kind == "aprilgrid" else detect_checkerboard
         self.recorder = SensorRecorder(
             self.sim, self.target, self.sampling, detector if self.sampling.backend == "render" else None
         )
         camera = self.sampling.camera
         self.state = EpisodeState(self.config, self.target, (camera.width, camera.height))
-        scale = np.asarray(self.config.action_scale, dtype=np.float32)
-        self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
-        size = INFO_OBS_SIZE if self.config.state == "information" else OBS_SIZE
-        self.observation_space = gym.spaces.Box(0.0, 1.0, (size,), dtype=np.float32)
-        self._bound = self.config.workspace.bound
         self.frame = pose_frame(self.sim, self.config.workspace)
         check_workspace(self.sim, self.frame, self.config.workspace)
-        self.truth: SensorTruth | None = None
-        self._steps = 0
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:
@@ -140,9 +159,13 @@ class CalibrationEnv(gym.Env):
         sim_seed, sensor_seed, noise_seed = self.np_random.integers(2**63 - 1, size=3)
         if len(self.tasks) > 1:  # drawn after the seeds: a single task's episodes are unchanged
             self.task = self.tasks[int(self.np_random.integers(len(self.tasks)))]
+        self.product = draw_product(self.sampling, int(sensor_seed), self._usable)
+        board = replace_board(self._sim_config.board, self.product.board)
+        if board != self.sim.cfg.board:
+            self._build_scene(board)
         self.sim.reset(seed=int(sim_seed))
         self.truth = sample_sensor(
-            self.sampling, np.random.default_rng(sensor_seed), asymmetric=self.task.asymmetric_distortion
+            self.product.sampling, np.random.default_rng(sensor_seed), asymmetric=self.task.asymmetric_distortion
         )
         self.recorder.start(self.truth, np.random.default_rng([int(noise_seed), stream]))
         self.state.reset(self._tracker_task(), self._guess() if self.config.state == "information" else None)
@@ -263,15 +286,15 @@ class CalibrationEnv(gym.Env):
         return self.task.calibrate if self.task.calibrate in TASK_GROUPS else "joint"
 
     def _guess(self) -> Guess:
-        """The information state's linearisation point: the sensor distribution's means (not the truth).
+        """The information state's linearisation point: the episode's product datasheet (not the truth).
 
         In the extrinsic task the intrinsics are given to the calibrator, so they are known here too.
         """
-        guess = mean_sensor(self.sampling)
+        guess = self.product.datasheet
         camera = self.truth.camera if self.task.calibrate == "extrinsic" else guess.camera
         settings = self.config.information
         return Guess(camera, guess.T_cam_imu, guess.time_offset, guess.imu_noise, settings.pixel_sigma,
-                     declared_lens_spread(settings, camera, self.sampling.camera, self.task))  # fmt: skip
+                     declared_lens_spread(settings, camera, self.product.sampling.camera, self.task))  # fmt: skip
 
     def _observation(self) -> np.ndarray:
         return self.state.observation(self._offset, self._steps)

@@ -25,9 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from vical.config_checks import ConfigError
+from vical.data import Target
 from vical.env.settings import Workspace
-from vical.geometry import euler_to_matrix, make_transform, matrix_to_euler
+from vical.geometry import CameraModel, euler_to_matrix, make_transform, matrix_to_euler
 from vical.sim import PandaSim
+from vical.sim.camera import ProjectBackend
 
 AXES = ("x", "y", "z", "roll", "pitch", "yaw")
 UNITS = ("m", "m", "m", "rad", "rad", "rad")
@@ -181,3 +183,30 @@ def reachable_fraction(sim: PandaSim, frame: PoseFrame, bound: np.ndarray, sampl
         if reason:
             reasons["beyond reach" if reason.startswith("beyond") else reason] += 1
     return Reachability(samples, 1.0 - sum(reasons.values()) / samples, dict(reasons))
+
+
+# Fronto-parallel distances tried across the workspace's reach along the line of sight, and the share of the
+# board's corners one of them must show for a product's board to count as usable with its camera.
+_SIGHT_DISTANCES = 5
+USABLE_SHARE = 0.25
+
+
+def board_in_sight(target: Target, camera: CameraModel, near: float, far: float) -> bool:
+    """Whether ``camera`` sees at least ``USABLE_SHARE`` of ``target``'s corners, under the analytic backend's
+    detector rules, from some distance in ``[near, far]`` [m] facing the board centre: a practitioner does not
+    calibrate with a board their camera cannot detect from where they can hold it (tags too small for a wide lens,
+    a checkerboard that never fits the image)."""
+    backend = ProjectBackend(target, np.eye(4), 0.0)
+    R_board_cam = np.diag([1.0, -1.0, -1.0])  # looking along -z of the board, its z toward the camera
+    for distance in np.linspace(near, far, _SIGHT_DISTANCES):
+        T_board_cam = make_transform(R_board_cam, target.center + [0.0, 0.0, distance])
+        _, ids = backend.ideal_observation(camera, T_board_cam)
+        if len(ids) >= USABLE_SHARE * target.num_points:
+            return True
+    return False
+
+
+def sight_range(distance: float, workspace: Workspace) -> tuple[float, float]:
+    """The nearest and farthest camera-board distances [m] along the line of sight: the board ``distance`` ahead of
+    the start pose, less and plus the workspace's bound along world x (the start pose looks along it)."""
+    return max(distance - workspace.position[0], 0.05), distance + workspace.position[0]

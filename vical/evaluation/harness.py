@@ -6,7 +6,7 @@ by ``vical.calib.tasks.run_task``, whatever ended it (coverage, step limit, or t
 trajectory), and at every **path budget** below its path: the recording as it stood when the end
 effector had travelled that far (``Recording.until_path``), so policies are compared at equal
 effort. A ``CalibrationError`` becomes a failed row; its ``prior_score_pct`` is the error of the
-nominal parameters (the sensor distribution's means), what a user is left with when the
+nominal parameters (the episode product's datasheet: the distributions' means), what a user is left with when the
 calibration fails, which the paired comparisons use in its place (``vical.evaluation.error_vs_effort``).
 
 A policy config (``conf/policy/<name>.yaml``, see :class:`PolicySpec`) holds one policy spec per
@@ -43,7 +43,6 @@ from vical.geometry import CameraModel
 from vical.parallel import ParallelConfig, connect_ray, imap_ordered
 from vical.policies.base import Policy
 from vical.policies.stopping import StopRule, with_stop
-from vical.sim.sampling import mean_sensor
 
 SPEC_KEYS = ("intrinsic", "extrinsic", "joint")
 EPISODE_FAILED = "the episode of sensor seed"  # how a failed row of an episode that raised begins
@@ -133,7 +132,7 @@ class EpisodeRow:
             state's tolerances measure them (``vical.calib.metrics.group_errors_px``).
         rotation_deg, translation_mm: extrinsic ``T_cam_imu`` errors [deg], [mm].
         time_offset_ms: |time offset error| [ms].
-        prior_score_pct: the task's error [%] of the nominal parameters (the distributions' means):
+        prior_score_pct: the task's error [%] of the nominal parameters (its product's datasheet):
             what a failed calibration leaves.
         path_length_m: executed end-effector path [m] of the calibrated data (both trajectories in
             two-trajectory mode).
@@ -353,7 +352,6 @@ class PolicyEvaluator:
         self.envs = [build_env(env_cfg, p) for p in self.policies]
         for policy, env in zip(self.policies, self.envs, strict=True):
             policy.check(env)
-        self.nominal = mean_sensor(self.envs[0].sampling)
         if len(self.policies) == 2:  # the paper's baselines: intrinsics from the first trajectory's frames
             if self.budgets:
                 raise ConfigError(
@@ -375,7 +373,7 @@ class PolicyEvaluator:
             "seed": seed,
             "steps": sum(r.steps for r in runs),
             "coverage_reached": all(r.coverage_reached for r in runs),
-            "prior_score_pct": prior_score(self.task, self.nominal, recording.truth),
+            "prior_score_pct": prior_score(self.task, self.envs[-1].product.datasheet, recording.truth),
         }
         if len(runs) == 2:
             row = EpisodeRow(**common, path_length_m=float(sum(r.recording.path_length for r in runs)))

@@ -12,7 +12,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from vical.data import SensorTruth
+from vical.data import SensorTruth, Target
 from vical.robot.franka import FrankaArm
 from vical.robot.interfaces import Arm, ViSensor
 from vical.robot.realsense import RealSenseSensor
@@ -27,11 +27,13 @@ class Rig:
     Attributes:
         arm, sensor: the two devices.
         datasheet: the sensor's nominal values, or None when the rig knows none.
+        target: the board the rig stands before, or None: the one the config describes (``sim.board``).
     """
 
     arm: Arm
     sensor: ViSensor
     datasheet: SensorTruth | None = None
+    target: Target | None = None
 
     def close(self) -> None:
         """Stop and release both devices (safe after they were closed, and when they never ran)."""

@@ -33,8 +33,9 @@ from vical.robot.interfaces import (
     check_pose,
 )
 from vical.sim.panda import PandaSim
+from vical.sim.products import replace_board
 from vical.sim.recorder import SensorRecorder
-from vical.sim.sampling import SensorSampling, mean_sensor, sample_sensor
+from vical.sim.sampling import SensorSampling, draw_product, sample_sensor
 from vical.sim.settings import SimConfig
 
 # The Panda's documented Cartesian limits (translation [m/s], rotation [rad/s], acceleration [m/s^2]);
@@ -96,15 +97,18 @@ class SimRig:
         faults: RigFaults | None = None,
     ) -> None:
         self.faults = faults or RigFaults()
-        self.sim = PandaSim(sim)
-        # Analytic corners are never used: the runner detects corners in the rendered images.
-        self.recorder = SensorRecorder(self.sim, self.sim.cfg.board.target, replace(sampling, backend="project"),
-                                       keep_images=True)  # fmt: skip
         sim_seed, sensor_seed, noise_seed = np.random.default_rng(seed).integers(2**63 - 1, size=3)
+        product = draw_product(sampling, int(sensor_seed))
+        self.sim = PandaSim(replace(sim, board=replace_board(sim.board, product.board)))
+        self.target = self.sim.cfg.board.target  # the board this rig stands before (its product's print)
+        # Analytic corners are never used: the runner detects corners in the rendered images.
+        self.recorder = SensorRecorder(self.sim, self.target, replace(sampling, backend="project"), keep_images=True)
         self.sim.reset(seed=int(sim_seed))
-        self.truth: SensorTruth = sample_sensor(sampling, np.random.default_rng(sensor_seed), asymmetric_distortion)
-        # What a datasheet says of the sensor (the runner's nominal values): the distribution's means.
-        self.datasheet: SensorTruth = mean_sensor(sampling)
+        self.truth: SensorTruth = sample_sensor(
+            product.sampling, np.random.default_rng(sensor_seed), asymmetric_distortion
+        )
+        # What a datasheet says of the sensor (the runner's nominal values): its product's.
+        self.datasheet: SensorTruth = product.datasheet
         self.recorder.start(self.truth, np.random.default_rng([int(noise_seed), 0]))
         self._tracking_rng = np.random.default_rng([int(noise_seed), 1])
         self.arm = SimArm(self)

@@ -12,7 +12,7 @@ extrinsic the calibrator estimates is ``T_cam_imu = T_cam_body @ T_body_imu``.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -29,6 +29,7 @@ from vical.geometry import (
     make_transform,
 )
 from vical.geometry.wide_angle import WIDE_ANGLE_MODELS, invalid_coefficient
+from vical.sim.products import Products
 
 NOISE_UNITS = ("continuous", "discrete")
 # The camera models the simulator draws (its coefficients' distributions); omni, omni-radtan are calibrated, not drawn.
@@ -38,8 +39,9 @@ INTRINSIC_STDS = (
 )  # fmt: skip
 IMU_SAMPLING = ("average", "instant")
 CAMERA_BACKENDS = ("project", "render")
-# Redraws of a camera whose distortion folds over inside the image before giving up.
+# Redraws of a camera whose distortion folds over inside the image (of a product its env refuses) before giving up.
 _MAX_CAMERA_DRAWS = 100
+_MAX_PRODUCT_DRAWS = 100
 # The paper's IMU: ImuSampling's noise and rate default to vical.data.ImuNoise's, the one place its numbers are
 # written (conf/sensor/paper.yaml states them too; tests/test_config_defaults.py checks that they agree).
 _PAPER_IMU = ImuNoise()
@@ -275,6 +277,8 @@ class SensorSampling:
         backend: camera observation backend, ``project`` (analytic) or ``render`` (MuJoCo image +
             detector).
         rig: a rig's other cameras (cam1, ...; ``RigCameraSampling``), none by default.
+        products: the products drawn per episode (``vical.sim.products.Products``: lens families, boards, IMU
+            grades), each episode's unit then drawn around its product's datasheet; None: one product, this.
     """
 
     camera: CameraSampling = field(default_factory=CameraSampling)
@@ -284,17 +288,91 @@ class SensorSampling:
     pixel_noise_px: float = 0.25
     backend: str = "project"
     rig: tuple[RigCameraSampling, ...] = ()
+    products: Products | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "rig", _rig(self.rig))
         self.time_offset.check("sensor.time_offset")
         require_range("sensor.pixel_noise_px", self.pixel_noise_px, 0.0)
         require(self.backend in CAMERA_BACKENDS, "sensor.backend", f"one of {CAMERA_BACKENDS}", self.backend)
+        if self.products is not None:
+            self._check_lenses()
+
+    def _check_lenses(self) -> None:
+        """Every lens family projects at both ends of its field of view with ``sensor.camera``'s coefficients."""
+        for index, lens in enumerate(self.products.lenses):
+            key = f"sensor.products.lenses[{index}]"
+            require(lens.distortion in SAMPLED_MODELS, f"{key}.distortion", f"one of {SAMPLED_MODELS}",
+                    lens.distortion)  # fmt: skip
+            for end in ("low", "high"):
+                try:
+                    _lens_camera(self.camera, lens.distortion, getattr(lens.hfov, end))
+                except ConfigError as err:
+                    raise ConfigError(str(err).replace("sensor.camera.hfov.mean", f"{key}.hfov.{end}")) from None
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any]) -> SensorSampling:
         """Build from a plain mapping (e.g. ``OmegaConf.to_container(cfg.sensor)``); unknown keys are refused."""
         return from_mapping(cls, cfg, "sensor")
+
+
+def _lens_camera(camera: CameraSampling, distortion: str, hfov: float) -> CameraSampling:
+    """``camera``'s distribution for a lens family: its model, centred on its nominal field of view [rad]."""
+    return replace(camera, distortion=distortion, hfov=Normal(hfov, camera.hfov.std))
+
+
+# The stream of the product draws beside a sensor seed's own: products never shift the draws of a unit.
+PRODUCT_STREAM = 0x50D
+
+
+@dataclass(frozen=True)
+class Product:
+    """One episode's product.
+
+    Attributes:
+        sampling: the distribution of its units (``products`` None); its means are the product's datasheet.
+        board: its printed board (``sim.board`` keys, ``vical.sim.products.replace_board``), None: the workspace's.
+    """
+
+    sampling: SensorSampling
+    board: dict[str, Any] | None = None
+
+    @property
+    def datasheet(self) -> SensorTruth:
+        """What a user knows of the sensor before calibrating it: the product's nominal values."""
+        return mean_sensor(self.sampling)
+
+
+def draw_product(cfg: SensorSampling, sensor_seed: int, usable: Callable[[Product], bool] | None = None) -> Product:
+    """The product of the episode whose sensor is drawn from ``sensor_seed`` (``cfg`` itself without products).
+
+    Drawn from its own stream of the seed, in a fixed order (lens, board, IMU grade), so a seed gives one product
+    and the unit drawn from the seed (``sample_sensor``) is independent of it. A product that ``usable`` refuses
+    (the env's: a board its camera cannot detect from the workspace) is drawn again from the same stream.
+    """
+    products = cfg.products
+    if products is None:
+        return Product(cfg)
+    rng = np.random.default_rng([int(sensor_seed), PRODUCT_STREAM])
+    for _ in range(_MAX_PRODUCT_DRAWS):
+        product = _one_product(cfg, products, rng)
+        if usable is None or usable(product):
+            return product
+    raise ConfigError(
+        f"sensor.products: {_MAX_PRODUCT_DRAWS} draws gave no product whose camera can detect its board from the "
+        "workspace; widen sensor.products.boards[].square or narrow sensor.products.lenses[].hfov"
+    )
+
+
+def _one_product(cfg: SensorSampling, products: Products, rng: np.random.Generator) -> Product:
+    lens = products.pick_lens(rng)
+    board = products.pick_board(rng)
+    scale = products.imu_scale(rng)
+    camera = cfg.camera if lens is None else _lens_camera(cfg.camera, *lens)
+    i = cfg.imu
+    imu = replace(i, accel_noise=i.accel_noise * scale, accel_random_walk=i.accel_random_walk * scale,
+                  gyro_noise=i.gyro_noise * scale, gyro_random_walk=i.gyro_random_walk * scale)  # fmt: skip
+    return Product(replace(cfg, camera=camera, imu=imu, products=None), board)
 
 
 def sample_camera(cfg: CameraSampling, rng: np.random.Generator, asymmetric: bool = False) -> CameraModel:
