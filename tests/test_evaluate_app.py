@@ -42,6 +42,7 @@ def test_two_random_moving_episodes_write_the_results_the_tables_and_the_figure(
             assert float(row["prior_score_pct"]) > float(end["score_pct"])
             assert row["extrinsic_pct"] == ""  # the intrinsic task estimates no extrinsic
         assert 1 <= int(end["steps"]) <= 20
+        assert 0.0 < float(end["decision_ms"]) < 5.0  # a random draw per step: well under a millisecond's work
     summary = (out / "summary.md").read_text()
     header = "| policy | mean error [%] | error std [%] | path length [m] | calibration time [s] |"
     assert "intrinsic task, workspace practitioner" in summary and header in summary

@@ -89,6 +89,28 @@ def test_the_planner_reaches_the_goal_sooner_than_random_motion_with_the_same_st
     assert len(planner.decision_times) == sum(run.steps for run in runs["planner"])
 
 
+def test_before_it_sees_the_board_the_planner_searches_along_the_line_of_sight():
+    """A practitioner's product whose board its wide lens detects only nearer than the start: the planner goes
+    nearer until a frame poses the board, then plans."""
+    planner = greedy_information_policy()
+    env = build_env(env_config("joint", "practitioner", "sensor=practitioner", "task.camera_model=sensor"), planner)
+    try:
+        seed = 40000
+        while env.reset(seed=seed) and env.recording().frames.num_detections.max() > 0:
+            seed += 1  # the first sensor that sees no corner at the start pose
+        planner.reset(env, np.random.default_rng(seed))
+        reach = env.config.workspace.bound[0]
+        distances = []
+        while env.recording().frames.num_detections.max() == 0:
+            assert env.steps < 6, "the search did not find the board"
+            env.step(planner.act(None, env))
+            distances.append(env.pose_offset[0])
+        assert distances[0] > 0.5 * reach  # the first step heads for the board, a full step of the action box
+        assert env.recording().frames.num_detections.max() >= 4
+    finally:
+        env.close()
+
+
 def test_bad_planner_settings_are_refused_by_key():
     with pytest.raises(ConfigError, match=r"policy\.samples must be an integer >= 0"):
         greedy_information_policy(samples=-1)

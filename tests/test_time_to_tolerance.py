@@ -46,3 +46,13 @@ def test_no_interval_on_too_few_sensors_and_no_right_without_a_stop():
     assert a.stopped == 0 and math.isnan(a.right) and a.time_versus is None  # 3 sensors: no 95 % interval
     with pytest.raises(ValueError, match="task must be one of"):
         summarize_stops(rows, "two_stage", TOLERANCES, None)
+
+
+def test_the_decision_time_is_the_mean_over_the_episodes_steps():
+    rows = [row("planner", s, True, 10.0, 1.0) for s in range(3)]
+    for r, (ms, steps) in zip(rows, ((200.0, 10), (300.0, 30), (None, 5)), strict=True):
+        r.decision_ms, r.steps = ms, steps
+    (planner,) = summarize_stops({"planner": rows}, "joint", TOLERANCES, None)
+    assert planner.decision_ms == pytest.approx((200.0 * 10 + 300.0 * 30) / 40)  # the untimed row left out
+    (old,) = summarize_stops({"old": [row("old", 0, True, 10.0, 1.0)]}, "joint", TOLERANCES, None)
+    assert math.isnan(old.decision_ms)  # a results file from before the column

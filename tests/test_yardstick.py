@@ -86,3 +86,29 @@ def test_the_environment_hash_follows_the_episode_not_the_reward(resolved_joint,
     board["env"]["sim"]["board"]["distance"] = 0.8
     assert fingerprint(board)["environment"] != computed["joint"]["environment"]
     assert fingerprint(board)["baselines"] == computed["joint"]["baselines"]
+
+
+@pytest.fixture(scope="module")
+def time_to_tolerance_joint():
+    return yardstick_config("joint", "time_to_tolerance")
+
+
+def test_the_time_to_tolerance_yardstick_hashes_the_planners_candidates_and_the_shared_rule(time_to_tolerance_joint):
+    resolved = time_to_tolerance_joint
+    before = fingerprint(resolved)
+    assert resolved["stop"]["information"]["tolerances"] == {
+        "focal_px": 0.35, "principal_point_px": 0.35, "distortion_px": 0.5, "rotation_deg": 0.1,
+        "translation_mm": 2.0, "time_offset_ms": 0.1,
+    }  # fmt: skip
+    assert resolved["stop"]["information"]["confidence"] == 0.9
+    samples = copy.deepcopy(resolved)
+    samples["policy_configs"]["greedy_information"]["joint"]["samples"] = 11
+    after = fingerprint(samples)
+    assert after["greedy_information"] != before["greedy_information"] and after["yardstick"] != before["yardstick"]
+    assert after["expert_long"] == before["expert_long"]
+    tolerance = copy.deepcopy(resolved)
+    tolerance["stop"]["information"]["tolerances"]["rotation_deg"] = 0.2
+    assert fingerprint(tolerance)["protocol"] != before["protocol"]
+    assert fingerprint(tolerance)["baselines"] == before["baselines"]
+    without = {k: v for k, v in resolved.items() if k != "stop"}
+    assert fingerprint(without)["protocol"] != before["protocol"]  # the rule is part of this yardstick's protocol

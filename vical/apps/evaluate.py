@@ -273,8 +273,10 @@ def summary_markdown(
             "Every policy stopped by the same information state (stop=information). `stopped`: episodes that reached "
             "the goal within the step limit; `right`: of those, the share whose true errors of the task's scored "
             "groups are within the tolerances; time and path at the stop (an episode that never stopped counts "
-            "with its whole recording); the last columns: the mean paired difference to the reference on the same "
-            "sensors with its 95 % bootstrap interval.\n\n" + stops_table(stops) + "\n"
+            "with its whole recording); decision: the policy's time to choose an action; the last columns: the "
+            "mean paired difference to the reference on the same sensors with its 95 % bootstrap interval.\n\n"
+            + stops_table(stops)
+            + "\n"
         )
     return text
 
@@ -288,16 +290,17 @@ def _interval_cell(interval: Interval | None, fmt: str) -> str:
 def stops_table(stops: Sequence[StopSummary]) -> str:
     """Markdown table of ``vical.evaluation.time_to_tolerance.summarize_stops``."""
     lines = [
-        "| policy | sensors | stopped | right | time [s] (mean / median) | path [m] | time vs reference [s] "
-        "| path vs reference [m] |",
-        "|" + "---|" * 8,
+        "| policy | sensors | stopped | right | time [s] (mean / median) | path [m] | decision [ms / step] "
+        "| time vs reference [s] | path vs reference [m] |",
+        "|" + "---|" * 9,
     ]
     for s in stops:
         right = "-" if math.isnan(s.right) else f"{s.right:.0%}"
+        decision = "-" if math.isnan(s.decision_ms) else f"{s.decision_ms:.1f}"
         time_versus, path_versus = _interval_cell(s.time_versus, "{:+.1f}"), _interval_cell(s.path_versus, "{:+.2f}")
         lines.append(
             f"| {s.policy} | {s.sensors} | {s.stopped:.0%} | {right} | {s.time_s:.1f} / {s.median_time_s:.1f} | "
-            f"{s.path_m:.2f} | {time_versus} | {path_versus} |"
+            f"{s.path_m:.2f} | {decision} | {time_versus} | {path_versus} |"
         )
     return "\n".join(lines)
 
@@ -367,13 +370,16 @@ def evaluate(
     return out, summaries, effort
 
 
-def yardstick_config(task: str) -> dict[str, Any]:
-    """What ``fingerprint`` hashes of ``+experiment=yardstick_<task>``, as vical-evaluate composes it."""
+YARDSTICKS = ("yardstick", "time_to_tolerance")  # conf/experiment/<kind>_<task>.yaml
+
+
+def yardstick_config(task: str, kind: str = "yardstick") -> dict[str, Any]:
+    """What ``fingerprint`` hashes of ``+experiment=<kind>_<task>``, as vical-evaluate composes it."""
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        cfg = compose(config_name="evaluate", overrides=[f"+experiment=yardstick_{task}"])
+        cfg = compose(config_name="evaluate", overrides=[f"+experiment={kind}_{task}"])
     chosen = "learned"  # the experiment's `policy` choice (for a learned policy added on the command line)
     names = list(cfg.policies)
-    return {
+    out = {
         "policy_configs": dict(zip(names, policy_configs(cfg, chosen), strict=True)),
         "env": OmegaConf.to_container(cfg.env, resolve=True),
         **{
@@ -381,11 +387,15 @@ def yardstick_config(task: str) -> dict[str, Any]:
             for key in PROTOCOL_KEYS
         },
     }
+    stop = StopRule.from_config(plain(cfg.get("stop")))
+    if stop.rule == "information":
+        out["stop"] = information_settings(stop)
+    return out
 
 
-def yardstick_fingerprint(task: str) -> dict[str, str]:
-    """The fingerprint of ``+experiment=yardstick_<task>`` (vical.evaluation.yardstick)."""
-    return fingerprint(yardstick_config(task))
+def yardstick_fingerprint(task: str, kind: str = "yardstick") -> dict[str, str]:
+    """The fingerprint of ``+experiment=<kind>_<task>`` (vical.evaluation.yardstick)."""
+    return fingerprint(yardstick_config(task, kind))
 
 
 @hydra.main(config_path=str(CONF_DIR), config_name="evaluate", version_base="1.3")

@@ -140,6 +140,7 @@ class EpisodeRow:
         calib_time_s: calibrator wall time [s] (until the failure for a failed calibration).
         steps: env steps of the episode (both trajectories).
         frames: camera frames the calibration was given.
+        decision_ms: the policy's mean time [ms] to choose an action (its ``act``), per step of the episode.
         coverage_reached: every trajectory of the episode reached the MDP's terminal condition (the
             coverage; for a policy of the information state: every parameter group within tolerance).
         failed: the calibration raised ``CalibrationError``; ``error`` holds its message.
@@ -164,6 +165,7 @@ class EpisodeRow:
     calib_time_s: float = 0.0
     steps: int = 0
     frames: int = 0
+    decision_ms: float | None = None
     coverage_reached: bool = False
     failed: bool = False
     error: str = ""
@@ -216,11 +218,13 @@ class Evaluation:
 
 @dataclass(frozen=True)
 class Trajectory:
-    """One executed trajectory: its recording, the steps taken and whether the coverage completed."""
+    """One executed trajectory: its recording, the steps taken, whether the coverage completed and the policy's
+    total time choosing its actions [s]."""
 
     recording: Recording
     steps: int
     coverage_reached: bool
+    decision_s: float = 0.0
 
 
 def policy_mdp(policy: Policy) -> dict[str, Any]:
@@ -256,14 +260,17 @@ def run_trajectory(env: CalibrationEnv, policy: Policy, seed: int, noise_stream:
     """
     obs, _ = env.reset(seed=seed, options={"noise_stream": noise_stream})
     policy.reset(env, np.random.default_rng(seed))
+    deciding = 0.0
     for _ in range(env.config.max_steps):
+        start = time.perf_counter()
         action = policy.act(obs, env)
+        deciding += time.perf_counter() - start
         if policy.finished:  # a fixed trajectory past its last waypoint: nothing left to record
             break
         obs, _, terminated, truncated, _ = env.step(action)
         if terminated or truncated:
             break
-    return Trajectory(env.recording(), env.steps, env.goal_reached)
+    return Trajectory(env.recording(), env.steps, env.goal_reached, deciding)
 
 
 def _optional(value: float | None) -> float | None:
@@ -373,6 +380,7 @@ class PolicyEvaluator:
             "seed": seed,
             "steps": sum(r.steps for r in runs),
             "coverage_reached": all(r.coverage_reached for r in runs),
+            "decision_ms": 1e3 * sum(r.decision_s for r in runs) / max(sum(r.steps for r in runs), 1),
             "prior_score_pct": prior_score(self.task, self.envs[-1].product.datasheet, recording.truth),
         }
         if len(runs) == 2:

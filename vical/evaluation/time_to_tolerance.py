@@ -10,6 +10,7 @@ whole episodes:
   (``vical.evaluation.seed_choice.stopped_right``; a failed calibration is not right);
 - **time** and **path**: recording time [s] and end-effector path [m] at the stop; an episode that never stopped
   counts with its whole recording (at the step limit), so a policy gains nothing by not stopping;
+- **decision**: the policy's mean time to choose an action [ms per step] (what a robot waits between motions);
 - the paired difference of time and path to the reference policy's on the same sensors, with its 95 % bootstrap
   interval (``vical.evaluation.intervals.paired_by_sensor``: none unless both ran the same sensors, at least
   ``MIN_SENSORS`` of them).
@@ -36,6 +37,7 @@ class StopSummary:
         policy: the table row; sensors: whole episodes.
         stopped: share that stopped at the goal; right: share of those whose stop was right (nan: none stopped).
         time_s, median_time_s: mean and median recording time at the stop [s]; path_m: mean path [m].
+        decision_ms: mean time to choose an action [ms per step] (nan: not recorded).
         time_versus, path_versus: paired differences to the reference (None for the reference itself, or too few
             common sensors).
     """
@@ -47,12 +49,21 @@ class StopSummary:
     time_s: float
     median_time_s: float
     path_m: float
+    decision_ms: float
     time_versus: Interval | None
     path_versus: Interval | None
 
 
 def _paired(rows: Sequence[EpisodeRow], reference: Sequence[EpisodeRow], key: str) -> Interval | None:
     return paired_by_sensor({r.seed: getattr(r, key) for r in rows}, {r.seed: getattr(r, key) for r in reference})
+
+
+def _mean_decision_ms(rows: Sequence[EpisodeRow]) -> float:
+    """The mean time per step [ms] over the episodes' steps (nan where no row recorded it)."""
+    timed = [r for r in rows if r.decision_ms is not None and r.steps > 0]
+    if not timed:
+        return math.nan
+    return float(sum(r.decision_ms * r.steps for r in timed) / sum(r.steps for r in timed))
 
 
 def summarize_stops(
@@ -79,6 +90,7 @@ def summarize_stops(
                 time_s=float(np.mean(times)),
                 median_time_s=float(np.median(times)),
                 path_m=float(np.mean([r.path_length_m for r in mine])),
+                decision_ms=_mean_decision_ms(mine),
                 time_versus=_paired(mine, ends[reference], "recording_time_s") if versus else None,
                 path_versus=_paired(mine, ends[reference], "path_length_m") if versus else None,
             )

@@ -1,7 +1,8 @@
-"""The frozen yardstick: a fingerprint of its baselines, workspace, sensors and protocol.
+"""The frozen yardsticks: a fingerprint of their baselines, workspace, sensors and protocol.
 
-The yardstick (``conf/experiment/yardstick_*.yaml``, docs/results.md) is frozen before any policy is
-tuned against it: a later change of a baseline must be visible. ``fingerprint`` hashes, from the
+The yardsticks (``conf/experiment/yardstick_*.yaml``: error at equal effort; ``time_to_tolerance_*.yaml``: time
+until the shared stopping rule, docs/results.md) are frozen before any policy is tuned against them: a later change
+of a baseline must be visible. ``fingerprint`` hashes, from the
 composed evaluation config, (1) every baseline's resolved config and the motion it generates (the
 expert's waypoints, the fitted loop's coefficients, the random loop and random actions drawn from a
 fixed seed), (2) the environment the baselines run in (workspace, board, start pose, simulator,
@@ -25,9 +26,11 @@ from vical.evaluation.harness import PolicySpec, instantiate_policy
 from vical.policies.base import Policy
 from vical.policies.expert import ExpertPolicy
 from vical.policies.fourier import FourierTrajectory, FourierTrajectoryPolicy
+from vical.policies.greedy import GreedyInformationPolicy, candidate_actions
 from vical.policies.random_policy import RandomMovingPolicy
 
 PROTOCOL_KEYS = ("episodes", "seed", "budgets", "reference", "paper_protocol", "policies")
+STOP_KEYS = ("stop",)  # the shared stopping rule's settings, where the yardstick has one (time to the tolerances)
 DRAW_SEED = 0  # the seed of the random loop and actions whose values enter the fingerprint
 # Env keys that cannot change a baseline's episode: the reward and the learner's discount at the step limit
 # (no baseline reads them) and the env's own calibration and termination switches
@@ -63,6 +66,9 @@ def _motion(policy: Policy, action_scale: np.ndarray) -> dict[str, Any]:
     if isinstance(policy, RandomMovingPolicy):
         actions = rng.uniform(-action_scale, action_scale, (20, 6))
         return {"actions": actions, "max_steps": policy.max_steps, "stop_at_coverage": policy.stop_at_coverage}
+    if isinstance(policy, GreedyInformationPolicy):  # the state it plans on and its first step's candidates
+        candidates = candidate_actions(action_scale, policy.samples, rng)
+        return {"settings": policy.env_settings, "max_steps": policy.max_steps, "candidates": candidates}
     raise TypeError(f"the yardstick knows no baseline of type {type(policy).__name__}")
 
 
@@ -71,7 +77,9 @@ def fingerprint(cfg: Mapping[str, Any]) -> dict[str, str]:
 
     Args:
         cfg: with ``policy_configs`` (name -> resolved policy config, in ``policies`` order), ``env``
-            (the resolved env config) and the protocol keys (``PROTOCOL_KEYS``).
+            (the resolved env config) and the protocol keys (``PROTOCOL_KEYS``); a yardstick whose policies all
+            stop by the information state adds ``stop``: the rule's resolved settings (its tolerances, confidence,
+            goal groups and step limit), part of its protocol.
 
     Returns:
         ``{"baselines": ..., "environment": ..., "protocol": ..., "<policy name>": ..., "yardstick": ...}``;
@@ -90,6 +98,6 @@ def fingerprint(cfg: Mapping[str, Any]) -> dict[str, str]:
     parts = {
         "baselines": _digest(per_policy),
         "environment": _digest({k: v for k, v in cfg["env"].items() if k not in NOT_EPISODE_KEYS}),
-        "protocol": _digest({key: cfg[key] for key in PROTOCOL_KEYS}),
+        "protocol": _digest({key: cfg[key] for key in (*PROTOCOL_KEYS, *STOP_KEYS) if key in cfg}),
     }
     return {**parts, **per_policy, "yardstick": _digest(parts)}

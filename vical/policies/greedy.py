@@ -15,8 +15,10 @@ groups and step limit, read from the learned run as ``stop=information`` reads t
   of motion, plus the terminal bonus when it reaches the goal: the information state's excess reduction per
   second of motion and per metre, at the prices the learned policy was trained with.
 
-Before any frame has posed the board it heads back toward the start pose (where the alignment put the board
-ahead). ``decision_times`` keeps each step's planning time [s] (``experiments/bench_greedy.py``).
+Before any frame has posed the board it searches along the line of sight to the board (where the alignment put
+it): to the workspace's nearest point first (tags too small to detect from the start), then to its farthest (a
+board too large for the image), back and forth, looking at the board centre. ``decision_times`` keeps each
+step's planning time [s] (``experiments/bench_greedy.py``).
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from vical.policies.learned import DEFAULT_WORKSPACE
 from vical.policies.stopping import learned_information_settings
 
 DEFAULT_SAMPLES = 12
+SEARCH_TOLERANCE = 0.01  # [m] the arm's reach of a workspace end (IK tolerance, clipping)
 
 
 def axis_actions(scale: np.ndarray) -> np.ndarray:
@@ -92,7 +95,7 @@ class GreedyInformationPolicy(Policy):
         try:
             lookahead = Lookahead(env.state, env.frame, env.pose_offset, env.config)
         except ValueError:  # no frame has posed the board yet
-            action = self._toward_start(env)
+            action = self._search(env)
         else:
             action = self._best(lookahead, env)
         self.decision_times.append(time.perf_counter() - start)
@@ -119,11 +122,26 @@ class GreedyInformationPolicy(Policy):
         )  # fmt: skip
         return float(sum(terms.values()))
 
-    @staticmethod
-    def _toward_start(env: CalibrationEnv) -> np.ndarray:
+    @classmethod
+    def _search(cls, env: CalibrationEnv) -> np.ndarray:
+        """Toward the workspace's nearest point on the line of sight (+x: the start pose looks along it), or from
+        there toward its farthest, with the start's orientation."""
+        reach = env.config.workspace.bound[0]
+        at_near_end = env.pose_offset[0] >= reach - SEARCH_TOLERANCE
+        goal = np.zeros(6)
+        goal[0] = -reach if at_near_end else reach
+        return cls._toward(env, goal)
+
+    @classmethod
+    def _toward_start(cls, env: CalibrationEnv) -> np.ndarray:
         """The action toward the start pose (offset 0), within the action box."""
+        return cls._toward(env, np.zeros(6))
+
+    @staticmethod
+    def _toward(env: CalibrationEnv, goal: np.ndarray) -> np.ndarray:
+        """The action toward the workspace offset ``goal`` (6,), within the action box."""
         scale = env.action_space.high
-        back = -np.asarray(env.pose_offset, dtype=float)
+        back = np.asarray(goal, dtype=float) - np.asarray(env.pose_offset, dtype=float)
         distance = np.linalg.norm(back[:3])
         if distance > scale[0]:
             back[:3] *= scale[0] / distance
