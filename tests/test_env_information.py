@@ -93,6 +93,22 @@ def test_more_data_never_increases_the_predicted_sigma(recording):
     assert after["rotation"] < 0.05 and after["time_offset"] < 0.1  # [deg], [ms]: determined by 12 s of motion
 
 
+def test_one_frame_alone_predicts_from_its_view_and_the_priors(recording):
+    """The first inertial state's velocity has no factor until the next frame's IMU links it: a step that adds one
+    frame alone predicts without it (it knows nothing and shares nothing), the same as before the frame's IMU
+    state existed, and no smaller than after the second frame."""
+    rec = recording
+    guess = Guess(rec.truth.camera, rec.truth.T_cam_imu, 0.0, rec.truth.imu_noise, pixel_sigma=0.3)
+    tracker = InformationTracker("joint", rec.target, guess)
+    observations = collect_observations(rec.frames, rec.target)
+    tracker.add_frames(observations[5:6], rec.imu)
+    one = tracker.sigmas()
+    assert all(np.isfinite(v) and v > 0 for v in one.values())
+    tracker.add_frames(observations[6:7], rec.imu)
+    two = tracker.sigmas()
+    assert all(two[g] <= one[g] * (1 + 1e-6) for g in one) and two["focal"] < one["focal"]
+
+
 def test_features_and_excess():
     ratios = {"focal": 100.0, "principal_point": 1.0, "rotation": 0.01}
     f = features(ratios)

@@ -508,15 +508,22 @@ def _check_lens_spread(task: str, camera: CameraModel) -> None:
 
 def _schur(block: np.ndarray, keep: int) -> np.ndarray:
     """Information of the first ``keep`` variables with the rest marginalised."""
-    a, b, c = block[:keep, :keep], block[:keep, keep:], block[keep:, keep:]
-    return a - b @ np.linalg.solve(c, b.T)
+    return _eliminated(block[:keep, :keep], block[:keep, keep:], block[keep:, keep:])
 
 
 def _marginalise(block: np.ndarray, start: int, stop: int) -> np.ndarray:
     """``block`` with the variables in ``[start, stop)`` marginalised out (the rest keeps its order)."""
     keep = np.r_[np.arange(start), np.arange(stop, block.shape[0])]
     gone = np.arange(start, stop)
-    a, b, c = block[np.ix_(keep, keep)], block[np.ix_(keep, gone)], block[np.ix_(gone, gone)]
+    return _eliminated(block[np.ix_(keep, keep)], block[np.ix_(keep, gone)], block[np.ix_(gone, gone)])
+
+
+def _eliminated(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """``a - b c^-1 b^T``: what the kept variables know once those of ``c`` are marginalised. A variable no factor
+    has touched yet (an all-zero row of ``c``: the first state's velocity until an IMU factor links it to the next)
+    knows nothing and shares nothing, so it is dropped instead of making ``c`` singular."""
+    touched = np.flatnonzero(np.any(c != 0.0, axis=1))
+    b, c = b[:, touched], c[np.ix_(touched, touched)]
     return a - b @ np.linalg.solve(c, b.T)
 
 

@@ -1,0 +1,99 @@
+"""The time-to-tolerance yardstick with learned policies: how soon each policy reaches the tolerances.
+
+Every policy stops by the same information state (``stop=information``) on the practitioner's sensors
+(``+experiment=time_to_tolerance_<task>``, held-out seeds 50000..). Runs ``vical-evaluate`` once per task with the
+reference learned policy and the baselines (the greedy planner, the long and short expert, random motion), once
+more per further learned run (each its own table row, on the same sensors), pools the results and prints, per
+task, the time-to-tolerance table: stops, right stops, time and path at the stop, decision time per step, and the
+paired difference to the reference with its 95 % interval; then each learned run's training time (its train.log).
+
+Usage:
+    python experiments/time_to_tolerance.py --runs runs/a runs/b runs/c           # reference: the shipped policy
+    python experiments/time_to_tolerance.py --reference runs/a --runs runs/b runs/c --tasks joint
+    python experiments/time_to_tolerance.py --episodes 20 --seed 40000 ...        # the tuning sensors
+    python experiments/time_to_tolerance.py --sensor paper --baselines ...        # the paper's sensors, no baselines
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import subprocess
+import sys
+from datetime import datetime
+from pathlib import Path
+
+from vical.apps.evaluate import stops_table
+from vical.evaluation.results_file import by_policy, read_results
+from vical.evaluation.time_to_tolerance import summarize_stops
+from vical.policies.stopping import StopRule, information_settings
+
+ROOT = Path(__file__).resolve().parents[1]
+TASKS = ("joint", "intrinsic")
+BASELINES = ("greedy_information", "expert_long", "expert_short", "random_moving")
+SHIPPED = "shipped"
+_STAMP = re.compile(r"^\[(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),\d+\]")
+
+
+def label(run: str) -> str:
+    """A learned run's table row."""
+    return "learned (shipped)" if run == SHIPPED else f"learned ({Path(run).name})"
+
+
+def evaluate(task: str, out: Path, policies: list[str], run: str, args: argparse.Namespace) -> Path:
+    """``vical-evaluate`` of ``policies`` (``learned`` is ``run``) on the yardstick's sensors; its results file."""
+    overrides = [
+        f"+experiment=time_to_tolerance_{task}",
+        f"policies=[{','.join(policies)}]",
+        "reference=learned",
+        f"policy.name='{label(run)}'",
+        f"episodes={args.episodes}",
+        f"seed={args.seed}",
+        f"out={out}",
+        "overwrite=true",
+    ]
+    if run != SHIPPED:
+        overrides.append(f"policy.run_dir={run}")
+    if args.sensor == "paper":  # the paper's sensors, one lens model
+        overrides += ["sensor=paper", "task.camera_model=radtan"]
+    subprocess.run([sys.executable, "-m", "vical.apps.evaluate", *overrides], cwd=ROOT, check=True)
+    return out / "results.csv"
+
+
+def training_minutes(run: str) -> float | None:
+    """Minutes between the first and the last line of a run's train.log (None: no log, the shipped policy)."""
+    log = Path(run) / "train.log"
+    if run == SHIPPED or not log.is_file():
+        return None
+    stamps = [_STAMP.match(line) for line in log.read_text().splitlines()]
+    times = [datetime.strptime(m.group(1), "%Y-%m-%d %H:%M:%S") for m in stamps if m]
+    return (times[-1] - times[0]).total_seconds() / 60 if len(times) > 1 else None
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS))
+    parser.add_argument("--reference", default=SHIPPED, help="the learned run every policy is paired with")
+    parser.add_argument("--runs", nargs="*", default=[], help="further learned runs, each its own row")
+    parser.add_argument("--baselines", nargs="*", default=list(BASELINES), help="baselines beside the reference")
+    parser.add_argument("--episodes", type=int, default=50)
+    parser.add_argument("--seed", type=int, default=50000, help="first sensor seed (50000..: held out)")
+    parser.add_argument("--sensor", choices=("practitioner", "paper"), default="practitioner")
+    parser.add_argument("--out", type=Path, default=ROOT / "evaluations" / "time_to_tolerance")
+    args = parser.parse_args()
+    tolerances = information_settings(StopRule("information"))["information"]["tolerances"]
+    for task in args.tasks:
+        where = args.out / args.sensor / task
+        files = [evaluate(task, where / "reference", ["learned", *args.baselines], args.reference, args)]
+        files += [evaluate(task, where / Path(run).name, ["learned"], run, args) for run in args.runs]
+        rows = by_policy([row for path in files for row in read_results(path)])
+        stops = summarize_stops(rows, task, tolerances, label(args.reference))
+        print(f"\n## {task} task, sensor={args.sensor}, seeds {args.seed}..{args.seed + args.episodes - 1}\n")
+        print(stops_table(stops))
+    for run in [args.reference, *args.runs]:
+        minutes = training_minutes(run)
+        print(f"training time of {label(run)}: " + ("-" if minutes is None else f"{minutes:.1f} min"))
+
+
+if __name__ == "__main__":
+    main()
