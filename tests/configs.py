@@ -29,3 +29,10 @@ def env_parts(
     env = env_config(task, workspace, *overrides)
     mdp = {k: v for k, v in env.items() if k not in ("_target_", "sim", "sensor", "task")}
     return env["sim"], env["sensor"], env["task"], mdp
+
+
+def resolved_policy(name: str, *overrides: str) -> dict:
+    """``conf/policy/<name>.yaml`` chosen as vical-evaluate's ``policy`` with ``overrides``, resolved."""
+    with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
+        cfg = compose(config_name="evaluate", overrides=[f"policy={name}", *overrides])
+    return OmegaConf.to_container(cfg.policy, resolve=True)

@@ -358,6 +358,14 @@ SUBPROCESS_CASES = [
     Case("vical-evaluate", "stop=information stop.run_dir={inputs}/nowhere", "stop=information: no trained agent at"),
     Case("vical-evaluate", "stop=information workspace=paper", ("paper_policy", "trained on the coverage state")),
     Case("vical-evaluate", "policy=greedy_information policy.samples=-1", "policy.samples must be an integer >= 0"),
+    Case("vical-evaluate", "sensor.camera.hfov.mean=5", "sensor.camera.hfov.mean must be a number in (0.0, 3.14"),
+    Case("vical-evaluate", "stop=information stop.max_steps=0", "stop.max_steps must be null or an integer >= 1"),
+    Case("vical-evaluate", "stop=information stop.horizon_s=-5", "stop.horizon_s must be null or a time > 0"),
+    Case(
+        "vical-evaluate",
+        "sensor=practitioner sensor.products.imu_noise_scale.low=20",
+        "sensor.products.imu_noise_scale.high must be a number >= sensor.products.imu_noise_scale.low",
+    ),
 ]
 
 

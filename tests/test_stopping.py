@@ -3,7 +3,7 @@
 import hydra.utils
 import numpy as np
 import pytest
-from configs import env_config
+from configs import env_config, resolved_policy
 
 from vical.config_checks import ConfigError
 from vical.evaluation.harness import (
@@ -46,6 +46,17 @@ def test_a_baseline_takes_the_shipped_policys_state_tolerances_and_step_limit_an
     random = instantiate_policy({"_target_": "vical.policies.random_policy.RandomMovingPolicy"}, "random")
     assert with_stop(random, INFORMATION).max_steps == settings["max_steps"]  # no limit of its own: the learned run's
     assert with_stop(trajectory, StopRule()) is trajectory  # stop=policy: the policy's own rule
+
+
+def test_the_rules_step_limit_reaches_every_policy_without_its_own_and_the_planner():
+    rule = StopRule("information", max_steps=200, horizon_s=45.0)
+    random = instantiate_policy({"_target_": "vical.policies.random_policy.RandomMovingPolicy"}, "random")
+    assert with_stop(random, rule).max_steps == 200
+    assert with_stop(expert(), rule).max_steps == expert().max_steps  # a trajectory keeps its own length
+    planner = PolicySpec.from_config(resolved_policy("greedy_information", "stop=information", "stop.max_steps=200"))
+    assert instantiate_policy(planner.joint, planner.name).max_steps == 200
+    default = PolicySpec.from_config(resolved_policy("greedy_information"))
+    assert instantiate_policy(default.joint, default.name).max_steps == shipped_settings()["max_steps"]
 
 
 def test_a_learned_policy_keeps_its_own_information_rule_and_one_of_another_state_is_refused():

@@ -56,3 +56,18 @@ def test_the_decision_time_is_the_mean_over_the_episodes_steps():
     assert planner.decision_ms == pytest.approx((200.0 * 10 + 300.0 * 30) / 40)  # the untimed row left out
     (old,) = summarize_stops({"old": [row("old", 0, True, 10.0, 1.0)]}, "joint", TOLERANCES, None)
     assert math.isnan(old.decision_ms)  # a results file from before the column
+
+
+def test_a_common_horizon_counts_every_run_not_stopped_by_then_at_it():
+    runs = [
+        row("p", 0, True, 20.0, 1.0),  # stopped within the horizon: as it is
+        row("p", 1, True, 60.0, 3.0),  # stopped after it: no stop, at the horizon
+        row("p", 2, False, 30.0, 1.5),  # its own limit ended it first: at the horizon, and cut short
+        row("p", 3, False, 90.0, 4.0),  # ran past it: at the horizon
+    ]
+    (plain,) = summarize_stops({"p": runs}, "joint", TOLERANCES, None)
+    (capped,) = summarize_stops({"p": runs}, "joint", TOLERANCES, None, horizon_s=45.0)
+    assert plain.stopped == 0.5 and plain.time_s == pytest.approx(50.0) and plain.cut_short == 0.0
+    assert capped.stopped == 0.25 and capped.right == 1.0
+    assert capped.time_s == pytest.approx((20.0 + 3 * 45.0) / 4) and capped.median_time_s == 45.0
+    assert capped.cut_short == 0.25

@@ -273,7 +273,9 @@ def summary_markdown(
             "Every policy stopped by the same information state (stop=information). `stopped`: episodes that reached "
             "the goal within the step limit; `right`: of those, the share whose true errors of the task's scored "
             "groups are within the tolerances; time and path at the stop (an episode that never stopped counts "
-            "with its whole recording); decision: the policy's time to choose an action; the last columns: the "
+            "with its whole recording, or at the horizon where `stop.horizon_s` sets one: `cut short` counts the "
+            "episodes whose own limit ended them before it); decision: the policy's time to choose an action; the "
+            "last columns: the "
             "mean paired difference to the reference on the same sensors with its 95 % bootstrap interval.\n\n"
             + stops_table(stops)
             + "\n"
@@ -290,17 +292,17 @@ def _interval_cell(interval: Interval | None, fmt: str) -> str:
 def stops_table(stops: Sequence[StopSummary]) -> str:
     """Markdown table of ``vical.evaluation.time_to_tolerance.summarize_stops``."""
     lines = [
-        "| policy | sensors | stopped | right | time [s] (mean / median) | path [m] | decision [ms / step] "
-        "| time vs reference [s] | path vs reference [m] |",
-        "|" + "---|" * 9,
+        "| policy | sensors | stopped | right | cut short | time [s] (mean / median) | path [m] "
+        "| decision [ms / step] | time vs reference [s] | path vs reference [m] |",
+        "|" + "---|" * 10,
     ]
     for s in stops:
         right = "-" if math.isnan(s.right) else f"{s.right:.0%}"
         decision = "-" if math.isnan(s.decision_ms) else f"{s.decision_ms:.1f}"
         time_versus, path_versus = _interval_cell(s.time_versus, "{:+.1f}"), _interval_cell(s.path_versus, "{:+.2f}")
         lines.append(
-            f"| {s.policy} | {s.sensors} | {s.stopped:.0%} | {right} | {s.time_s:.1f} / {s.median_time_s:.1f} | "
-            f"{s.path_m:.2f} | {decision} | {time_versus} | {path_versus} |"
+            f"| {s.policy} | {s.sensors} | {s.stopped:.0%} | {right} | {s.cut_short:.0%} | "
+            f"{s.time_s:.1f} / {s.median_time_s:.1f} | {s.path_m:.2f} | {decision} | {time_versus} | {path_versus} |"
         )
     return "\n".join(lines)
 
@@ -361,7 +363,7 @@ def evaluate(
     stops = []
     if stop.rule == "information":
         tolerances = information_settings(stop)["information"]["tolerances"]
-        stops = summarize_stops(rows, cfg.task.name, tolerances, reference)
+        stops = summarize_stops(rows, cfg.task.name, tolerances, reference, stop.horizon_s)
     with files_together(out) as path_of:  # overwrite=true: the old set stays until the new one is whole
         path_of(RESULTS).write_text(results_csv(evaluations))
         path_of(SUMMARY).write_text(summary_markdown(cfg, summaries, seeds, effort, reference, stop, stops))
@@ -389,7 +391,7 @@ def yardstick_config(task: str, kind: str = "yardstick") -> dict[str, Any]:
     }
     stop = StopRule.from_config(plain(cfg.get("stop")))
     if stop.rule == "information":
-        out["stop"] = information_settings(stop)
+        out["stop"] = {**information_settings(stop), "horizon_s": stop.horizon_s}
     return out
 
 

@@ -246,7 +246,12 @@ def policy_mdp(policy: Policy) -> dict[str, Any]:
 
 def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
     """The calibration env of ``env_cfg`` with ``policy``'s MDP settings, step limit and termination."""
-    env = hydra.utils.instantiate({**dict(env_cfg), **policy_mdp(policy)})
+    try:
+        env = hydra.utils.instantiate({**dict(env_cfg), **policy_mdp(policy)})
+    except InstantiationException as err:
+        if isinstance(err.__cause__, ConfigError):  # a bad setting of the sensor, sim, task or MDP: its own line
+            raise err.__cause__ from None
+        raise
     if not isinstance(env, CalibrationEnv):
         raise ConfigError(f"env must be the calibration env (env=calibration), got {type(env).__name__}")
     return env

@@ -9,7 +9,10 @@ whole episodes:
 - **right**: of the stopped, the share whose true errors of the task's scored groups are within the tolerances
   (``vical.evaluation.seed_choice.stopped_right``; a failed calibration is not right);
 - **time** and **path**: recording time [s] and end-effector path [m] at the stop; an episode that never stopped
-  counts with its whole recording (at the step limit), so a policy gains nothing by not stopping;
+  counts with its whole recording (at the step limit), so a policy gains nothing by not stopping. With a common
+  **horizon** (``stop.horizon_s``) an episode that had not stopped by then counts at the horizon, whenever its own
+  limit ended it (a policy gains nothing by a short step limit either; ``cut short`` says how many ended before
+  it), and a stop after the horizon is no stop;
 - **decision**: the policy's mean time to choose an action [ms per step] (what a robot waits between motions);
 - the paired difference of time and path to the reference policy's on the same sensors, with its 95 % bootstrap
   interval (``vical.evaluation.intervals.paired_by_sensor``: none unless both ran the same sensors, at least
@@ -18,6 +21,7 @@ whole episodes:
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -38,6 +42,7 @@ class StopSummary:
         stopped: share that stopped at the goal; right: share of those whose stop was right (nan: none stopped).
         time_s, median_time_s: mean and median recording time at the stop [s]; path_m: mean path [m].
         decision_ms: mean time to choose an action [ms per step] (nan: not recorded).
+        cut_short: share of the episodes that neither stopped nor reached the horizon (0 without one).
         time_versus, path_versus: paired differences to the reference (None for the reference itself, or too few
             common sensors).
     """
@@ -50,12 +55,27 @@ class StopSummary:
     median_time_s: float
     path_m: float
     decision_ms: float
+    cut_short: float
     time_versus: Interval | None
     path_versus: Interval | None
 
 
 def _paired(rows: Sequence[EpisodeRow], reference: Sequence[EpisodeRow], key: str) -> Interval | None:
     return paired_by_sensor({r.seed: getattr(r, key) for r in rows}, {r.seed: getattr(r, key) for r in reference})
+
+
+def at_horizon(row: EpisodeRow, horizon_s: float | None) -> EpisodeRow:
+    """``row`` as the summary counts it with a common horizon (module doc): not stopped by then, at the horizon."""
+    if horizon_s is None or (row.coverage_reached and row.recording_time_s <= horizon_s):
+        return row
+    return dataclasses.replace(row, coverage_reached=False, recording_time_s=float(horizon_s))
+
+
+def _cut_short(rows: Sequence[EpisodeRow], horizon_s: float | None) -> float:
+    """The share of ``rows`` that neither stopped nor reached ``horizon_s`` (their own limit came first)."""
+    if horizon_s is None or not rows:
+        return 0.0
+    return float(np.mean([not r.coverage_reached and r.recording_time_s < horizon_s for r in rows]))
 
 
 def _mean_decision_ms(rows: Sequence[EpisodeRow]) -> float:
@@ -67,12 +87,18 @@ def _mean_decision_ms(rows: Sequence[EpisodeRow]) -> float:
 
 
 def summarize_stops(
-    rows: Mapping[str, Sequence[EpisodeRow]], task: str, tolerances: Mapping[str, float], reference: str | None
+    rows: Mapping[str, Sequence[EpisodeRow]],
+    task: str,
+    tolerances: Mapping[str, float],
+    reference: str | None,
+    horizon_s: float | None = None,
 ) -> list[StopSummary]:
-    """Every policy's stops from its rows (``{policy: rows}``, every budget; the whole episodes are used)."""
+    """Every policy's stops from its rows (``{policy: rows}``, every budget; the whole episodes are used), counted
+    at the common ``horizon_s`` [s] where one is given."""
     if task not in SCORED_GROUPS:
         raise ValueError(f"task must be one of {sorted(SCORED_GROUPS)}, got {task!r}")
-    ends = {name: [r for r in rs if r.budget_m == END] for name, rs in rows.items()}
+    whole = {name: [r for r in rs if r.budget_m == END] for name, rs in rows.items()}
+    ends = {name: [at_horizon(r, horizon_s) for r in rs] for name, rs in whole.items()}
     summaries = []
     for name, mine in ends.items():
         if not mine:
@@ -91,6 +117,7 @@ def summarize_stops(
                 median_time_s=float(np.median(times)),
                 path_m=float(np.mean([r.path_length_m for r in mine])),
                 decision_ms=_mean_decision_ms(mine),
+                cut_short=_cut_short(whole[name], horizon_s),
                 time_versus=_paired(mine, ends[reference], "recording_time_s") if versus else None,
                 path_versus=_paired(mine, ends[reference], "path_length_m") if versus else None,
             )

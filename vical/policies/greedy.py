@@ -153,8 +153,14 @@ def greedy_information_policy(
     workspace: str = DEFAULT_WORKSPACE,
     samples: int = DEFAULT_SAMPLES,
     name: str = "greedy information planner",
+    max_steps: int | None = None,
 ) -> GreedyInformationPolicy:
     """The factory ``conf/policy/greedy_information.yaml`` names: the planner on the information state of the
-    learned run ``run_dir`` (None: the policy shipped for the workspace named ``workspace``)."""
+    learned run ``run_dir`` (None: the policy shipped for the workspace named ``workspace``), with its step limit
+    (``max_steps``; None: the learned run's)."""
     settings = learned_information_settings(run_dir, workspace, key="policy.run_dir")
+    if max_steps is not None:
+        ok = isinstance(max_steps, int) and not isinstance(max_steps, bool) and max_steps >= 1
+        require(ok, "policy.max_steps", "null or an integer >= 1", max_steps)
+        settings = {**settings, "max_steps": max_steps}
     return GreedyInformationPolicy(settings, samples, name)

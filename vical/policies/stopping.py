@@ -38,15 +38,28 @@ class StopRule:
         run_dir: the learned run (``vical-train env=information``) whose information settings the rule uses;
             None: the policy shipped for ``workspace``.
         workspace: the workspace the policies run in (the shipped policy is chosen by it).
+        max_steps: the step limit of every policy the rule stops that has none of its own, and of the greedy
+            planner; None: the learned run's.
+        horizon_s: the time-to-tolerance summary's common horizon [s]: a run that has not stopped by then counts
+            at it, whenever its own limit ended it (``vical.evaluation.time_to_tolerance``); None: each run at its
+            own end.
     """
 
     rule: str = "policy"
     run_dir: str | None = None
     workspace: str = DEFAULT_WORKSPACE
+    max_steps: int | None = None
+    horizon_s: float | None = None
 
     def __post_init__(self) -> None:
         require(self.rule in RULES, "stop.rule", f"one of {RULES} (stop=policy or stop=information)", self.rule)
         require(self.run_dir is None or isinstance(self.run_dir, str), "stop.run_dir", "null or a path", self.run_dir)
+        steps = self.max_steps
+        ok = steps is None or (isinstance(steps, int) and not isinstance(steps, bool) and steps >= 1)
+        require(ok, "stop.max_steps", "null or an integer >= 1", steps)
+        horizon = self.horizon_s
+        ok = horizon is None or (isinstance(horizon, int | float) and not isinstance(horizon, bool) and horizon > 0)
+        require(ok, "stop.horizon_s", "null or a time > 0 [s]", horizon)
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any] | None) -> StopRule:
@@ -55,11 +68,13 @@ class StopRule:
 
 
 def information_settings(rule: StopRule) -> dict[str, Any]:
-    """The information state, tolerances, confidence, goal groups and step limit of the rule's learned run."""
+    """The information state, tolerances, confidence, goal groups and step limit of the rule's learned run (the
+    rule's own step limit where it has one)."""
     try:
-        return learned_information_settings(rule.run_dir, rule.workspace)
+        settings = learned_information_settings(rule.run_dir, rule.workspace)
     except ConfigError as err:
         raise ConfigError(f"stop=information: {err}") from None
+    return settings if rule.max_steps is None else {**settings, "max_steps": rule.max_steps}
 
 
 def learned_information_settings(run_dir: str | None, workspace: str, key: str = "stop.run_dir") -> dict[str, Any]:
