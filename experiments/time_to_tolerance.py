@@ -2,8 +2,8 @@
 
 Every policy stops by the same information state (``stop=information``) on the practitioner's sensors
 (``+experiment=time_to_tolerance_<task>``, held-out seeds 50000..). Runs ``vical-evaluate`` once per task with the
-reference learned policy and the baselines (the greedy planner, the long and short expert, random motion), once
-more per further learned run (each its own table row, on the same sensors), pools the results and prints, per
+baselines (the greedy planner, the long and short expert, random motion), once per learned run (the reference
+and each further one, each its own table row, on the same sensors), pools the results and prints, per
 task, the time-to-tolerance table: stops, right stops, time and path at the stop, decision time per step, and the
 paired difference to the reference with its 95 % interval; then each learned run's training time (its train.log).
 
@@ -12,6 +12,7 @@ Usage:
     python experiments/time_to_tolerance.py --reference runs/a --runs runs/b runs/c --tasks joint
     python experiments/time_to_tolerance.py --episodes 20 --seed 40000 ...        # the tuning sensors
     python experiments/time_to_tolerance.py --sensor paper --baselines ...        # the paper's sensors, no baselines
+    python experiments/time_to_tolerance.py --reuse ...                          # keep the results already written
 """
 
 from __future__ import annotations
@@ -41,19 +42,23 @@ def label(run: str) -> str:
     return "learned (shipped)" if run == SHIPPED else f"learned ({Path(run).name})"
 
 
-def evaluate(task: str, out: Path, policies: list[str], run: str, args: argparse.Namespace) -> Path:
-    """``vical-evaluate`` of ``policies`` (``learned`` is ``run``) on the yardstick's sensors; its results file."""
+def evaluate(task: str, out: Path, policies: list[str], run: str | None, args: argparse.Namespace) -> Path:
+    """``vical-evaluate`` of ``policies`` on the yardstick's sensors (``learned``: the run ``run``); its results file
+    (an existing one is kept with ``--reuse``)."""
+    if args.reuse and (out / "results.csv").is_file():
+        return out / "results.csv"
     overrides = [
         f"+experiment=time_to_tolerance_{task}",
         f"policies=[{','.join(policies)}]",
-        "reference=learned",
-        f"policy.name='{label(run)}'",
+        f"reference={policies[0]}",
         f"episodes={args.episodes}",
         f"seed={args.seed}",
         f"out={out}",
         "overwrite=true",
     ]
-    if run != SHIPPED:
+    if run is not None:
+        overrides.append(f"policy.name='{label(run)}'")
+    if run not in (None, SHIPPED):
         overrides.append(f"policy.run_dir={run}")
     if args.sensor == "paper":  # the paper's sensors, one lens model
         overrides += ["sensor=paper", "task.camera_model=radtan"]
@@ -81,14 +86,16 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=50000, help="first sensor seed (50000..: held out)")
     parser.add_argument("--sensor", choices=("practitioner", "paper"), default="practitioner")
     parser.add_argument("--horizon", type=float, default=HORIZON_S, help="the common horizon [s] (the yardstick's)")
+    parser.add_argument("--reuse", action="store_true", help="keep the results a run already wrote")
     parser.add_argument("--out", type=Path, default=ROOT / "evaluations" / "time_to_tolerance")
     args = parser.parse_args()
     rule = StopRule("information", horizon_s=args.horizon)
     tolerances = information_settings(rule)["information"]["tolerances"]
     for task in args.tasks:
         where = args.out / args.sensor / task
-        files = [evaluate(task, where / "reference", ["learned", *args.baselines], args.reference, args)]
-        files += [evaluate(task, where / Path(run).name, ["learned"], run, args) for run in args.runs]
+        files = [evaluate(task, where / "baselines", args.baselines, None, args)] if args.baselines else []
+        for run in [args.reference, *args.runs]:
+            files.append(evaluate(task, where / Path(run).name, ["learned"], run, args))
         rows = by_policy([row for path in files for row in read_results(path)])
         stops = summarize_stops(rows, task, tolerances, label(args.reference), rule.horizon_s)
         print(f"\n## {task} task, sensor={args.sensor}, seeds {args.seed}..{args.seed + args.episodes - 1}\n")
