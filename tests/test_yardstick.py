@@ -15,13 +15,17 @@ RESULTS = Path(__file__).resolve().parents[1] / "docs" / "results.md"
 TASKS = ("joint", "intrinsic")
 
 
-def recorded_fingerprints() -> dict[str, dict[str, str]]:
-    """The table under "The yardstick's fingerprint" in docs/results.md: task -> part -> hash."""
+HEADINGS = {"yardstick": "### The yardstick's fingerprint",
+            "time_to_tolerance": "### The time-to-tolerance yardstick's fingerprint"}  # fmt: skip
+
+
+def recorded_fingerprints(kind: str = "yardstick") -> dict[str, dict[str, str]]:
+    """The table under the ``kind`` yardstick's fingerprint heading in docs/results.md: task -> part -> hash."""
     text = RESULTS.read_text()
-    section = text.split("### The yardstick's fingerprint", 1)[1].split("\n#", 1)[0]  # up to the next heading
+    section = text.split(HEADINGS[kind], 1)[1].split("\n#", 1)[0]  # up to the next heading
     header = re.search(r"^\| part \|(.+)\|$", section, re.M)
     assert header, "docs/results.md: the fingerprint table has no header row"
-    columns = [c.strip().strip("`").removeprefix("yardstick_") for c in header.group(1).split("|")]
+    columns = [c.strip().strip("`").removeprefix(f"{kind}_") for c in header.group(1).split("|")]
     table: dict[str, dict[str, str]] = {task: {} for task in columns}
     for line in re.findall(r"^\| `?(\w+)`? \|(.+)\|$", section, re.M):
         part, cells = line
@@ -42,6 +46,12 @@ def test_recorded_fingerprint_matches_the_yardstick_as_composed(task, computed):
     # A failure here means a baseline, its environment or the protocol changed after the yardstick was frozen:
     # rerun experiments/yardstick.py and record the new results and hashes with the reason, never silently.
     assert recorded_fingerprints()[task] == computed[task]
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_recorded_fingerprint_matches_the_time_to_tolerance_yardstick_as_composed(task):
+    # As above, for experiments/time_to_tolerance.py's yardstick: its baselines, sensors, shared rule and horizon.
+    assert recorded_fingerprints("time_to_tolerance")[task] == yardstick_fingerprint(task, "time_to_tolerance")
 
 
 def test_baselines_are_the_same_in_both_tasks_and_the_environments_differ(computed):
