@@ -1,5 +1,7 @@
 """The stopping rule: each policy's own, or the learned policy's information state for every baseline."""
 
+import dataclasses
+
 import hydra.utils
 import numpy as np
 import pytest
@@ -114,3 +116,19 @@ def test_the_evaluation_runs_every_baseline_with_the_rule():
     finally:
         evaluator.close()
     assert row.coverage_reached and not row.failed and row.recording_time_s < 40
+
+
+def test_a_horizon_ends_each_episode_at_the_first_step_past_it():
+    """What a run records past the time-to-tolerance horizon is never counted, so the evaluation stops there."""
+    rule = StopRule("information", horizon_s=4.0)
+    trajectory = with_stop(expert("joint"), rule)
+    env = build_env(env_config("joint"), trajectory)
+    try:
+        whole = run_trajectory(env, trajectory, 3)
+        cut = run_trajectory(env, trajectory, 3, horizon_s=4.0)
+    finally:
+        env.close()
+    assert whole.recording.duration > 6.0  # the rule alone lets it run well past 4 s
+    assert 4.0 <= cut.recording.duration < 4.0 + 2.5 and cut.steps < whole.steps  # one step (<= 2.5 s) past it
+    spec = PolicySpec.from_config(resolved_policy("expert_long"))
+    assert PolicyEvaluator(dataclasses.replace(spec, stop=rule), env_config("joint")).horizon_s == 4.0

@@ -37,7 +37,7 @@ from vical.calib.errors import CalibrationError
 from vical.calib.metrics import group_errors_px, parameter_errors
 from vical.calib.tasks import CalibrationTask, TaskOutcome, run_task, task_score
 from vical.config_checks import ConfigError, require
-from vical.data import CameraFrames, Recording, SensorTruth
+from vical.data import NS_PER_S, CameraFrames, Recording, SensorTruth
 from vical.env.calibration import CalibrationEnv
 from vical.geometry import CameraModel
 from vical.parallel import ParallelConfig, connect_ray, imap_ordered
@@ -257,8 +257,12 @@ def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
     return env
 
 
-def run_trajectory(env: CalibrationEnv, policy: Policy, seed: int, noise_stream: int = 0) -> Trajectory:
-    """One episode of ``policy`` on the sensor of ``seed``: until termination, truncation or the policy is done.
+def run_trajectory(
+    env: CalibrationEnv, policy: Policy, seed: int, noise_stream: int = 0, horizon_s: float | None = None
+) -> Trajectory:
+    """One episode of ``policy`` on the sensor of ``seed``: until termination, truncation or the policy is done,
+    or, with ``horizon_s``, the first step that ends at or past that much simulated time [s] (the time-to-tolerance
+    summary counts a run not stopped by its horizon at it: what it would record after is never used).
 
     ``noise_stream`` selects the sensor noise of the recording (another trajectory of the same sensor
     records other noise).
@@ -273,7 +277,7 @@ def run_trajectory(env: CalibrationEnv, policy: Policy, seed: int, noise_stream:
         if policy.finished:  # a fixed trajectory past its last waypoint: nothing left to record
             break
         obs, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated:
+        if terminated or truncated or (horizon_s is not None and env.sim.time_ns >= horizon_s * NS_PER_S):
             break
     return Trajectory(env.recording(), env.steps, env.goal_reached, deciding)
 
@@ -355,6 +359,7 @@ class PolicyEvaluator:
         paper_protocol: bool = False,
     ) -> None:
         self.spec = spec
+        self.horizon_s = spec.stop.horizon_s if spec.stop.rule == "information" else None
         self.task = CalibrationTask.from_config(env_cfg["task"])
         self.budgets = check_budgets(budgets)
         self.paper_protocol = paper_protocol
@@ -378,7 +383,7 @@ class PolicyEvaluator:
         Returns one row per budget below the episode's path, then the whole episode's row (``budget_m = inf``).
         """
         pairs = zip(self.envs, self.policies, strict=True)
-        runs = [run_trajectory(env, p, seed, noise_stream=k) for k, (env, p) in enumerate(pairs)]
+        runs = [run_trajectory(env, p, seed, k, self.horizon_s) for k, (env, p) in enumerate(pairs)]
         recording = runs[-1].recording
         common = {
             "policy": self.spec.name,
