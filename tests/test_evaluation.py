@@ -8,6 +8,7 @@ from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.tasks import run_task
 from vical.config_checks import ConfigError
 from vical.evaluation.harness import (
+    WALL_TIME_FIELDS,
     EpisodeRow,
     PolicyEvaluator,
     PolicySpec,
@@ -134,12 +135,12 @@ RANDOM_SHORT = PolicySpec(
 
 
 def _without_wall_time(rows: list[EpisodeRow]) -> list[dict]:
-    return [{k: v for k, v in vars(r).items() if k != "calib_time_s"} for r in rows]
+    return [{k: v for k, v in vars(r).items() if k not in WALL_TIME_FIELDS} for r in rows]
 
 
 @pytest.mark.integration
 def test_parallel_evaluation_gives_the_serial_rows():
-    """Episodes on two worker processes: the same rows in the same order (all but the wall time of the solves)."""
+    """Episodes on two worker processes: the same rows in the same order (all but the wall times)."""
     specs, env, seeds = [HANDCRAFTED_SHORT, RANDOM_SHORT], env_config("intrinsic", "paper"), [0, 1, 2]
     serial = evaluate_policies(specs, env, seeds, budgets=(0.3,), progress=False)
     parallel = evaluate_policies(specs, env, seeds, budgets=(0.3,), parallel=ParallelConfig(2), progress=False)

@@ -117,6 +117,10 @@ def instantiate_policy(spec: Mapping[str, Any], name: str) -> Policy:
     return policy
 
 
+# The columns that measure this machine's wall time, not the episode: they differ between runs of one episode.
+WALL_TIME_FIELDS = ("calib_time_s", "decision_ms")
+
+
 @dataclass
 class EpisodeRow:
     """One evaluated sensor at one path budget (None where the task estimates no such quantity or it failed).
