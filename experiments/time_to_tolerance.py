@@ -24,16 +24,14 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
-from vical.apps.evaluate import stops_table
+from vical.apps.evaluate import stops_table, yardstick_config
 from vical.evaluation.results_file import by_policy, read_results
 from vical.evaluation.time_to_tolerance import summarize_stops
-from vical.policies.stopping import StopRule, information_settings
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = ("joint", "intrinsic")
 BASELINES = ("greedy_information", "expert_long", "expert_short", "random_moving")
 SHIPPED = "shipped"
-HORIZON_S = 45.0  # conf/experiment/time_to_tolerance_*.yaml's stop.horizon_s
 _STAMP = re.compile(r"^\[(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),\d+\]")
 
 
@@ -85,19 +83,18 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--seed", type=int, default=50000, help="first sensor seed (50000..: held out)")
     parser.add_argument("--sensor", choices=("practitioner", "paper"), default="practitioner")
-    parser.add_argument("--horizon", type=float, default=HORIZON_S, help="the common horizon [s] (the yardstick's)")
     parser.add_argument("--reuse", action="store_true", help="keep the results a run already wrote")
     parser.add_argument("--out", type=Path, default=ROOT / "evaluations" / "time_to_tolerance")
     args = parser.parse_args()
-    rule = StopRule("information", horizon_s=args.horizon)
-    tolerances = information_settings(rule)["information"]["tolerances"]
     for task in args.tasks:
+        rule = yardstick_config(task, "time_to_tolerance")["stop"]  # the experiment's: its tolerances and horizon
         where = args.out / args.sensor / task
         files = [evaluate(task, where / "baselines", args.baselines, None, args)] if args.baselines else []
         for run in [args.reference, *args.runs]:
             files.append(evaluate(task, where / Path(run).name, ["learned"], run, args))
         rows = by_policy([row for path in files for row in read_results(path)])
-        stops = summarize_stops(rows, task, tolerances, label(args.reference), rule.horizon_s)
+        tolerances = rule["information"]["tolerances"]
+        stops = summarize_stops(rows, task, tolerances, label(args.reference), rule["horizon_s"])
         print(f"\n## {task} task, sensor={args.sensor}, seeds {args.seed}..{args.seed + args.episodes - 1}\n")
         print(stops_table(stops))
     for run in [args.reference, *args.runs]:

@@ -95,13 +95,15 @@ def test_the_families_are_drawn_as_often_as_their_weights_say():
 
 
 def test_the_unit_drawn_from_a_seed_does_not_depend_on_its_product_draw():
-    """Products come from their own stream: the same seed's unit under one lens family keeps its other draws."""
+    """A product changes what it draws and nothing after it: a pinhole product's unit draws the extrinsic and the
+    time offset the seed gives without products (the same number of draws before them: hfov, k1, k2)."""
     cfg = SensorSampling.from_config(PRACTITIONER)
-    product = draw_product(cfg, 5)
-    unit = sample_sensor(product.sampling, np.random.default_rng(5))
-    plain = sample_sensor(replace(product.sampling, time_offset=product.sampling.time_offset),
-                          np.random.default_rng(5))  # fmt: skip
+    seed = next(s for s in SEEDS if draw_product(cfg, s).sampling.camera.distortion == "radtan")
+    unit = sample_sensor(draw_product(cfg, seed).sampling, np.random.default_rng(seed))
+    plain = sample_sensor(replace(cfg, products=None), np.random.default_rng(seed))
+    assert unit.camera != plain.camera  # another nominal field of view
     np.testing.assert_array_equal(unit.T_cam_imu, plain.T_cam_imu)
+    assert unit.time_offset == plain.time_offset
 
 
 @pytest.mark.parametrize(

@@ -120,7 +120,7 @@ class CalibrationEnv(gym.Env):
         self.observation_space = gym.spaces.Box(0.0, 1.0, (size,), dtype=np.float32)
         self._bound = self.config.workspace.bound
         self.truth: SensorTruth | None = None
-        self.product = draw_product(self.sampling, 0)  # each reset draws the episode's own
+        self.product: Product | None = None  # each reset draws the episode's own
         self._steps = 0
 
     def _usable(self, product: Product) -> bool:

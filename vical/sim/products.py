@@ -18,8 +18,6 @@ import numpy as np
 from vical.config_checks import ConfigError, from_mapping, require, require_range
 from vical.sim.settings import BoardConfig
 
-BOARD_KINDS = ("aprilgrid", "checkerboard")
-
 
 @dataclass(frozen=True)
 class Range:
@@ -106,11 +104,8 @@ class Products:
         for index, lens in enumerate(self.lenses):
             lens.hfov.check(f"{key}.lenses[{index}].hfov")
         for index, board in enumerate(self.boards):
-            require(board.kind in BOARD_KINDS, f"{key}.boards[{index}].kind", f"one of {BOARD_KINDS}", board.kind)
-            board.check(f"{key}.boards[{index}]")
+            board.check(f"{key}.boards[{index}]")  # BoardConfig's own checks (kind, sizes), named by this key
         if self.imu_noise_scale is not None:
-            if isinstance(self.imu_noise_scale, Mapping):
-                object.__setattr__(self, "imu_noise_scale", from_mapping(Range, self.imu_noise_scale, key))
             self.imu_noise_scale.check(f"{key}.imu_noise_scale")
             require(self.imu_noise_scale.low > 0, f"{key}.imu_noise_scale.low", "a factor > 0",
                     self.imu_noise_scale.low)  # fmt: skip

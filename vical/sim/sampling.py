@@ -12,6 +12,7 @@ extrinsic the calibrator estimates is ``T_cam_imu = T_cam_body @ T_body_imu``.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -337,7 +338,7 @@ class Product:
     sampling: SensorSampling
     board: dict[str, Any] | None = None
 
-    @property
+    @functools.cached_property  # read by the env's board check, its guess and the evaluation's prior score
     def datasheet(self) -> SensorTruth:
         """What a user knows of the sensor before calibrating it: the product's nominal values."""
         return mean_sensor(self.sampling)
