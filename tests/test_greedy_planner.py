@@ -1,5 +1,6 @@
 """The information-greedy planner: its candidates, its predictions against what the env then records, its episodes."""
 
+import dataclasses
 from types import SimpleNamespace
 
 import hydra.utils
@@ -11,9 +12,10 @@ from scipy.stats import spearmanr
 
 from vical.config_checks import ConfigError
 from vical.env.actions import goal_offset
-from vical.env.lookahead import GRAVITY_WORLD, IMU_RATE, Lookahead, imu_readings
+from vical.env.lookahead import GRAVITY_WORLD, IMU_RATE, Lookahead, Prediction, imu_readings
 from vical.evaluation.harness import build_env, instantiate_policy, run_trajectory
 from vical.policies.greedy import DEFAULT_SAMPLES, candidate_actions, greedy_information_policy
+from vical.policies.learned import shipped_policy_dir, trained_reward
 from vical.policies.stopping import StopRule, with_stop
 from vical.sim.motion import quintic
 
@@ -138,3 +140,19 @@ def test_the_predicted_imu_reads_the_rates_and_specific_force_of_the_motion():
     np.testing.assert_allclose(gyro[inner], rate[inner], atol=0.01 * angle / T)
     expected = np.einsum("nji,nj->ni", poses[:, :3, :3], np.outer(dds / T**2, travel) - GRAVITY_WORLD)
     np.testing.assert_allclose(specific_force[inner], expected[inner], atol=0.01)
+
+
+def test_the_planners_price_is_its_learned_runs_not_the_envs():
+    """The env it drives is given vical-evaluate's reward (20 per metre); the planner pays the run's (5)."""
+    planner = greedy_information_policy()
+    env = build_env(env_config("joint", "practitioner"), planner)
+    try:
+        env.reset(seed=1)
+        excess = env.state.excess
+        stay = Prediction(np.zeros(6), 1.0, 0.0, 0, {}, excess, False)
+        metre = dataclasses.replace(stay, path_length=1.0)
+        cost = planner.score(stay, excess, env) - planner.score(metre, excess, env)
+    finally:
+        env.close()
+    assert env.config.reward.path_weight == 20.0
+    assert cost == pytest.approx(trained_reward(shipped_policy_dir()).path_weight) and cost == pytest.approx(5.0)

@@ -15,6 +15,7 @@ learned policy leaves the yardstick as it is. docs/results.md records the hashes
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 from collections.abc import Mapping
@@ -33,8 +34,8 @@ PROTOCOL_KEYS = ("episodes", "seed", "budgets", "reference", "paper_protocol", "
 STOP_KEYS = ("stop",)  # the shared stopping rule's settings, where the yardstick has one (time to the tolerances)
 DRAW_SEED = 0  # the seed of the random loop and actions whose values enter the fingerprint
 # Env keys that cannot change a baseline's episode: the reward and the learner's discount at the step limit
-# (no baseline reads them) and the env's own calibration and termination switches
-# (vical.evaluation.harness.build_env sets them per policy).
+# (no baseline reads them: the greedy planner prices with its learned run's reward, hashed with it) and the
+# env's own calibration and termination switches (vical.evaluation.harness.build_env sets them per policy).
 NOT_EPISODE_KEYS = (
     "reward",
     "step_limit_final",
@@ -66,9 +67,10 @@ def _motion(policy: Policy, action_scale: np.ndarray) -> dict[str, Any]:
     if isinstance(policy, RandomMovingPolicy):
         actions = rng.uniform(-action_scale, action_scale, (20, 6))
         return {"actions": actions, "max_steps": policy.max_steps, "stop_at_coverage": policy.stop_at_coverage}
-    if isinstance(policy, GreedyInformationPolicy):  # the state it plans on and its first step's candidates
+    if isinstance(policy, GreedyInformationPolicy):  # the state and prices it plans with, its first candidates
         candidates = candidate_actions(action_scale, policy.samples, rng)
-        return {"settings": policy.env_settings, "max_steps": policy.max_steps, "candidates": candidates}
+        settings = {**policy.env_settings, "reward": dataclasses.asdict(policy.reward)}
+        return {"settings": settings, "max_steps": policy.max_steps, "candidates": candidates}
     raise TypeError(f"the yardstick knows no baseline of type {type(policy).__name__}")
 
 

@@ -13,7 +13,8 @@ groups and step limit, read from the learned run as ``stop=information`` reads t
 - **score**: the information MDP's step reward of the prediction (``vical.env.rewards.information_reward_terms``):
   ``information_weight`` per e-fold of excess shed, less ``path_weight`` per metre and ``time_weight`` per second
   of motion, plus the terminal bonus when it reaches the goal: the information state's excess reduction per
-  second of motion and per metre, at the prices the learned policy was trained with.
+  second of motion and per metre, at the prices the learned policy was trained with (the learned run's
+  ``env.reward`` and ``env.information``, whatever the env it drives is given).
 
 Before any frame has posed the board it searches along the line of sight to the board (where the alignment put
 it): to the workspace's nearest point first (tags too small to detect from the start), then to its farthest (a
@@ -32,8 +33,9 @@ from vical.env.actions import step_to_action
 from vical.env.calibration import CalibrationEnv
 from vical.env.lookahead import Lookahead, Prediction
 from vical.env.rewards import information_reward_terms
+from vical.env.settings import RewardWeights
 from vical.policies.base import Policy
-from vical.policies.learned import DEFAULT_WORKSPACE
+from vical.policies.learned import DEFAULT_WORKSPACE, shipped_policy_dir, trained_reward
 from vical.policies.stopping import learned_information_settings
 
 DEFAULT_SAMPLES = 12
@@ -63,16 +65,24 @@ class GreedyInformationPolicy(Policy):
 
     Args:
         settings: the learned run's ``state``, ``information`` and ``max_steps`` (its MDP).
+        reward: the learned run's reward weights (the prices of path and the goal's bonus).
         samples: random candidates per step beside the 12 axis moves.
         name: shown in evaluation tables.
     """
 
     stop_at_coverage = True
 
-    def __init__(self, settings: dict, samples: int = DEFAULT_SAMPLES, name: str = "greedy information planner"):
+    def __init__(
+        self,
+        settings: dict,
+        reward: RewardWeights,
+        samples: int = DEFAULT_SAMPLES,
+        name: str = "greedy information planner",
+    ) -> None:
         ok = isinstance(samples, int) and not isinstance(samples, bool) and samples >= 0
         require(ok, "policy.samples", "an integer >= 0 (random candidates beside the 12 axis moves)", samples)
         self.env_settings = {k: v for k, v in settings.items() if k != "max_steps"}
+        self.reward = reward
         self.max_steps = settings.get("max_steps")
         self.samples = samples
         self.name = name
@@ -102,23 +112,28 @@ class GreedyInformationPolicy(Policy):
         return action
 
     def _best(self, lookahead: Lookahead, env: CalibrationEnv) -> np.ndarray:
-        excess = env.state.excess
-        best, best_score = None, -np.inf
+        actions, predictions = [], []
         for action in candidate_actions(env.action_space.high, self.samples, self._rng):
             prediction = lookahead.predict(action)
             if np.allclose(prediction.goal, lookahead.offset, atol=1e-9):
                 continue  # clipped to no motion at the workspace's edge
-            score = self.score(prediction, excess, env)
-            if score > best_score:
-                best, best_score = action, score
-        return best if best is not None else self._toward_start(env)
+            actions.append(action)
+            predictions.append(prediction)
+        if not actions:
+            return self._toward_start(env)
+        return actions[int(np.argmax(self.scores(predictions, env)))]  # the first of equals, in candidate order
 
-    @staticmethod
-    def score(prediction: Prediction, excess: float, env: CalibrationEnv) -> float:
-        """The information MDP's reward of the predicted step from the current ``excess``."""
+    def scores(self, predictions: list[Prediction], env: CalibrationEnv) -> np.ndarray:
+        """Each predicted step's score: the information MDP's reward of the step (``score``)."""
+        excess = env.state.excess
+        return np.array([self.score(prediction, excess, env) for prediction in predictions])
+
+    def score(self, prediction: Prediction, excess: float, env: CalibrationEnv) -> float:
+        """The information MDP's reward of the predicted step from the current ``excess``, at the learned run's
+        prices (the env carries its information settings)."""
         terms = information_reward_terms(
             excess, prediction.excess, prediction.path_length, prediction.motion_time, prediction.goal_reached,
-            env.config.information, env.config.reward,
+            env.config.information, self.reward,
         )  # fmt: skip
         return float(sum(terms.values()))
 
@@ -158,9 +173,16 @@ def greedy_information_policy(
     """The factory ``conf/policy/greedy_information.yaml`` names: the planner on the information state of the
     learned run ``run_dir`` (None: the policy shipped for the workspace named ``workspace``), with its step limit
     (``max_steps``; None: the learned run's)."""
+    settings, reward = planner_settings(run_dir, workspace, max_steps)
+    return GreedyInformationPolicy(settings, reward, samples, name)
+
+
+def planner_settings(run_dir: str | None, workspace: str, max_steps: int | None) -> tuple[dict, RewardWeights]:
+    """The learned run's MDP settings (its step limit replaced by ``max_steps`` unless None) and reward weights,
+    that a planner on its information state plans with (``run_dir`` None: the policy shipped for ``workspace``)."""
     settings = learned_information_settings(run_dir, workspace, key="policy.run_dir")
     if max_steps is not None:
         ok = isinstance(max_steps, int) and not isinstance(max_steps, bool) and max_steps >= 1
         require(ok, "policy.max_steps", "null or an integer >= 1", max_steps)
         settings = {**settings, "max_steps": max_steps}
-    return GreedyInformationPolicy(settings, samples, name)
+    return settings, trained_reward(run_dir or shipped_policy_dir(workspace))

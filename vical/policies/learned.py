@@ -18,7 +18,7 @@ import torch
 
 from vical.config_checks import ConfigError, from_mapping
 from vical.env.calibration import INFO_OBS_SIZE, OBS_SIZE, CalibrationEnv
-from vical.env.settings import Workspace
+from vical.env.settings import RewardWeights, Workspace
 from vical.policies.base import Policy
 from vical.rl.checkpoint import AGENT, load_checkpoint
 from vical.rl.envs import BoxActions
@@ -80,6 +80,13 @@ def load_run(run_dir: str | Path) -> tuple[Path, dict[str, Any]]:
     state = load_checkpoint(path)
     _check_run(state, path)
     return path, state
+
+
+def trained_reward(run_dir: str | Path) -> RewardWeights:
+    """The reward weights the learned run ``run_dir`` trained with (its ``env.reward``): the prices a planner on
+    its information state pays, whatever the env it runs in is given."""
+    path, state = load_run(run_dir)
+    return from_mapping(RewardWeights, state["config"]["env"].get("reward", {}), f"{path}: env.reward")
 
 
 def carried_settings(env: dict[str, Any]) -> dict[str, Any]:
