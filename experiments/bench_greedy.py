@@ -5,8 +5,10 @@ On the tuning sensors (reset seeds 40000.., used by no held-out evaluation) of t
 policy runs one episode per sensor until the information state says every goal group is within tolerance (the
 shipped policy's tolerances, confidence and step limit; the baselines with ``stop=information``):
 
-1. decision time per step: the planner's (its 24 predictions), the learned policy's network, and the simulated
-   step itself (the Panda's motion, the recording and the state's update), median and largest, in the same run;
+1. decision time per step: the planner's (its 24 predictions), the critic-scored planner's (the same and their
+   values, ``vical.policies.critic_planner`` with the shipped policy's value), the learned policy's network, and
+   the simulated step itself (the Panda's motion, the recording and the state's update), median and largest, in
+   the same run;
    the planner's share of a step is the ratio. Target: the planner decides within 0.5 s a step on this machine
    (what ``vical-collect`` can afford between motions).
 2. time to the tolerances: recording time and path at the stop, how many stopped within the step limit, and the
@@ -29,6 +31,7 @@ from omegaconf import OmegaConf
 
 from vical.evaluation.harness import build_env, instantiate_policy
 from vical.evaluation.intervals import paired_difference
+from vical.policies.critic_planner import critic_planner_policy
 from vical.policies.greedy import greedy_information_policy
 from vical.policies.learned import learned_policy
 from vical.policies.stopping import StopRule, with_stop
@@ -49,6 +52,7 @@ def policies(task: str) -> dict:
     expert = {"_target_": "vical.policies.expert.expert_policy", "task": task}
     return {
         "greedy planner": greedy_information_policy(),
+        "critic-scored planner": critic_planner_policy(),
         "learned (shipped)": learned_policy(),
         "expert (long) + stop": with_stop(instantiate_policy({**expert, "length": "long"}, "expert"), STOP),
         "expert (short) + stop": with_stop(instantiate_policy({**expert, "length": "short"}, "expert"), STOP),
@@ -93,13 +97,17 @@ def run(task: str, seeds: list[int]) -> dict[str, list[dict]]:
 
 
 def print_timing(task: str, runs: dict[str, list[dict]]) -> None:
-    planner = np.concatenate([r["decisions"] for r in runs["greedy planner"]])
-    learned = np.concatenate([r["decisions"] for r in runs["learned (shipped)"]])
+    def decisions(name: str) -> np.ndarray:
+        return np.concatenate([r["decisions"] for r in runs[name]])
+
+    planner = decisions("greedy planner")
     steps = np.concatenate([r["steps"] for r in runs["greedy planner"]])
     print(f"\n{task} task: decision time per step (ms), {len(planner)} planner steps")
     print("| what | median | max | ratio to the step (median) |")
     print("|---|---|---|---|")
-    for label, x in (("greedy planner: 24 predictions", planner), ("learned policy: its network", learned),
+    for label, x in (("greedy planner: 24 predictions", planner),
+                     ("critic-scored planner: 24 predictions, their values", decisions("critic-scored planner")),
+                     ("learned policy: its network", decisions("learned (shipped)")),
                      ("the simulated step it plans", steps)):  # fmt: skip
         print(f"| {label} | {1e3 * np.median(x):.0f} | {1e3 * np.max(x):.0f} | {np.median(x) / np.median(steps):.2f} |")
 

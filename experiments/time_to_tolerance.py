@@ -3,13 +3,15 @@
 Every policy stops by the same information state (``stop=information``) on the practitioner's sensors
 (``+experiment=time_to_tolerance_<task>``, held-out seeds 50000..). Runs ``vical-evaluate`` once per task with the
 baselines (the greedy planner, the long and short expert, random motion), once per learned run (the reference
-and each further one, each its own table row, on the same sensors), pools the results and prints, per
+and each further one, each its own table row, on the same sensors), once per critic-scored planner (the planner's
+candidates scored by a learned run's value, ``policy=critic_planner``), pools the results and prints, per
 task, the time-to-tolerance table: stops, right stops, time and path at the stop, decision time per step, and the
 paired difference to the reference with its 95 % interval; then each learned run's training time (its train.log).
 
 Usage:
     python experiments/time_to_tolerance.py --runs runs/a runs/b runs/c           # reference: the shipped policy
     python experiments/time_to_tolerance.py --reference runs/a --runs runs/b runs/c --tasks joint
+    python experiments/time_to_tolerance.py --runs runs/a --critics runs/a shipped     # and planners scored by them
     python experiments/time_to_tolerance.py --episodes 20 --seed 40000 ...        # the tuning sensors
     python experiments/time_to_tolerance.py --sensor paper --baselines ...        # the paper's sensors, no baselines
     python experiments/time_to_tolerance.py --reuse ...                          # keep the results already written
@@ -35,14 +37,18 @@ SHIPPED = "shipped"
 _STAMP = re.compile(r"^\[(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),\d+\]")
 
 
-def label(run: str) -> str:
-    """A learned run's table row."""
-    return "learned (shipped)" if run == SHIPPED else f"learned ({Path(run).name})"
+def label(run: str, policy: str = "learned") -> str:
+    """The table row of a learned run's ``policy`` (``learned``: its agent; ``critic_planner``: the planner scored by
+    its value)."""
+    kind = {"learned": "learned", "critic_planner": "critic-scored planner"}[policy]
+    return f"{kind} (shipped)" if run == SHIPPED else f"{kind} ({Path(run).name})"
 
 
-def evaluate(task: str, out: Path, policies: list[str], run: str | None, args: argparse.Namespace) -> Path:
-    """``vical-evaluate`` of ``policies`` on the yardstick's sensors (``learned``: the run ``run``); its results file
-    (an existing one is kept with ``--reuse``)."""
+def evaluate(
+    task: str, out: Path, policies: list[str], run: str | None, args: argparse.Namespace, policy: str = "learned"
+) -> Path:
+    """``vical-evaluate`` of ``policies`` on the yardstick's sensors (``policy``, ``learned`` or ``critic_planner``:
+    of the run ``run``); its results file (an existing one is kept with ``--reuse``)."""
     if args.reuse and (out / "results.csv").is_file():
         return out / "results.csv"
     overrides = [
@@ -55,7 +61,7 @@ def evaluate(task: str, out: Path, policies: list[str], run: str | None, args: a
         "overwrite=true",
     ]
     if run is not None:
-        overrides.append(f"policy.name='{label(run)}'")
+        overrides += [f"policy={policy}", f"policy.name='{label(run, policy)}'"]
     if run not in (None, SHIPPED):
         overrides.append(f"policy.run_dir={run}")
     if args.sensor == "paper":  # the paper's sensors, one lens model
@@ -79,6 +85,13 @@ def main() -> None:
     parser.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS))
     parser.add_argument("--reference", default=SHIPPED, help="the learned run every policy is paired with")
     parser.add_argument("--runs", nargs="*", default=[], help="further learned runs, each its own row")
+    parser.add_argument(
+        "--critics",
+        nargs="*",
+        default=[],
+        help="learned runs whose value scores the planner's "
+        "candidates (policy=critic_planner; shipped: the shipped policy's), each its own row",
+    )
     parser.add_argument("--baselines", nargs="*", default=list(BASELINES), help="baselines beside the reference")
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--seed", type=int, default=50000, help="first sensor seed (50000..: held out)")
@@ -92,6 +105,9 @@ def main() -> None:
         files = [evaluate(task, where / "baselines", args.baselines, None, args)] if args.baselines else []
         for run in [args.reference, *args.runs]:
             files.append(evaluate(task, where / Path(run).name, ["learned"], run, args))
+        for run in args.critics:
+            out = where / f"critic_{Path(run).name}"
+            files.append(evaluate(task, out, ["critic_planner"], run, args, "critic_planner"))
         rows = by_policy([row for path in files for row in read_results(path)])
         tolerances = rule["information"]["tolerances"]
         stops = summarize_stops(rows, task, tolerances, label(args.reference), rule["horizon_s"])

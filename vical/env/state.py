@@ -20,6 +20,11 @@ from vical.env.settings import MdpConfig
 RATE_FRAMES = 20  # latest frames whose stamps give the camera's frame rate
 
 
+def workspace_pose(offset: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """(6,) the pose ``offset`` normalised to [0, 1] over the workspace's ``bound`` (the policy's input)."""
+    return np.clip((np.asarray(offset, dtype=float) + bound) / (2 * bound), 0.0, 1.0)
+
+
 class EpisodeState:
     """Coverage and (``state: information``) predicted uncertainty of one episode.
 
@@ -127,11 +132,15 @@ class EpisodeState:
     def observation(self, offset: np.ndarray, steps: int) -> np.ndarray:
         """The policy's input: the state's terms, the pose ``offset`` (6,) normalised and (information state)
         the fraction ``steps / max_steps``."""
-        bound = self.config.workspace.bound
-        pose = np.clip((offset + bound) / (2 * bound), 0.0, 1.0)
         if self.config.state == "information":
-            return np.r_[features(self.ratios), pose, steps / self.config.max_steps].astype(np.float32)
-        return np.r_[self.coverage.vector(), pose].astype(np.float32)
+            return self.information_observation(self.ratios, offset, steps / self.config.max_steps)
+        return np.r_[self.coverage.vector(), workspace_pose(offset, self.config.workspace.bound)].astype(np.float32)
+
+    def information_observation(self, ratios: dict[str, float], offset: np.ndarray, fraction: float) -> np.ndarray:
+        """The information state's observation of ``ratios`` (a prediction's or the state's own) at the pose
+        ``offset`` (6,), ``fraction`` of the step limit gone."""
+        pose = workspace_pose(offset, self.config.workspace.bound)
+        return np.r_[features(ratios), pose, fraction].astype(np.float32)
 
     def info(self) -> dict[str, float]:
         """``coverage/*`` and ``information/*`` terms (TensorBoard, progress lines)."""
