@@ -172,8 +172,12 @@ class SensorRecorder:
 
     def add_motion(self, result: MotionResult) -> None:
         """Account a finished ``MotionResult`` (path length [m] and time [s]) to the recording."""
-        self._path_length += float(result.path_length)
-        self._duration += float(result.duration + result.settle_time)
+        self.add_time(result.duration + result.settle_time, result.path_length)
+
+    def add_time(self, duration: float, path_length: float) -> None:
+        """Account ``duration`` [s] of recording and ``path_length`` [m] of the sensor's path to the recording."""
+        self._path_length += float(path_length)
+        self._duration += float(duration)
 
     def detections_since(self, first: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Corners (K_i, 2) [px] and point ids (K_i,) of the frames observed from index ``first`` on.

@@ -32,6 +32,8 @@ _R_BODY_APRILGRID_FACING = np.array([[0.0, 0.0, -1.0], [-1.0, 0.0, 0.0], [0.0, 1
 APRILGRID_BITS_PER_TAG = 10  # tag36h11: 6 data bits + 2 black border bits on each side
 STAND_CLEARANCE = 0.03  # [m] the stand's post stands this far behind the board's printed side
 STAND_POST_HALF_WIDTH = 0.02  # [m]
+PANDA_ROOT = "link0"  # the Panda's root body in assets/panda.xml
+VISUAL_GROUP = 2  # assets/panda.xml's class "visual" (no collision; "collision" is group 3)
 
 
 class SceneError(RuntimeError):
@@ -125,6 +127,74 @@ def build_model(cfg: SimConfig) -> tuple[mujoco.MjModel, np.ndarray]:
         model: the compiled ``MjModel``.
         T_world_board: (4, 4) board pose (Kalibr board frame in world).
     """
+    spec, T_world_board, _ = _scene_spec(cfg)
+    return spec.compile(), T_world_board
+
+
+def build_hand_held_model(cfg: SimConfig) -> tuple[mujoco.MjModel, np.ndarray, np.ndarray]:
+    """The scene of ``build_model`` with the sensor held by a person instead of the Panda: ``cam_body`` a mocap
+    body (posed by ``data.mocap_pos/mocap_quat``) carrying the camera, sites and housing the flange carries.
+
+    Returns:
+        model: the compiled ``MjModel`` (no Panda, no joints).
+        T_world_board: (4, 4) board pose, where ``build_model`` puts it.
+        T_world_start: (4, 4) ``cam_body``'s start pose (the Panda's, ``start_camera_body_pose``).
+    """
+    spec, T_world_board, T_world_start = _scene_spec(cfg)
+    rig = _rig_in_body(spec.compile())
+    for kind in ("excludes", "keys", "actuators", "sensors", "tendons", "equalities"):
+        for element in list(getattr(spec, kind)):
+            spec.delete(element)
+    spec.delete(spec.body(PANDA_ROOT))
+    hand = spec.worldbody.add_body(name="cam_body", mocap=True, pos=T_world_start[:3, 3],
+                                   quat=matrix_to_quat(T_world_start[:3, :3]))  # fmt: skip
+    camera = rig["camera"]
+    hand.add_camera(name="cam", pos=camera["pos"], quat=camera["quat"], fovy=camera["fovy"])
+    for name, site in rig["sites"].items():
+        hand.add_site(name=name, pos=site["pos"], quat=site["quat"], size=site["size"], rgba=site["rgba"])
+    for geom in rig["geoms"]:
+        hand.add_geom(**geom, contype=0, conaffinity=0)  # held in the air: nothing collides
+    return spec.compile(), T_world_board, T_world_start
+
+
+def _rig_in_body(model: mujoco.MjModel) -> dict:
+    """What ``cam_body`` carries in the compiled Panda scene, in its frame: the camera, the sites, the visual
+    housing (the one description of the rig, assets/panda.xml's)."""
+    body = model.body("cam_body").id
+    camera = model.camera("cam").id
+    sites = {name: model.site(name).id for name in ("ee", "imu")}
+    geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] == body and model.geom_group[g] == VISUAL_GROUP]
+    return {
+        "camera": {
+            "pos": model.cam_pos[camera].copy(),
+            "quat": model.cam_quat[camera].copy(),
+            "fovy": float(model.cam_fovy[camera]),
+        },
+        "sites": {
+            name: {
+                "pos": model.site_pos[i].copy(),
+                "quat": model.site_quat[i].copy(),
+                "size": model.site_size[i].copy(),
+                "rgba": model.site_rgba[i].copy(),
+            }
+            for name, i in sites.items()
+        },
+        "geoms": [
+            {
+                "type": mujoco.mjtGeom(int(model.geom_type[g])),
+                "size": model.geom_size[g].copy(),
+                "pos": model.geom_pos[g].copy(),
+                "quat": model.geom_quat[g].copy(),
+                "rgba": model.geom_rgba[g].copy(),
+            }
+            for g in geoms
+        ],
+    }
+
+
+def _scene_spec(cfg: SimConfig) -> tuple[mujoco.MjSpec, np.ndarray, np.ndarray]:
+    """The scene's spec for ``cfg`` (board placed, textured and standing), the board pose and the camera body's
+    start pose."""
     if not SCENE_XML.is_file():
         raise SceneError(f"scene file {SCENE_XML} is missing; reinstall vical")
     board = cfg.board
@@ -132,7 +202,8 @@ def build_model(cfg: SimConfig) -> tuple[mujoco.MjModel, np.ndarray]:
     assets = {BOARD_TEXTURE: board_texture_png(target, board.border_squares, board.px_per_square)}
     spec = mujoco.MjSpec.from_file(str(SCENE_XML), assets=assets)
     spec.option.timestep = cfg.physics.timestep
-    T_world_board = board_pose_from_camera(start_camera_body_pose(spec, cfg), board)
+    T_world_start = start_camera_body_pose(spec, cfg)
+    T_world_board = board_pose_from_camera(T_world_start, board)
     body = spec.body("board")
     body.pos = T_world_board[:3, 3]
     body.quat = matrix_to_quat(T_world_board[:3, :3])
@@ -142,8 +213,7 @@ def build_model(cfg: SimConfig) -> tuple[mujoco.MjModel, np.ndarray]:
         geom.pos = [target.center[0], target.center[1], geom.pos[2]]
         geom.size = [half[0], half[1], thickness]
     _place_stand(spec, T_world_board, target)
-    model = spec.compile()
-    return model, T_world_board
+    return spec, T_world_board, T_world_start
 
 
 def site_pose(model: mujoco.MjModel, data: mujoco.MjData, name: str) -> np.ndarray:

@@ -1,0 +1,157 @@
+"""The sensor in a simulated person's hand: the scene without the Panda, recorded as the Panda's sensor is.
+
+``HandHeldSim`` stands where ``PandaSim`` stands for ``SensorRecorder`` (``vical.sim.recorder``): the same scene
+and board (``vical.sim.scene.build_hand_held_model``: ``cam_body`` a mocap body carrying the rig the flange
+carries), the same physics clock, the same observer protocol (``vical.sim.panda.StepObserver``). Its motion is
+the simulated person's (``vical.sim.person.SimulatedPerson``): each physics step the rig is where the person's
+hand holds it at that instant, tremor included, so the recorder makes the IMU samples (its model: averaging,
+noise, bias walk, intrinsics), the camera frames (exposure instants, time offset, analytic corners or rendered
+images) and the ground truth exactly as it does for the arm. Nothing collides and nothing is simulated
+dynamically: a hand's motion is prescribed, not actuated.
+
+``HandHeldRig`` is one person holding one sensor drawn from the sensor distribution, as ``SimRig`` is one Panda
+holding one: ``suggest`` a pose, ``advance`` the clock, read the ``recording`` (truth in it, for tests that compare
+a calibration with it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import mujoco
+import numpy as np
+
+from vical.data import NS_PER_S, Recording, SensorTruth
+from vical.geometry import matrix_to_quat
+from vical.sim.panda import StepObserver, StepPoses
+from vical.sim.person import HandModel, Reach, SimulatedPerson
+from vical.sim.products import replace_board
+from vical.sim.recorder import SensorRecorder
+from vical.sim.sampling import SensorSampling, draw_product, sample_sensor
+from vical.sim.scene import build_hand_held_model, imu_pose_in_body
+from vical.sim.settings import SimConfig
+
+MAX_ADVANCE_S = 60.0  # [s] the longest stretch one ``advance`` simulates (its step poses are held in memory)
+
+
+class HandHeldSim:
+    """The scene with ``cam_body`` in the person's hand (module doc).
+
+    Args:
+        cfg: the simulator's config (board, start pose, physics step).
+        rng: draws the person (tremor now, placement errors as suggestions come).
+        hand: how the person follows suggestions.
+
+    Attributes:
+        model, data: MuJoCo model and data of the scene; T_world_board: (4, 4) board pose.
+        T_world_start: (4, 4) ``cam_body``'s start pose (the person's first hold); person: the simulated person.
+    """
+
+    def __init__(self, cfg: SimConfig, rng: np.random.Generator, hand: HandModel | None = None) -> None:
+        self.cfg = cfg
+        self.model, self.T_world_board, self.T_world_start = build_hand_held_model(cfg)
+        self.data = mujoco.MjData(self.model)
+        self.person = SimulatedPerson(self.T_world_start, rng, hand or HandModel())
+        self._step = 0
+        self._pose_at(0)
+
+    @property
+    def timestep_ns(self) -> int:
+        return self.cfg.physics.timestep_ns
+
+    @property
+    def time_ns(self) -> int:
+        """Simulated time [ns] of the current state."""
+        return self._step * self.timestep_ns
+
+    def body_pose(self) -> np.ndarray:
+        """``T_world_body`` (4, 4) of ``cam_body`` now (tremor included)."""
+        return self.person.poses(np.array([self.time_ns / NS_PER_S]))[0]
+
+    def _pose_at(self, step: int) -> None:
+        """Put ``cam_body`` where the person holds it at physics step ``step`` and update ``data``'s kinematics."""
+        T = self.person.poses(np.array([step * self.timestep_ns / NS_PER_S]))[0]
+        self.data.mocap_pos[0] = T[:3, 3]
+        self.data.mocap_quat[0] = matrix_to_quat(T[:3, :3])
+        mujoco.mj_forward(self.model, self.data)
+
+    def advance(self, seconds: float, observer: StepObserver | None = None) -> float:
+        """Simulate ``seconds`` [s] of the person's motion (whole physics steps); the observer sees every step's
+        poses and ``data`` at the steps it asks for, as in ``PandaSim``'s motions. Returns the path [m] of
+        ``cam_body``'s origin over the steps."""
+        if not 0.0 <= seconds <= MAX_ADVANCE_S:
+            raise ValueError(f"advance takes 0 to {MAX_ADVANCE_S:g} s at a time, got {seconds}")
+        n, t0_ns, step_ns = round(seconds * NS_PER_S / self.timestep_ns), self.time_ns, self.timestep_ns
+        if n == 0:
+            return 0.0
+        T = self.person.poses((t0_ns + step_ns * np.arange(n + 1)) / NS_PER_S)  # the steps, then the end state
+        live = [] if observer is None else observer.live_steps(t0_ns, n, step_ns)
+        first = self._step
+        for k in live:  # data describes the state at the start of step k
+            self._step = first + k
+            self._pose_at(self._step)
+            observer.on_live_step(self, self.time_ns)
+        self._step = first + n
+        self._pose_at(self._step)
+        if observer is not None:
+            imu = T[:n] @ imu_pose_in_body(self.model)
+            observer.on_steps(StepPoses(t0_ns, step_ns, imu[:, :3, 3].copy(), imu[:, :3, :3].reshape(n, 9).copy(),
+                                        T[:n, :3, 3].copy()))  # fmt: skip
+        return float(np.sum(np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1)))
+
+
+class HandHeldRig:
+    """One simulated person holding one simulated sensor before the board (module doc).
+
+    Args:
+        sim: the simulator's config (its board, start pose, physics).
+        sampling: the sensor distribution (its products, where it has them, pick the board and lens).
+        seed: draws the sensor, its product, its noise and the person.
+        hand: how the person follows suggestions.
+        keep_images: also render every frame (for a page that shows them; corners stay analytic with the
+            ``project`` backend).
+        asymmetric_distortion: draw the distortion-centre offset and tangential terms (the joint task's sensor).
+    """
+
+    def __init__(
+        self,
+        sim: SimConfig,
+        sampling: SensorSampling,
+        seed: int,
+        hand: HandModel | None = None,
+        keep_images: bool = False,
+        asymmetric_distortion: bool = False,
+    ) -> None:
+        person_seed, sensor_seed, noise_seed = np.random.default_rng(seed).integers(2**63 - 1, size=3)
+        product = draw_product(sampling, int(sensor_seed))
+        self.sim = HandHeldSim(replace(sim, board=replace_board(sim.board, product.board)),
+                               np.random.default_rng(person_seed), hand)  # fmt: skip
+        self.target = self.sim.cfg.board.target
+        self.recorder = SensorRecorder(self.sim, self.target, sampling, keep_images=keep_images)
+        self.truth: SensorTruth = sample_sensor(
+            product.sampling, np.random.default_rng(sensor_seed), asymmetric_distortion
+        )
+        self.datasheet: SensorTruth = product.datasheet  # what the person's datasheet says of the sensor
+        self.recorder.start(self.truth, np.random.default_rng(noise_seed))
+
+    @property
+    def time(self) -> float:
+        """[s] since the recording started."""
+        return self.sim.time_ns / NS_PER_S
+
+    def suggest(self, T_world_body: np.ndarray) -> Reach:
+        """Show the person where to hold the sensor next (``cam_body``'s pose); the reach it makes."""
+        return self.sim.person.follow(T_world_body, self.time)
+
+    def advance(self, seconds: float) -> None:
+        """Let ``seconds`` [s] pass, the sensor recording as the person moves it."""
+        path = self.sim.advance(seconds, self.recorder)
+        self.recorder.add_time(seconds, path)
+
+    def recording(self) -> Recording:
+        """Everything recorded so far, with the sensor's truth."""
+        return self.recorder.recording()
+
+    def close(self) -> None:
+        """Free the renderer."""
+        self.recorder.close()
