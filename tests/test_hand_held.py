@@ -92,7 +92,7 @@ def test_a_hand_held_recording_without_tremor_calibrates_within_its_sigmas(setti
     """A person turning and moving the sensor along each axis (12 suggestions, 30 s): the joint task's extrinsic
     and time offset within 3 reported sigma. Measured (seeds 0-3): all 28 within 3 sigma, 1.1-2.7 mm, 0.03-0.06
     deg. With the model's tremor (1 mm, 0.3 deg at 8-12 Hz) the same recordings give 2.9-6.7 mm and t_z up to 5.1
-    sigma (docs/simulation.md)."""
+    sigma, the calibrator's integration of 200 Hz IMU samples (docs/simulation.md)."""
     sim_config, sampling, task = settings
     z = []
     for seed in (0, 1):
