@@ -7,6 +7,7 @@ from configs import composed
 from scipy.spatial.transform import Rotation
 
 from vical.calib.tasks import CalibrationTask, run_task
+from vical.collection.runner import Limits, SensorStream
 from vical.config_checks import from_mapping
 from vical.geometry import T_CAM_BODY, invert_transform, make_transform
 from vical.sim.hand_held import HandHeldRig
@@ -115,3 +116,27 @@ def test_a_hand_held_recording_without_tremor_calibrates_within_its_sigmas(setti
         names = ["rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "time_offset"]
         z.append(np.abs(error) / np.array([result.sigma(n) for n in names]))
     assert np.all(np.concatenate(z) <= 3.0), z
+
+
+def test_the_hand_held_sensor_streams_frames_in_which_the_runner_finds_the_board(settings):
+    """Read as vical-collect reads a live sensor (``SensorStream``: rendered images, the board detected in them)
+    while the person turns it: a frame every camera period, each with the board's corners where the analytic
+    projection puts them."""
+    sim_config, sampling, _ = settings
+    rig = HandHeldRig(sim_config, sampling, 5, keep_images=True)
+    stream = SensorStream(rig.sensor, rig.target, None, Limits())
+    rig.sensor.start()
+    turn = make_transform(Rotation.from_rotvec([0.0, 0.15, 0.1]).as_matrix(), np.zeros(3))
+    reach = rig.suggest(rig.sim.T_world_start @ turn)
+    seen = []
+    while rig.time < reach.t_end:
+        seen += stream.read()
+    try:
+        analytic, ids = rig.recorder.detections_since(0)  # every exposure (the recording keeps those in the IMU span)
+        assert len(seen) == len(analytic) >= 10 * reach.t_end
+        for (_, corners, found), projected, expected in zip(seen, analytic, ids, strict=True):
+            common, here, there = np.intersect1d(found, expected, return_indices=True)
+            assert len(common) >= 0.8 * len(expected) > 0
+            assert np.median(np.linalg.norm(corners[here] - projected[there], axis=1)) < 0.5
+    finally:
+        rig.close()

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -37,6 +37,9 @@ from vical.sim.products import replace_board
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, draw_product, sample_sensor
 from vical.sim.settings import SimConfig
+
+if TYPE_CHECKING:
+    from vical.sim.hand_held import HandHeldRig
 
 # The Panda's documented Cartesian limits (translation [m/s], rotation [rad/s], acceleration [m/s^2]);
 # the simulator plans in joint space within sim.motion's fractions of the joint limits.
@@ -114,6 +117,10 @@ class SimRig:
         self.arm = SimArm(self)
         self.sensor = SimViSensor(self)
 
+    def rest(self, seconds: float) -> None:
+        """The arm rests ``seconds`` [s], the sensor recording."""
+        self.recorder.add_motion(self.sim.hold(seconds, observer=self.recorder))
+
     def close(self) -> None:
         """Free the renderer."""
         self.recorder.close()
@@ -189,13 +196,15 @@ class SimArm(Arm):
 
 
 class SimViSensor(ViSensor):
-    """The simulated camera + IMU as a ``ViSensor``: rendered grey images, the IMU model's samples.
+    """The simulated camera + IMU as a ``ViSensor``: rendered grey images, the IMU model's samples; on the arm of a
+    ``SimRig`` or in the hand of a ``vical.sim.hand_held.HandHeldRig`` (their ``rest`` lets time pass, their
+    ``recorder`` records, their ``faults`` apply).
 
     Clocks: the IMU clock is the simulation clock; camera stamps are in the camera clock, exposed at
     ``t_cam + time_offset`` (the sensor's truth).
     """
 
-    def __init__(self, rig: SimRig) -> None:
+    def __init__(self, rig: SimRig | HandHeldRig) -> None:
         self._rig = rig
         camera = rig.truth.camera
         self.image_size = (camera.width, camera.height)
@@ -220,7 +229,7 @@ class SimViSensor(ViSensor):
             return SensorData.empty()
         rig = self._rig
         if len(rig.recorder.imu_samples()) == self._imu_read:
-            rig.recorder.add_motion(rig.sim.hold(1.0 / self.camera_rate_hz, observer=rig.recorder))
+            rig.rest(1.0 / self.camera_rate_hz)
         recorder = rig.recorder
         stamps = recorder.stamps_since(self._frames_read)
         images = recorder.images_since(self._frames_read)

@@ -11,7 +11,8 @@ dynamically: a hand's motion is prescribed, not actuated.
 
 ``HandHeldRig`` is one person holding one sensor drawn from the sensor distribution, as ``SimRig`` is one Panda
 holding one: ``suggest`` a pose, ``advance`` the clock, read the ``recording`` (truth in it, for tests that compare
-a calibration with it).
+a calibration with it), or read its ``sensor`` (``vical.sim.adapters.SimViSensor``: rendered images and IMU
+samples, time passing as it is read) as a live sensor is read.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 
 from vical.data import NS_PER_S, Recording, SensorTruth
 from vical.geometry import matrix_to_quat
+from vical.sim.adapters import RigFaults, SimViSensor
 from vical.sim.panda import StepObserver, StepPoses
 from vical.sim.person import HandModel, Reach, SimulatedPerson
 from vical.sim.products import replace_board
@@ -133,6 +135,8 @@ class HandHeldRig:
         )
         self.datasheet: SensorTruth = product.datasheet  # what the person's datasheet says of the sensor
         self.recorder.start(self.truth, np.random.default_rng(noise_seed))
+        self.faults = RigFaults()  # a hand-held sensor streams without an arm's faults
+        self.sensor = SimViSensor(self)  # the sensor as vical-collect's runner reads one (rendered images)
 
     @property
     def time(self) -> float:
@@ -147,6 +151,8 @@ class HandHeldRig:
         """Let ``seconds`` [s] pass, the sensor recording as the person moves it."""
         path = self.sim.advance(seconds, self.recorder)
         self.recorder.add_time(seconds, path)
+
+    rest = advance  # what the sensor does when it is read with nothing new: time passes (``SimViSensor``)
 
     def recording(self) -> Recording:
         """Everything recorded so far, with the sensor's truth."""
