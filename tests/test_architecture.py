@@ -31,7 +31,7 @@ ALLOWED = {
     "env": {"calib", "config_checks", "data", "geometry", "sim"},
     "policies": {"config_checks", "env", "rl"},
     "evaluation": {"calib", "config_checks", "data", "env", "geometry", "io", "parallel", "policies", "sim"},
-    "collection": {"calib", "data", "env", "geometry", "io", "policies", "robot"},
+    "collection": {"calib", "config_checks", "data", "env", "geometry", "io", "policies", "robot"},
     "apps": {
         "calib", "collection", "config_checks", "data", "env", "evaluation", "geometry", "io", "parallel",
         "policies", "rl", "robot", "sim",

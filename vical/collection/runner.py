@@ -155,7 +155,7 @@ class RobotEpisode:
 
 
 class SensorStream:
-    """Reads the sensor, checks the streams, detects the board and (once recording) writes everything.
+    """Reads the sensor, checks the streams, detects the board and (once recording, with a writer) writes everything.
 
     Keeps the recording's IMU samples for the state (the detections go to the caller).
     """
@@ -188,10 +188,11 @@ class SensorStream:
             corners, ids = self.detect(frame.image)
             self._lost = 0 if len(ids) else self._lost + 1
             if self.recording:
-                self.writer.add_frame(frame.t_ns, frame.image, corners, ids)
+                if self.writer is not None:
+                    self.writer.add_frame(frame.t_ns, frame.image, corners, ids)
                 self.frames += 1
             detections.append((frame.t_ns, corners, ids))
-        if self.recording and len(data.imu):
+        if self.recording and self.writer is not None and len(data.imu):
             self.writer.add_imu(data.imu)
         if (self.recording or self.keep_imu) and len(data.imu):
             self._imu.append(data.imu)
@@ -221,6 +222,10 @@ class SensorStream:
                 raise SensorStreamError("the camera stamps go backwards; check the sensor's clock settings")
             self._last_frame = frame.t_ns
 
+    def start_recording(self) -> None:
+        """Write and keep everything from now on (IMU samples kept before, without recording, are dropped)."""
+        self.recording, self.keep_imu, self._imu = True, False, []
+
     def imu(self) -> ImuSamples:
         """All IMU samples of the recording so far."""
         if len(self._imu) != 1:
@@ -230,6 +235,47 @@ class SensorStream:
     @property
     def last_imu_ns(self) -> int | None:
         return self._last_imu
+
+
+def run_policy(
+    policy: Policy,
+    episode: RobotEpisode,
+    limits: Limits,
+    step: Callable[[np.ndarray], None],
+    over_time: Callable[[], bool],
+) -> str:
+    """The policy loop of an episode off the env (the arm's and the guided person's): act, ``step``, until the policy's
+    last waypoint, its stopping rule, the step limit or ``over_time()``; why it stopped."""
+    state, mdp = episode.state, episode.config
+    max_steps = limits.max_steps or policy.max_steps or mdp.max_steps
+    while episode.steps < max_steps:
+        action = policy.act(state.observation(episode.pose_offset, episode.steps), episode)
+        if policy.finished:
+            return "the policy's last waypoint"
+        step(action)
+        if policy.stop_at_coverage and state.goal_reached:
+            return "the goal (" + ("every parameter group within tolerance" if mdp.state == "information"
+                                   else "coverage complete") + ")"  # fmt: skip
+        if over_time():
+            return f"the time limit ({limits.time_limit:.0f} s)"
+    return f"the step limit ({max_steps})"
+
+
+def read_until(stream: SensorStream, done: Callable[[], bool], take: Callable[[list], None]) -> None:
+    """Read ``stream`` (handing the detections to ``take``) until ``done()``; ``SensorStreamError`` when no data
+    arrive for its ``limits.wait_timeout``."""
+    limits = stream.limits
+    last_data = time.monotonic()
+    while not done():
+        before = stream.last_imu_ns
+        take(stream.read())
+        if stream.last_imu_ns != before:
+            last_data = time.monotonic()
+        elif time.monotonic() - last_data > limits.wait_timeout:
+            raise SensorStreamError(
+                f"no sensor data for {limits.wait_timeout:.0f} s; check that the camera and IMU stream"
+            )
+        time.sleep(limits.poll_interval)
 
 
 class Collector:
@@ -297,7 +343,7 @@ class Collector:
             self.stream.writer.close()
 
     def _episode(self, frame: PoseFrame, seed: int) -> CollectResult:
-        self.stream.recording = True
+        self.stream.start_recording()
         self.state.reset(self.task, self.guess)
         self._episode_start = self.stream.last_imu_ns
         self._rest(self.mdp.reset_hold)
@@ -305,22 +351,13 @@ class Collector:
         episode = self.episode
         episode.state, episode.frame = self.state, frame
         self.policy.reset(episode, np.random.default_rng(seed))
-        max_steps = self.limits.max_steps or self.policy.max_steps or self.mdp.max_steps
-        reason = f"the step limit ({max_steps})"
-        while episode.steps < max_steps:
-            action = self.policy.act(self.state.observation(episode.pose_offset, episode.steps), episode)
-            if self.policy.finished:
-                reason = "the policy's last waypoint"
-                break
+
+        def step(action: np.ndarray) -> None:
             self._step(frame, action)
             self._report()
-            if self.policy.stop_at_coverage and self.state.goal_reached:
-                reason = "the goal (" + ("every parameter group within tolerance" if self.mdp.state == "information"
-                                         else "coverage complete") + ")"  # fmt: skip
-                break
-            if time.monotonic() - self._started > self.limits.time_limit:
-                reason = f"the time limit ({self.limits.time_limit:.0f} s)"
-                break
+
+        reason = run_policy(self.policy, episode, self.limits, step,
+                            lambda: time.monotonic() - self._started > self.limits.time_limit)  # fmt: skip
         self.arm.stop()
         duration = self._sensor_time()
         self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, {duration:.1f} s")
@@ -412,19 +449,7 @@ class Collector:
         self.state.add_frames([d[0] for d in pending], [d[1] for d in pending], [d[2] for d in pending], imu)
 
     def _wait(self, done: Callable[[], bool], take: Callable[[list], None]) -> None:
-        """Read (handing the detections to ``take``) until ``done()``; ``SensorStreamError`` when no data arrive
-        for ``wait_timeout``."""
-        last_data = time.monotonic()
-        while not done():
-            before = self.stream.last_imu_ns
-            take(self.stream.read())
-            if self.stream.last_imu_ns != before:
-                last_data = time.monotonic()
-            elif time.monotonic() - last_data > self.limits.wait_timeout:
-                raise SensorStreamError(
-                    f"no sensor data for {self.limits.wait_timeout:.0f} s; check that the camera and IMU stream"
-                )
-            time.sleep(self.limits.poll_interval)
+        read_until(self.stream, done, take)
 
     # ------------------------------------------------------------------ dry run
     def dry_run(self, seconds: float = 3.0) -> list[str]:

@@ -1,4 +1,5 @@
-"""Robot-agnostic interfaces of an arm and a visual-inertial sensor, the two things ``vical-collect`` drives.
+"""Robot-agnostic interfaces of an arm, a visual-inertial sensor and a person who holds one: what ``vical-collect``
+and ``vical-guide`` drive.
 
 Imports ``geometry`` and ``data`` only: an adapter for a real arm or sensor needs nothing of the
 simulator, and the simulated adapters (``vical.sim.adapters``) implement these same interfaces.
@@ -8,7 +9,9 @@ from vical.robot.interfaces import (
     Arm,
     ArmLimits,
     CameraImage,
+    Guidance,
     MotionRefused,
+    Person,
     SensorData,
     SensorStreamError,
     StampedPose,
@@ -19,7 +22,9 @@ __all__ = [
     "Arm",
     "ArmLimits",
     "CameraImage",
+    "Guidance",
     "MotionRefused",
+    "Person",
     "SensorData",
     "SensorStreamError",
     "StampedPose",

@@ -201,3 +201,31 @@ class ViSensor(Device):
     @abstractmethod
     def close(self) -> None:
         """Release the device (after ``stop``)."""
+
+
+@dataclass(frozen=True)
+class Guidance:
+    """What ``vical-guide`` shows the person who holds the sensor (``vical.collection.guide``).
+
+    Attributes:
+        T_board_body: (4, 4) where to hold the sensor's body next, in the board's frame (the frame a person and a
+            hand-held sensor share); None once the guide is done.
+        words: the instruction ("move 20 cm closer, tilt the top away 25 deg"; "done" at the end).
+        ratios: each parameter group's predicted error over its tolerance (the goal is every ratio <= 1).
+        elapsed_s: [s] of recording so far.
+        done: the calibration is predicted good enough: stop moving.
+    """
+
+    T_board_body: np.ndarray | None
+    words: str
+    ratios: dict[str, float]
+    elapsed_s: float
+    done: bool = False
+
+
+class Person(ABC):
+    """Someone who holds the sensor and follows guidance: a page in a browser, lines on a terminal, a model."""
+
+    @abstractmethod
+    def show(self, guidance: Guidance) -> None:
+        """Tell the person what to do next (returns at once; the guide watches the sensor for the rest)."""

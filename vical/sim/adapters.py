@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -37,9 +37,6 @@ from vical.sim.products import replace_board
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, draw_product, sample_sensor
 from vical.sim.settings import SimConfig
-
-if TYPE_CHECKING:
-    from vical.sim.hand_held import HandHeldRig
 
 # The Panda's documented Cartesian limits (translation [m/s], rotation [rad/s], acceleration [m/s^2]);
 # the simulator plans in joint space within sim.motion's fractions of the joint limits.
@@ -195,6 +192,24 @@ class SimArm(Arm):
         """Nothing to release: the rig owns the simulator (``SimRig.close``)."""
 
 
+class SimClock(Protocol):
+    @property
+    def time_ns(self) -> int:
+        """Simulated time [ns] of the current state."""
+
+
+class SensorRig(Protocol):
+    """What ``SimViSensor`` reads of a simulated rig (``SimRig``, ``vical.sim.hand_held.HandHeldRig``)."""
+
+    sim: SimClock
+    truth: SensorTruth
+    recorder: SensorRecorder
+    faults: RigFaults
+
+    def rest(self, seconds: float) -> None:
+        """Let ``seconds`` [s] pass, the sensor recording."""
+
+
 class SimViSensor(ViSensor):
     """The simulated camera + IMU as a ``ViSensor``: rendered grey images, the IMU model's samples; on the arm of a
     ``SimRig`` or in the hand of a ``vical.sim.hand_held.HandHeldRig`` (their ``rest`` lets time pass, their
@@ -204,7 +219,7 @@ class SimViSensor(ViSensor):
     ``t_cam + time_offset`` (the sensor's truth).
     """
 
-    def __init__(self, rig: SimRig | HandHeldRig) -> None:
+    def __init__(self, rig: SensorRig) -> None:
         self._rig = rig
         camera = rig.truth.camera
         self.image_size = (camera.width, camera.height)

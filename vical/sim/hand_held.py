@@ -24,6 +24,7 @@ import numpy as np
 
 from vical.data import NS_PER_S, Recording, SensorTruth
 from vical.geometry import matrix_to_quat
+from vical.robot import Guidance, Person
 from vical.sim.adapters import RigFaults, SimViSensor
 from vical.sim.panda import StepObserver, StepPoses
 from vical.sim.person import HandModel, Reach, SimulatedPerson
@@ -66,10 +67,6 @@ class HandHeldSim:
         """Simulated time [ns] of the current state."""
         return self._step * self.timestep_ns
 
-    def body_pose(self) -> np.ndarray:
-        """``T_world_body`` (4, 4) of ``cam_body`` now (tremor included)."""
-        return self.person.poses(np.array([self.time_ns / NS_PER_S]))[0]
-
     def _pose_at(self, step: int) -> None:
         """Put ``cam_body`` where the person holds it at physics step ``step`` and update ``data``'s kinematics."""
         T = self.person.poses(np.array([step * self.timestep_ns / NS_PER_S]))[0]
@@ -102,7 +99,7 @@ class HandHeldSim:
         return float(np.sum(np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1)))
 
 
-class HandHeldRig:
+class HandHeldRig(Person):
     """One simulated person holding one simulated sensor before the board (module doc).
 
     Args:
@@ -146,6 +143,11 @@ class HandHeldRig:
     def suggest(self, T_world_body: np.ndarray) -> Reach:
         """Show the person where to hold the sensor next (``cam_body``'s pose); the reach it makes."""
         return self.sim.person.follow(T_world_body, self.time)
+
+    def show(self, guidance: Guidance) -> None:
+        """The person follows the guide (``vical.robot.Person``): to the pose it shows, in the board's frame."""
+        if guidance.T_board_body is not None:
+            self.suggest(self.sim.T_world_board @ guidance.T_board_body)
 
     def advance(self, seconds: float) -> None:
         """Let ``seconds`` [s] pass, the sensor recording as the person moves it."""
