@@ -10,6 +10,8 @@ from vical.calib.tasks import CalibrationTask, run_task
 from vical.collection.runner import Limits, SensorStream
 from vical.config_checks import from_mapping
 from vical.geometry import T_CAM_BODY, invert_transform, make_transform
+from vical.io.euroc import EurocStreamWriter
+from vical.robot import SensorStreamError
 from vical.sim.hand_held import HandHeldRig
 from vical.sim.panda import PandaSim
 from vical.sim.person import HandModel
@@ -140,3 +142,28 @@ def test_the_hand_held_sensor_streams_frames_in_which_the_runner_finds_the_board
             assert np.median(np.linalg.norm(corners[here] - projected[there], axis=1)) < 0.5
     finally:
         rig.close()
+
+
+def test_at_corner_level_the_sensor_delivers_the_analytic_corners_which_are_not_written_as_euroc(settings, tmp_path):
+    """Without images (a comparison that renders nothing) the sensor's frames are the board's analytic corners;
+    a EuRoC writer needs images and says so in one line."""
+    sim_config, sampling, _ = settings
+    rig = HandHeldRig(sim_config, sampling, 6)
+    stream = SensorStream(rig.sensor, rig.target, None, Limits())
+    rig.sensor.start()
+    rig.suggest(rig.sim.T_world_start @ make_transform(np.eye(3), [0.0, 0.1, 0.0]))
+    seen = []
+    while rig.time < 2.0:
+        seen += stream.read()
+    corners, ids = rig.recorder.detections_since(0)
+    assert len(seen) == len(corners) >= 20
+    for (_, uv, found), expected_uv, expected_ids in zip(seen, corners, ids, strict=True):
+        np.testing.assert_array_equal(found, expected_ids)
+        np.testing.assert_array_equal(uv, expected_uv)
+    writer = EurocStreamWriter(tmp_path / "recording", rig.sensor.image_size, 10.0, 200.0, rig.datasheet.imu_noise)
+    stream = SensorStream(rig.sensor, rig.target, writer, Limits())
+    stream.start_recording()
+    with pytest.raises(SensorStreamError, match="without images, and a EuRoC recording needs the images"):
+        while True:
+            stream.read()
+    writer.close()

@@ -44,7 +44,16 @@ from vical.env.workspace import PoseFrame, look_at_rotation
 from vical.geometry import R_CAM_BODY, make_transform, rotation_angle, transform_points
 from vical.io.euroc import EurocStreamWriter
 from vical.policies.base import Policy
-from vical.robot import Arm, MotionRefused, SensorData, SensorStreamError, StampedPose, ViSensor
+from vical.robot import (
+    Arm,
+    CameraDetections,
+    CameraImage,
+    MotionRefused,
+    SensorData,
+    SensorStreamError,
+    StampedPose,
+    ViSensor,
+)
 
 # The camera's optical frame (z forward, x right, y down) in the tool frame (x forward, y left, z up): the tool
 # frame is the camera body's.
@@ -174,6 +183,12 @@ class SensorStream:
         self._lost = 0
         self._aprilgrid = make_aprilgrid_detector() if target.kind == "aprilgrid" else None
 
+    def corners_of(self, frame: CameraImage | CameraDetections) -> tuple[np.ndarray, np.ndarray]:
+        """The board's corners (K, 2) and ids (K,) in a frame: detected in its image, or as the sensor found them."""
+        if isinstance(frame, CameraDetections):
+            return frame.corners, frame.ids
+        return self.detect(frame.image)
+
     def detect(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self._aprilgrid is not None:
             return detect_aprilgrid(image, self.target, detector=self._aprilgrid)
@@ -185,11 +200,11 @@ class SensorStream:
         self._check(data)
         detections = []
         for frame in data.frames:
-            corners, ids = self.detect(frame.image)
+            corners, ids = self.corners_of(frame)
             self._lost = 0 if len(ids) else self._lost + 1
             if self.recording:
                 if self.writer is not None:
-                    self.writer.add_frame(frame.t_ns, frame.image, corners, ids)
+                    self._write(frame, corners, ids)
                 self.frames += 1
             detections.append((frame.t_ns, corners, ids))
         if self.recording and self.writer is not None and len(data.imu):
@@ -202,6 +217,14 @@ class SensorStream:
                 "board's position, then align again"
             )
         return detections
+
+    def _write(self, frame: CameraImage | CameraDetections, corners: np.ndarray, ids: np.ndarray) -> None:
+        if isinstance(frame, CameraDetections):
+            raise SensorStreamError(
+                "the sensor delivers the board's corners without images, and a EuRoC recording needs the images; "
+                "record without writing (a corner-level simulation), or use a sensor that streams images"
+            )
+        self.writer.add_frame(frame.t_ns, frame.image, corners, ids)
 
     def _check(self, data: SensorData) -> None:
         """Refuse stamps going backwards and gaps in the IMU stream (a broken USB link, a dropped driver)."""

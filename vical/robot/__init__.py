@@ -8,6 +8,7 @@ simulator, and the simulated adapters (``vical.sim.adapters``) implement these s
 from vical.robot.interfaces import (
     Arm,
     ArmLimits,
+    CameraDetections,
     CameraImage,
     Guidance,
     MotionRefused,
@@ -21,6 +22,7 @@ from vical.robot.interfaces import (
 __all__ = [
     "Arm",
     "ArmLimits",
+    "CameraDetections",
     "CameraImage",
     "Guidance",
     "MotionRefused",

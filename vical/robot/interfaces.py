@@ -109,10 +109,29 @@ class CameraImage:
 
 
 @dataclass(frozen=True)
-class SensorData:
-    """What arrived from the sensor since the last read: camera frames and IMU samples, each in stamp order."""
+class CameraDetections:
+    """One camera frame as a sensor that finds the board itself delivers it (a simulated sensor at corner level):
+    the board's corners (K, 2) [px] and their target point ids (K,), stamped ``t_ns`` in the camera clock."""
 
-    frames: list[CameraImage]
+    t_ns: int
+    corners: np.ndarray
+    ids: np.ndarray
+
+    def __post_init__(self) -> None:
+        corners, ids = np.asarray(self.corners, dtype=float), np.asarray(self.ids, dtype=np.int64)
+        if corners.shape != (len(ids), 2):
+            raise ValueError(f"CameraDetections needs corners (K, 2) for K ids, got {corners.shape} and {ids.shape}")
+        object.__setattr__(self, "t_ns", int(self.t_ns))
+        object.__setattr__(self, "corners", corners)
+        object.__setattr__(self, "ids", ids)
+
+
+@dataclass(frozen=True)
+class SensorData:
+    """What arrived from the sensor since the last read: camera frames (images, or the board's corners where the
+    sensor detects them) and IMU samples, each in stamp order."""
+
+    frames: list[CameraImage | CameraDetections]
     imu: ImuSamples
 
     @classmethod

@@ -25,6 +25,7 @@ from vical.geometry import make_transform, so3_exp
 from vical.robot.interfaces import (
     Arm,
     ArmLimits,
+    CameraDetections,
     CameraImage,
     MotionRefused,
     SensorData,
@@ -211,7 +212,8 @@ class SensorRig(Protocol):
 
 
 class SimViSensor(ViSensor):
-    """The simulated camera + IMU as a ``ViSensor``: rendered grey images, the IMU model's samples; on the arm of a
+    """The simulated camera + IMU as a ``ViSensor``: rendered grey images (the board's analytic corners where the
+    rig's recorder keeps no images: a comparison at corner level), the IMU model's samples; on the arm of a
     ``SimRig`` or in the hand of a ``vical.sim.hand_held.HandHeldRig`` (their ``rest`` lets time pass, their
     ``recorder`` records, their ``faults`` apply).
 
@@ -247,12 +249,16 @@ class SimViSensor(ViSensor):
             rig.rest(1.0 / self.camera_rate_hz)
         recorder = rig.recorder
         stamps = recorder.stamps_since(self._frames_read)
-        images = recorder.images_since(self._frames_read)
+        if recorder.keep_images:
+            images = recorder.images_since(self._frames_read)
+            frames = [CameraImage(t, image) for t, image in zip(stamps, images, strict=True)]
+        else:  # corner level: the analytic detections (a comparison that needs no images)
+            corners, ids = recorder.detections_since(self._frames_read)
+            frames = [CameraDetections(t, uv, i) for t, uv, i in zip(stamps, corners, ids, strict=True)]
         self._frames_read += len(stamps)
         imu = recorder.imu_samples()
         new = np.arange(self._imu_read, len(imu))
         self._imu_read = len(imu)
-        frames = [CameraImage(t, image) for t, image in zip(stamps, images, strict=True)]
         return SensorData(frames, self._without_gap(ImuSamples(imu.t[new], imu.gyro[new], imu.accel[new])))
 
     def _without_gap(self, imu: ImuSamples) -> ImuSamples:
