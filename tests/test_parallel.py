@@ -104,6 +104,30 @@ def test_workers_end_soon_after_their_caller_is_killed(tmp_path):
     assert len(list(tmp_path.glob("task*"))) == 2  # and started none of the tasks queued after
 
 
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads process states from /proc")
+def test_an_interrupted_caller_ends_its_workers_mid_task_and_exits(tmp_path):
+    """Ctrl-C while the workers run 120-s tasks: the caller ends them and exits in seconds (it waited for the
+    running tasks before: an evaluation's episodes, seconds each, after every Ctrl-C or SIGTERM)."""
+    script = tmp_path / "caller.py"
+    script.write_text(textwrap.dedent(HOLDING_CALLER))
+    caller = subprocess.Popen([sys.executable, str(script), str(tmp_path)], stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while len(started := sorted(tmp_path.glob("task*"))) < 2 and time.monotonic() < deadline:
+        assert caller.poll() is None
+        time.sleep(0.1)
+    time.sleep(0.2)  # both pids written whole
+    workers = [int(path.read_text()) for path in started]
+    caller.send_signal(signal.SIGINT)
+    deadline = time.monotonic() + 20
+    while caller.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.1)
+    if caller.poll() is None:
+        caller.kill()  # its workers follow it (test_workers_end_soon_after_their_caller_is_killed)
+        pytest.fail("the caller waited for its workers' tasks")
+    assert b"KeyboardInterrupt" in caller.stderr.read()
+    assert not any(_running(pid) for pid in workers)
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [

@@ -19,6 +19,7 @@ recording, and the path lengths add up. Everywhere else every policy runs one tr
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import itertools
 import json
@@ -531,10 +532,12 @@ def evaluate_policies(
         tasks = [EpisodeTask(spec, env_cfg, budgets, paper_protocol, int(seed)) for spec in specs for seed in seeds]
         bar = tqdm(total=len(tasks), desc="episodes", unit="episode", disable=not progress)
         rows: dict[str, list[EpisodeRow]] = {spec.name: [] for spec in specs}
-        for task, episode_rows in zip(tasks, imap_ordered(run_episode, tasks, parallel), strict=True):
-            rows[task.spec.name].extend(episode_rows)
-            bar.set_postfix_str(f"{task.spec.name}, sensor {task.seed}")
-            bar.update(1)
+        # closed on the way out, an interrupt's too: the workers end now, not when the traceback is released
+        with contextlib.closing(imap_ordered(run_episode, tasks, parallel)) as results:
+            for task, episode_rows in zip(tasks, results, strict=True):
+                rows[task.spec.name].extend(episode_rows)
+                bar.set_postfix_str(f"{task.spec.name}, sensor {task.seed}")
+                bar.update(1)
         bar.close()
     finally:
         release_evaluators()

@@ -89,6 +89,7 @@ def _process_imap(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int) 
         max_workers=min(workers, max(len(tasks), 1)), mp_context=_spawn(),
         initializer=_end_with_parent, initargs=(os.getpid(),),
     )  # fmt: skip
+    finished = False
     try:
         with single_threaded_children():  # the workers start with the first submissions
             futures = [executor.submit(fn, task) for task in tasks]
@@ -100,8 +101,19 @@ def _process_imap(fn: Callable[[Any], Any], tasks: Sequence[Any], workers: int) 
                     f"a worker process died (killed, or out of memory) while task {index} of {len(tasks)} ran; "
                     "the results of the finished tasks are lost with this run: start it again"
                 ) from err
+        finished = True
     finally:
+        if not finished:  # Ctrl-C, SIGTERM, an error, a caller that stopped reading: nobody wants what still runs
+            _terminate_workers(executor)
         executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _terminate_workers(executor: ProcessPoolExecutor) -> None:
+    """End the pool's workers now, the tasks they run unfinished: shutting down waits for those tasks (an episode
+    takes seconds) and the interpreter's exit joins the pool too. (``ProcessPoolExecutor`` offers no public way
+    before Python 3.14's ``terminate_workers``.)"""
+    for process in list((executor._processes or {}).values()):
+        process.terminate()
 
 
 def _spawn():
