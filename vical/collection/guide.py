@@ -36,8 +36,7 @@ from vical.collection.runner import (
     CollectionStopped,
     CollectResult,
     Limits,
-    RobotEpisode,
-    SensorStream,
+    LiveEpisode,
     read_until,
     run_policy,
 )
@@ -46,7 +45,6 @@ from vical.data import NS_PER_S, Target
 from vical.env.actions import goal_offset
 from vical.env.information import Guess
 from vical.env.settings import MdpConfig
-from vical.env.state import EpisodeState
 from vical.env.workspace import PoseFrame, look_at_rotation
 from vical.geometry import T_CAM_BODY, invert_transform, make_transform, rotation_angle
 from vical.io.euroc import EurocStreamWriter
@@ -112,7 +110,7 @@ def upright_board_frame(T_board_cam: np.ndarray, up_board: np.ndarray) -> np.nda
     return make_transform(R_board_world.T, np.zeros(3))
 
 
-class Guide:
+class Guide(LiveEpisode):
     """One guided collection with a person holding the sensor (module doc).
 
     Args:
@@ -148,22 +146,13 @@ class Guide:
         limits: Limits | None = None,
         progress: Callable[[str], None] = print,
     ) -> None:
+        super().__init__(sensor, policy, mdp, task, target, guess, writer, limits, progress)
         self.person = person
-        self.policy = policy
-        self.mdp = mdp
-        self.task = task
-        self.target = target
-        self.guess = guess
         self.start = start
         self.arrival = arrival or Arrival()
         self.wording = wording or Wording()
-        self.limits = limits or Limits()
-        self.stream = SensorStream(sensor, target, writer, self.limits)
-        self.state = EpisodeState(mdp, target, sensor.image_size)
-        self.episode = RobotEpisode(mdp)
-        self.progress = progress
-        self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []
         self._poses: list[tuple[int, np.ndarray]] = []  # (stamp, T_world_body) of the frames since the last pose shown
+        self._T_cam_board: np.ndarray | None = None  # the latest frame's that posed the board
         self.T_world_board = np.eye(4)
         self._t0: int | None = None
 
@@ -183,8 +172,8 @@ class Guide:
     def _start(self) -> PoseFrame:
         """Find the board and the way up, show the start pose, wait for the person; the workspace frame."""
         self.stream.keep_imu = True
-        self._read_for(self.start.start_rest)
-        T_board_cam = invert_transform(self._last_pose(required=True))
+        self._rest(self.start.start_rest)
+        T_board_cam = invert_transform(self._last_pose())
         imu = self.stream.imu()
         accel = imu.accel[len(imu) // 2 :].mean(axis=0)  # the rest's second half: the person has stopped moving
         up_board = T_board_cam[:3, :3] @ self.guess.T_cam_imu[:3, :3] @ accel  # specific force at rest: up
@@ -196,7 +185,7 @@ class Guide:
         position = centre + self.start.distance * toward_camera / np.linalg.norm(toward_camera)
         T_start = make_transform(look_at_rotation(position, centre), position)
         frame = PoseFrame(T_start, self.mdp.workspace.frame, centre)
-        self._show(T_start, None)
+        self._show(T_start)
         self._settle()
         self.episode.pose_offset = frame.offset(self._body_now())
         self.stream.start_recording()  # from the start pose on, as the runner records from its aligned pose
@@ -206,7 +195,8 @@ class Guide:
 
     def _episode(self, frame: PoseFrame, seed: int) -> CollectResult:
         self.state.reset(self.task, self.guess)
-        self._rest_and_update()
+        self._rest(self.mdp.reset_hold)
+        self._update_state()
         episode = self.episode
         episode.state, episode.frame = self.state, frame
         self.policy.reset(episode, np.random.default_rng(seed))
@@ -226,7 +216,7 @@ class Guide:
         a = np.clip(np.asarray(action, dtype=float).reshape(-1), space.low, space.high)
         goal = goal_offset(episode.pose_offset, a, self.mdp.workspace.bound)
         before = self._body_now()
-        self._show(frame.pose(goal), None)
+        self._show(frame.pose(goal))
         self._settle()
         after = self._body_now()
         episode.steps += 1
@@ -237,12 +227,11 @@ class Guide:
         self.progress(f"step {episode.steps}: {self._worst()}, {self.state.frames} frames, {self._elapsed():.1f} s")
 
     # ------------------------------------------------------------------ the person
-    def _show(self, T_world_body: np.ndarray, words: str | None) -> None:
-        """Show the person the pose ``T_world_body`` (with ``words``, else the instruction from where it is now)."""
+    def _show(self, T_world_body: np.ndarray) -> None:
+        """Show the person the pose ``T_world_body`` with the instruction from where the sensor is now."""
         T_board_body = invert_transform(self.T_world_board) @ T_world_body
-        if words is None:
-            T_board_cam = invert_transform(self.T_world_board) @ self._body_now() @ invert_transform(T_CAM_BODY)
-            words = instruction(T_board_cam, T_board_body @ invert_transform(T_CAM_BODY), self.wording)
+        T_board_cam = invert_transform(self._last_pose())
+        words = instruction(T_board_cam, T_board_body @ invert_transform(T_CAM_BODY), self.wording)
         ratios = dict(self.state.goal_ratios) if self.state.information is not None else {}
         self.person.show(Guidance(T_board_body, words, ratios, self._elapsed()))
         self.progress(f"next: {words}")
@@ -274,11 +263,12 @@ class Guide:
     # ------------------------------------------------------------------ data
     def _take(self, detections: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
         """Keep the detections for the state and the pose of each frame that shows enough of the board."""
-        self._pending.extend(detections)
+        super()._take(detections)
         for stamp, corners, ids in detections:
             T_cam_board = self._pose(corners, ids)
             if T_cam_board is not None:
-                self._poses.append((stamp, self.T_world_board @ invert_transform(T_cam_board) @ T_CAM_BODY))
+                self._T_cam_board = T_cam_board
+                self._poses.append((stamp, self._body(T_cam_board)))
 
     def _pose(self, corners: np.ndarray, ids: np.ndarray) -> np.ndarray | None:
         if len(ids) < self.start.min_corners:
@@ -286,46 +276,22 @@ class Guide:
         solved = pnp(self.guess.camera, FrameObservation(-1, 0, corners, ids, self.target.points[ids]))
         return None if solved is None else solved[0]
 
-    def _read_for(self, seconds: float) -> None:
-        """Read ``seconds`` of sensor time (the frames' poses kept)."""
-        self._take(self.stream.read())
-        start = self.stream.last_imu_ns
+    def _body(self, T_cam_board: np.ndarray) -> np.ndarray:
+        """``T_world_body`` of the camera that sees the board at ``T_cam_board``."""
+        return self.T_world_board @ invert_transform(T_cam_board) @ T_CAM_BODY
 
-        def covered() -> bool:
-            nonlocal start
-            start = self.stream.last_imu_ns if start is None else start
-            return start is not None and self.stream.last_imu_ns - start >= seconds * NS_PER_S
-
-        read_until(self.stream, covered, self._take)
-
-    def _last_pose(self, required: bool = False) -> np.ndarray | None:
-        """``T_cam_board`` of the latest frame that shows the board."""
-        for _, corners, ids in reversed(self._pending):
-            T = self._pose(corners, ids)
-            if T is not None:
-                return T
-        if required:
+    def _last_pose(self) -> np.ndarray:
+        """``T_cam_board`` of the latest frame that posed the board."""
+        if self._T_cam_board is None:
             raise CollectionStopped(
                 f"the board was not seen in the first {self.start.start_rest:g} s; hold the sensor so that the whole "
                 "board is in view, then start again"
             )
-        return None
+        return self._T_cam_board
 
     def _body_now(self) -> np.ndarray:
         """``T_world_body`` of the latest frame that posed the board."""
-        if self._poses:
-            return self._poses[-1][1]
-        return self.T_world_board @ invert_transform(self._last_pose(required=True)) @ T_CAM_BODY
-
-    def _rest_and_update(self) -> None:
-        self._read_for(self.mdp.reset_hold)
-        self._update_state()
-
-    def _update_state(self) -> None:
-        """Feed the frames read since the last update (and all IMU samples of the recording) to the state."""
-        pending, self._pending = self._pending, []
-        imu = self.stream.imu() if self.state.information is not None else None
-        self.state.add_frames([d[0] for d in pending], [d[1] for d in pending], [d[2] for d in pending], imu)
+        return self._body(self._last_pose())
 
     def _elapsed(self) -> float:
         """[s] of recording (IMU time) since the start pose was reached (0 before)."""

@@ -301,7 +301,70 @@ def read_until(stream: SensorStream, done: Callable[[], bool], take: Callable[[l
         time.sleep(limits.poll_interval)
 
 
-class Collector:
+class LiveEpisode:
+    """What a policy's episode on a live sensor keeps and how it reads, the arm's (``Collector``) and the guided
+    person's (``vical.collection.guide.Guide``): the sensor stream, the state it feeds, the episode the policy sees.
+
+    Args:
+        sensor: the live sensor.
+        policy: the calibration policy (it sees a ``RobotEpisode`` as its env).
+        mdp: the MDP the policy runs in (state, workspace, action scale, step limit, rests).
+        task: ``intrinsic``, ``extrinsic`` or ``joint``: the state's calibration problem.
+        target: the board.
+        guess: the sensor's nominal values (the information state's linearisation; the camera its poses use).
+        writer: where the recording goes (None: nowhere).
+        limits: stopping settings.
+        progress: prints one line per stage and step.
+    """
+
+    def __init__(
+        self,
+        sensor: ViSensor,
+        policy: Policy,
+        mdp: MdpConfig,
+        task: str,
+        target: Target,
+        guess: Guess,
+        writer: EurocStreamWriter | None,
+        limits: Limits | None,
+        progress: Callable[[str], None],
+    ) -> None:
+        self.policy = policy
+        self.mdp = mdp
+        self.task = task
+        self.target = target
+        self.guess = guess
+        self.limits = limits or Limits()
+        self.stream = SensorStream(sensor, target, writer, self.limits)
+        self.state = EpisodeState(mdp, target, sensor.image_size)
+        self.episode = RobotEpisode(mdp)
+        self.progress = progress
+        self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []  # detections not yet fed to the state
+
+    def _take(self, detections: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
+        """Keep what was read for the state's next update."""
+        self._pending.extend(detections)
+
+    def _rest(self, seconds: float) -> None:
+        """Take what arrived, then keep reading until the IMU stream has advanced ``seconds`` of sensor time."""
+        self._take(self.stream.read())
+        start = self.stream.last_imu_ns
+
+        def rested() -> bool:
+            nonlocal start
+            start = self.stream.last_imu_ns if start is None else start
+            return start is not None and self.stream.last_imu_ns - start >= seconds * NS_PER_S
+
+        read_until(self.stream, rested, self._take)
+
+    def _update_state(self) -> None:
+        """Feed the frames read since the last update (and all IMU samples) to the state: once per step, as the env."""
+        pending, self._pending = self._pending, []
+        imu = self.stream.imu() if self.state.information is not None else None
+        self.state.add_frames([d[0] for d in pending], [d[1] for d in pending], [d[2] for d in pending], imu)
+
+
+class Collector(LiveEpisode):
     """One policy-driven collection on an arm with a camera + IMU (module doc).
 
     Args:
@@ -330,21 +393,11 @@ class Collector:
         limits: Limits | None = None,
         progress: Callable[[str], None] = print,
     ) -> None:
+        super().__init__(sensor, policy, mdp, task, target, guess, writer, limits, progress)
         self.arm = arm
-        self.policy = policy
-        self.mdp = mdp
-        self.task = task
-        self.target = target
-        self.guess = guess
         self.align_settings = align
-        self.limits = limits or Limits()
-        self.stream = SensorStream(sensor, target, writer, self.limits)
-        self.state = EpisodeState(mdp, target, sensor.image_size)
-        self.episode = RobotEpisode(mdp)
-        self.progress = progress
         self._started = 0.0
         self._episode_start: int | None = None  # [ns] the IMU's last stamp when the episode began
-        self._pending: list[tuple[int, np.ndarray, np.ndarray]] = []
         self._refused = 0
 
     # ------------------------------------------------------------------ the run
@@ -453,24 +506,6 @@ class Collector:
         self.progress(f"step {e.steps}: {what}, {s.frames} frames, path {s.path_length:.2f} m, {time_s:.1f} s")
 
     # ------------------------------------------------------------------ data
-    def _rest(self, seconds: float) -> None:
-        """Take what arrived, then keep reading until the IMU stream has advanced ``seconds`` of sensor time."""
-        self._pending.extend(self.stream.read())
-        start = self.stream.last_imu_ns
-
-        def rested() -> bool:
-            nonlocal start
-            start = self.stream.last_imu_ns if start is None else start
-            return start is not None and self.stream.last_imu_ns - start >= seconds * NS_PER_S
-
-        self._wait(rested, self._pending.extend)
-
-    def _update_state(self) -> None:
-        """Feed the frames read since the last update (and all IMU samples) to the state: once per step, as the env."""
-        pending, self._pending = self._pending, []
-        imu = self.stream.imu() if self.state.information is not None else None
-        self.state.add_frames([d[0] for d in pending], [d[1] for d in pending], [d[2] for d in pending], imu)
-
     def _wait(self, done: Callable[[], bool], take: Callable[[list], None]) -> None:
         read_until(self.stream, done, take)
 
