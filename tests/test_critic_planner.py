@@ -12,7 +12,7 @@ from vical.env.lookahead import Lookahead, Prediction
 from vical.evaluation.harness import build_env
 from vical.policies.critic_planner import critic_planner_policy
 from vical.policies.greedy import greedy_information_policy
-from vical.policies.learned import shipped_policy_dir, trained_reward
+from vical.policies.learned import load_run, shipped_policy_dir
 
 POSE = slice(-7, -1)  # the information observation: a value per group, the normalised pose, the step fraction
 
@@ -99,10 +99,10 @@ def test_the_backup_discounts_by_the_runs_gamma_and_path_and_values_nothing_afte
             value = float(hybrid.critic.agent.v(torch.as_tensor(obs[None]))[0])
     finally:
         env.close()
-    reward = trained_reward(shipped_policy_dir())
+    reward = load_run(shipped_policy_dir())[1]["config"]["env"]["reward"]
     assert scores[1] == pytest.approx(rewards[1])  # the goal ends the episode: its bonus, no value after it
-    assert scores[0] - rewards[0] == pytest.approx(0.95 * reward.path_discount**0.4 * value, rel=1e-5)
-    assert hybrid.gamma == 0.95 and reward.path_discount == 0.25  # the shipped run's, as it trained
+    assert scores[0] - rewards[0] == pytest.approx(0.95 * reward["path_discount"] ** 0.4 * value, rel=1e-5)
+    assert hybrid.gamma == 0.95 and reward["path_discount"] == 0.25  # the shipped run's, as it trained
 
 
 def test_the_hybrid_refuses_an_env_its_critic_did_not_train_in():

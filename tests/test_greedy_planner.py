@@ -15,7 +15,7 @@ from vical.env.actions import goal_offset
 from vical.env.lookahead import GRAVITY_WORLD, IMU_RATE, Lookahead, Prediction, imu_readings
 from vical.evaluation.harness import build_env, instantiate_policy, run_trajectory
 from vical.policies.greedy import DEFAULT_SAMPLES, candidate_actions, greedy_information_policy
-from vical.policies.learned import shipped_policy_dir, trained_reward
+from vical.policies.learned import load_run, shipped_policy_dir
 from vical.policies.stopping import StopRule, with_stop
 from vical.sim.motion import quintic
 
@@ -155,4 +155,5 @@ def test_the_planners_price_is_its_learned_runs_not_the_envs():
     finally:
         env.close()
     assert env.config.reward.path_weight == 20.0
-    assert cost == pytest.approx(trained_reward(shipped_policy_dir()).path_weight) and cost == pytest.approx(5.0)
+    trained = load_run(shipped_policy_dir())[1]["config"]["env"]["reward"]
+    assert cost == pytest.approx(trained["path_weight"]) and cost == pytest.approx(5.0)

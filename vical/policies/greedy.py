@@ -35,8 +35,8 @@ from vical.env.lookahead import Lookahead, Prediction
 from vical.env.rewards import information_reward_terms
 from vical.env.settings import RewardWeights
 from vical.policies.base import Policy
-from vical.policies.learned import DEFAULT_WORKSPACE, shipped_policy_dir, trained_reward
-from vical.policies.stopping import learned_information_settings
+from vical.policies.learned import DEFAULT_WORKSPACE, carried_settings, trained_reward
+from vical.policies.stopping import information_run
 
 DEFAULT_SAMPLES = 12
 SEARCH_TOLERANCE = 0.01  # [m] the arm's reach of a workspace end (IK tolerance, clipping)
@@ -180,9 +180,10 @@ def greedy_information_policy(
 def planner_settings(run_dir: str | None, workspace: str, max_steps: int | None) -> tuple[dict, RewardWeights]:
     """The learned run's MDP settings (its step limit replaced by ``max_steps`` unless None) and reward weights,
     that a planner on its information state plans with (``run_dir`` None: the policy shipped for ``workspace``)."""
-    settings = learned_information_settings(run_dir, workspace, key="policy.run_dir")
+    path, env = information_run(run_dir, workspace, key="policy.run_dir")
+    settings = carried_settings(env)
     if max_steps is not None:
         ok = isinstance(max_steps, int) and not isinstance(max_steps, bool) and max_steps >= 1
         require(ok, "policy.max_steps", "null or an integer >= 1", max_steps)
         settings = {**settings, "max_steps": max_steps}
-    return settings, trained_reward(run_dir or shipped_policy_dir(workspace))
+    return settings, trained_reward(path, env)

@@ -82,11 +82,10 @@ def load_run(run_dir: str | Path) -> tuple[Path, dict[str, Any]]:
     return path, state
 
 
-def trained_reward(run_dir: str | Path) -> RewardWeights:
-    """The reward weights the learned run ``run_dir`` trained with (its ``env.reward``): the prices a planner on
-    its information state pays, whatever the env it runs in is given."""
-    path, state = load_run(run_dir)
-    return from_mapping(RewardWeights, state["config"]["env"].get("reward", {}), f"{path}: env.reward")
+def trained_reward(path: Path, env: dict[str, Any]) -> RewardWeights:
+    """The reward weights a learned run trained with (the ``env`` config of its ``agent.pt`` at ``path``): the prices
+    a planner on its information state pays, whatever the env it runs in is given."""
+    return from_mapping(RewardWeights, env.get("reward", {}), f"{path}: env.reward")
 
 
 def carried_settings(env: dict[str, Any]) -> dict[str, Any]:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
@@ -80,6 +81,12 @@ def information_settings(rule: StopRule) -> dict[str, Any]:
 def learned_information_settings(run_dir: str | None, workspace: str, key: str = "stop.run_dir") -> dict[str, Any]:
     """The MDP settings (state, information, max_steps) of the learned run ``run_dir`` of the information state
     (None: the policy shipped for ``workspace``); ``ConfigError`` naming the config ``key`` for another state."""
+    return carried_settings(information_run(run_dir, workspace, key)[1])
+
+
+def information_run(run_dir: str | None, workspace: str, key: str) -> tuple[Path, dict[str, Any]]:
+    """The ``agent.pt`` and env config of the learned run ``run_dir`` of the information state (None: the policy
+    shipped for ``workspace``); ``ConfigError`` naming the config ``key`` for another state."""
     path, state = load_run(run_dir or shipped_policy_dir(workspace))
     env = state["config"]["env"]
     kind = env.get("state", "coverage")
@@ -88,7 +95,7 @@ def learned_information_settings(run_dir: str | None, workspace: str, key: str =
             f"the information state's rule is read from a learned run of the information state, but {path} was "
             f"trained on the {kind} state: name one with {key}=<a vical-train env=information run>"
         )
-    return carried_settings(env)
+    return path, env
 
 
 class InformationStop(Policy):
