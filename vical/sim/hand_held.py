@@ -56,7 +56,7 @@ class HandHeldSim:
         self.data = mujoco.MjData(self.model)
         self.person = SimulatedPerson(self.T_world_start, rng, hand or HandModel())
         self._step = 0
-        self._pose_at(0)
+        self._place(self.person.poses(np.zeros(1))[0])
 
     @property
     def timestep_ns(self) -> int:
@@ -67,9 +67,8 @@ class HandHeldSim:
         """Simulated time [ns] of the current state."""
         return self._step * self.timestep_ns
 
-    def _pose_at(self, step: int) -> None:
-        """Put ``cam_body`` where the person holds it at physics step ``step`` and update ``data``'s kinematics."""
-        T = self.person.poses(np.array([step * self.timestep_ns / NS_PER_S]))[0]
+    def _place(self, T: np.ndarray) -> None:
+        """Put ``cam_body`` at ``T_world_body`` ``T`` (4, 4) and update ``data``'s kinematics."""
         self.data.mocap_pos[0] = T[:3, 3]
         self.data.mocap_quat[0] = matrix_to_quat(T[:3, :3])
         mujoco.mj_forward(self.model, self.data)
@@ -88,10 +87,10 @@ class HandHeldSim:
         first = self._step
         for k in live:  # data describes the state at the start of step k
             self._step = first + k
-            self._pose_at(self._step)
+            self._place(T[k])
             observer.on_live_step(self, self.time_ns)
         self._step = first + n
-        self._pose_at(self._step)
+        self._place(T[n])
         if observer is not None:
             imu = T[:n] @ imu_pose_in_body(self.model)
             observer.on_steps(StepPoses(t0_ns, step_ns, imu[:, :3, 3].copy(), imu[:, :3, :3].reshape(n, 9).copy(),
