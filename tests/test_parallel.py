@@ -83,17 +83,22 @@ def _running(pid: int) -> bool:
         return False
 
 
-@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads process states from /proc")
-def test_workers_end_soon_after_their_caller_is_killed(tmp_path):
+def _holding_caller(tmp_path: Path, **popen) -> tuple[subprocess.Popen, list[int]]:
+    """A process running ``HOLDING_CALLER`` and the pids of its two workers, once both hold a task."""
     script = tmp_path / "caller.py"
     script.write_text(textwrap.dedent(HOLDING_CALLER))
-    caller = subprocess.Popen([sys.executable, str(script), str(tmp_path)])
+    caller = subprocess.Popen([sys.executable, str(script), str(tmp_path)], **popen)
     deadline = time.monotonic() + 60
     while len(started := sorted(tmp_path.glob("task*"))) < 2 and time.monotonic() < deadline:
         assert caller.poll() is None
         time.sleep(0.1)
     time.sleep(0.2)  # both pids written whole
-    workers = [int(path.read_text()) for path in started]
+    return caller, [int(path.read_text()) for path in started]
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").is_file(), reason="reads process states from /proc")
+def test_workers_end_soon_after_their_caller_is_killed(tmp_path):
+    caller, workers = _holding_caller(tmp_path)
     assert len(workers) == 2 and all(_running(pid) for pid in workers)
     caller.send_signal(signal.SIGKILL)  # no cleanup runs: as a scheduler's or a user's kill -9
     caller.wait()
@@ -108,15 +113,7 @@ def test_workers_end_soon_after_their_caller_is_killed(tmp_path):
 def test_an_interrupted_caller_ends_its_workers_mid_task_and_exits(tmp_path):
     """Ctrl-C while the workers run 120-s tasks: the caller ends them and exits in seconds (it waited for the
     running tasks before: an evaluation's episodes, seconds each, after every Ctrl-C or SIGTERM)."""
-    script = tmp_path / "caller.py"
-    script.write_text(textwrap.dedent(HOLDING_CALLER))
-    caller = subprocess.Popen([sys.executable, str(script), str(tmp_path)], stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 60
-    while len(started := sorted(tmp_path.glob("task*"))) < 2 and time.monotonic() < deadline:
-        assert caller.poll() is None
-        time.sleep(0.1)
-    time.sleep(0.2)  # both pids written whole
-    workers = [int(path.read_text()) for path in started]
+    caller, workers = _holding_caller(tmp_path, stderr=subprocess.PIPE)
     caller.send_signal(signal.SIGINT)
     deadline = time.monotonic() + 20
     while caller.poll() is None and time.monotonic() < deadline:
