@@ -29,7 +29,10 @@ class Solution:
 
 # Levenberg-Marquardt's damping schedule (GTSAM's defaults): lambda starts small, is divided by the
 # factor after a step that lowers the error and multiplied by it after one that does not; the
-# solve stops when lambda exceeds the upper bound (no step lowers the error any more).
+# solve stops when lambda exceeds the upper bound (no step lowers the error any more), or when a step
+# that does not lower the error changes it by no more than RELATIVE_ERROR_TOL: the minimum, to the
+# error's own rounding (stronger damping only shortens the same step: measured, 13 of 17 error
+# evaluations of a rolling-shutter solve went to raising lambda there).
 LAMBDA_INITIAL = 1e-5
 LAMBDA_FACTOR = 10.0
 LAMBDA_UPPER_BOUND = 1e5
@@ -106,6 +109,8 @@ def _levenberg_marquardt(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values
             new_error = float(graph.error(candidate))
             if np.isfinite(new_error) and new_error < error:
                 break
+            if np.isfinite(new_error) and new_error - error <= RELATIVE_ERROR_TOL * error:
+                return Solution(values, iterations, "converged", error)  # no lower error within its rounding
             lam *= LAMBDA_FACTOR
         else:
             return Solution(values, iterations, "converged", error)  # no step lowers the error: a minimum
