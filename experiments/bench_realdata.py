@@ -104,6 +104,7 @@ def run_one(spec: dict) -> dict:
         argv += ["--intrinsics", spec["intrinsics"]]
     else:  # corners without images: the size comes from the command line, as a user gives it
         argv += ["--image-size", "752", "480"]
+    argv += spec.get("flags", [])  # e.g. --rolling-shutter (experiments/rolling_shutter.py)
     with open(os.devnull, "w") as quiet:
         stdout, sys.stdout = sys.stdout, quiet
         try:
@@ -122,6 +123,8 @@ def run_one(spec: dict) -> dict:
             "sigma_offset_ms": float(1e3 * sigma[at["time_offset"]]), "solve_time": r.solve_time,
             "noise_scale": r.imu_noise_scale,
             "sigmas": {n: float(sigma[at[n]]) for n in CONSISTENCY_PARAMETERS if n in at},
+            "line_delay": r.line_delay, "warnings": list(r.warnings),
+            "sigma_line_delay": float(sigma[at["line_delay"]]) if "line_delay" in at else None,
         }  # fmt: skip
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return {"cameras": cameras, "command_s": time.time() - start, "extra_mb": peak_mb - base_mb}

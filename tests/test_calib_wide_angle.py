@@ -68,7 +68,7 @@ def test_radtan_on_a_180_deg_fisheye_fits_visibly_worse_and_the_results_say_so()
 
 def test_a_rolling_shutter_is_not_taken_for_a_lens_the_model_does_not_fit():
     # A 30 ms readout leaves systematic errors too, but they follow each view's motion, not the image position.
-    rec = make_recording(duration=8.0, camera=default_camera("radtan"), pixel_sigma=0.3, seed=0, rolling_shutter=0.03)
+    rec = make_recording(duration=8.0, camera=default_camera("radtan"), pixel_sigma=0.3, seed=0, line_delay=0.03 / 480)
     result = calibrate_intrinsics(rec.frames, rec.target, "radtan", SIZE)
     assert result.reprojection.rms > 1.4 * 0.3 * np.sqrt(2)  # the residuals do show the readout
     assert not [w for w in result.warnings if "does not fit" in w or w.startswith("lens models")]

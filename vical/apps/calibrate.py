@@ -88,9 +88,11 @@ from vical.geometry import CAMERA_MODELS, CameraModel, CameraModelError
 from vical.io.atomic import remove_stale_temporaries
 from vical.io.errors import FormatError, KalibrFormatError
 from vical.io.kalibr import (
+    LINE_DELAY_KEY,
     read_camchain,
     read_imu_intrinsics,
     read_imu_yaml,
+    read_line_delay,
     read_target_yaml,
 )
 from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain
@@ -179,6 +181,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--max-time-offset", type=_number(0), default=0.1, help="time-offset search half-width [s]")
     p.add_argument("--fixed-time-offset", action="store_true", help="do not estimate the time offset")
+    p.add_argument(
+        "--rolling-shutter",
+        action="store_true",
+        help="estimate each camera's rolling-shutter line delay with the time offset (without it: the --intrinsics "
+        "camchain's line_delay_nanoseconds, else a global shutter)",
+    )
     p.add_argument(
         "--imu-model",
         choices=("calibrated", "scale-misalignment"),
@@ -440,6 +448,7 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
         imu_model=args.imu_model,
         g_sensitivity=args.g_sensitivity,
         imu_intrinsics=read_imu_intrinsics(args.imu_yaml) if args.imu_yaml else None,
+        rolling_shutter=args.rolling_shutter,
     )
     out = Path(args.out)
     inputs = [args.recording, args.target, args.intrinsics, args.imu_yaml, args.imu_csv]
@@ -456,10 +465,12 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     known = {n: s.camera for n, s in setup.items() if s.camera is not None}
     guesses = {n: s.T_cam_imu for n, s in setup.items() if s.T_cam_imu is not None}
     offsets = {n: s.time_shift for n, s in setup.items() if s.time_shift is not None}
+    delays = {n: s.line_delay for n, s in setup.items() if s.line_delay is not None}
+    _check_line_delays(args, delays, setup, rec)
     results = calibrate_rig(
         {n: rec.frames_of(n) for n in names}, rec.imu, rec.target, args.task, args.model,
         {n: s.size for n, s in setup.items()}, noise, known if args.task in ("intrinsic", "extrinsic") else None,
-        guesses, offsets, options,
+        guesses, offsets, options, line_delays=delays,
     ).results  # fmt: skip
     said = [w for w in (hint, rate_note) if w] + ignored_flags(args, known)  # said once, with the first camera's
     if said:
@@ -503,20 +514,22 @@ def _spelled(dest: str, value) -> str:
 
 @dataclass(frozen=True)
 class _CameraSetup:
-    """What the command line and ``--intrinsics`` say about one camera: its intrinsics, ``T_cam_imu`` and time
-    shift (each None where not given) and its images' size."""
+    """What the command line and ``--intrinsics`` say about one camera: its intrinsics, ``T_cam_imu``, time
+    shift and line delay (each None where not given) and its images' size."""
 
     camera: CameraModel | None
     T_cam_imu: np.ndarray | None
     time_shift: float | None
     size: tuple[int, int] | None
+    line_delay: float | None = None
 
 
 def _one_camera_setup(args, rec: Recording, detector: SizedDetector | None) -> dict[str, _CameraSetup]:
     """``cam0``'s setup from a one-camera ``--intrinsics`` file (EuRoC's ``sensor.yaml``, a camchain of one)."""
     camera, T_guess, shift = _known_intrinsics(args)
     size = _image_size(args, rec, camera, None if detector is None else detector.size)
-    return {"cam0": _CameraSetup(camera, T_guess, shift, size)}
+    line_delay = read_line_delay(args.intrinsics) if args.intrinsics else None
+    return {"cam0": _CameraSetup(camera, T_guess, shift, size, line_delay)}
 
 
 def _rig_setup(args, rec: Recording, names: list[str], chain: CameraChain | None) -> dict[str, _CameraSetup]:
@@ -537,8 +550,23 @@ def _rig_setup(args, rec: Recording, names: list[str], chain: CameraChain | None
         if given is None:
             setup[n] = _CameraSetup(None, None, None, size)
         else:
-            setup[n] = _CameraSetup(given.camera, given.T_cam_imu, given.timeshift_cam_imu, size)
+            setup[n] = _CameraSetup(given.camera, given.T_cam_imu, given.timeshift_cam_imu, size, given.line_delay)
     return setup
+
+
+def _check_line_delays(args, delays: dict[str, float], setup: dict[str, _CameraSetup], rec: Recording) -> None:
+    """A given line delay whose readout (times the image height) lasts longer than the frame interval is no camera's."""
+    for name, delay in delays.items():
+        frames, size = rec.frames_of(name), setup[name].size
+        if size is None or len(frames) < 2:
+            continue
+        readout, interval = delay * size[1], float(np.median(np.diff(frames.t))) / 1e9
+        if readout > interval:
+            raise CalibrationError(
+                f"--intrinsics {args.intrinsics}: {name}'s {LINE_DELAY_KEY} {delay * 1e9:g} gives a readout of "
+                f"{readout * 1e3:.1f} ms over its {size[1]} rows, longer than the {interval * 1e3:.1f} ms between its "
+                "frames; give the line delay in nanoseconds per row (e.g. 30000 for a 14 ms readout of 480 rows)"
+            )
 
 
 def _check_known_intrinsics(args, names: list[str], chain, setup: dict[str, _CameraSetup], one: bool) -> None:

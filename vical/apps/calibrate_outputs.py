@@ -87,7 +87,9 @@ def _write_one_camera(
                 write_camchain_imucam(tmp / name, result.camera, None, None)
             if noise is not None:
                 if given is None:
-                    write_camchain_imucam(tmp / name, result.camera, result.T_cam_imu, result.time_offset)
+                    write_camchain_imucam(
+                        tmp / name, result.camera, result.T_cam_imu, result.time_offset, line_delay=result.line_delay
+                    )
                 write_imu_output(tmp / "imu.yaml", args.imu_yaml, noise, result.imu_intrinsics)
             write_results_text(tmp / "results.txt", result, errors, failure)
             write_frames_csv(tmp / "frames.csv", result.frame_log)
@@ -187,6 +189,7 @@ def rig_chain(results: dict[str, CalibrationResult], rec: Recording, given: Came
                 rostopic=_rostopic(name, base, rec),
                 cam_overlaps=tuple(names.index(o) for o in overlaps if o in names),
                 section=section,
+                line_delay=result.line_delay if result.line_delay is not None or base is None else base.line_delay,
             )
         )
     if given is None:

@@ -155,7 +155,7 @@ class CalibrationResult:
             [px], ``d0..d3`` (distortion), ``rot_x rot_y rot_z`` [rad] (rotation error of
             ``R_cam_imu`` as a rotation vector in the camera frame, left perturbation),
             ``t_x t_y t_z`` [m] (translation of ``T_cam_imu``), ``time_offset`` [s],
-            ``bg_x..bg_z`` [rad/s], ``ba_x..ba_z`` [m/s^2].
+            ``line_delay`` [s/row] (when estimated), ``bg_x..bg_z`` [rad/s], ``ba_x..ba_z`` [m/s^2].
         estimate: (P,) values of those parameters (0 for the rotation perturbation).
         covariance: (P, P) their marginal covariance from the factor graph.
         weak_parameters: weakly observed parameters, the weakest first, with motion hints.
@@ -179,6 +179,8 @@ class CalibrationResult:
         imu_intrinsics: the IMU's scale, misalignment and g-sensitivity (estimated with
             ``imu_model="scale-misalignment"``, else the known ones given), or None.
         frame_poses: the PnP poses the camera-IMU solve started from, or None (intrinsic task).
+        line_delay: [s/row] the camera's rolling shutter (row ``v`` exposed ``line_delay * v`` after the
+            timestamp): estimated, or the known one the solve used; None for a global shutter.
     """
 
     task: str
@@ -215,6 +217,7 @@ class CalibrationResult:
     # (residual field, corner noise) [px per axis]: how far the corners' residuals depend on their image position,
     # the same in every view, beside their noise (vical.calib.solve.model_fit.lens_misfit); None where not measured.
     lens_misfit: tuple[float, float] | None = None
+    line_delay: float | None = None
 
     @property
     def sigmas(self) -> dict[str, float]:

@@ -41,6 +41,8 @@ from vical.geometry import CameraModel, euler_to_matrix, make_transform, so3_exp
 
 GRAVITY = np.array([0.0, 0.0, -9.81])  # [m/s^2] world frame, z up
 EPOCH_NS = 1_700_000_000 * NS_PER_S  # a realistic epoch so int64 ns handling is exercised
+ROLLING_SHUTTER_TOLERANCE_PX = 1e-6  # a rolling shutter's corners are iterated to their row's time to this
+MAX_ROLLING_SHUTTER_ITERATIONS = 20
 
 # The nominal camera looks along world +x (optical z = world x, image x = world -y, image y = world -z).
 R_WORLD_CAM_NOMINAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -190,26 +192,33 @@ def _observe(camera: CameraModel, target: Target, T_world_cam: np.ndarray, T_wor
 
 
 def _rolling_shutter(
-    camera: CameraModel,
+    rig: RigCamera,
     target: Target,
     excitation: Excitation,
-    T_cam_imu: np.ndarray,
     T_rig_cam_imu: np.ndarray,
     T_world_target: np.ndarray,
     t: float,
     uv: np.ndarray,
     ids: np.ndarray,
-    readout: float,
 ) -> np.ndarray:
-    """Pixels (K, 2) of corners ``ids`` each seen at its row's exposure time (one fixed-point step from ``uv``).
+    """Pixels (K, 2) of corners ``ids``, each seen at its own row's exposure time ``t + line_delay * v``.
 
+    The row a corner lands in depends on when it is exposed: fixed-point iterations from the global-shutter
+    ``uv`` until no pixel moves by more than ``ROLLING_SHUTTER_TOLERANCE_PX`` (2-3 iterations at 40 us/row).
     ``T_rig_cam_imu`` is the extrinsic of the camera whose motion the excitation describes (the first one).
     """
-    times = t + readout * (uv[:, 1] / camera.height - 0.5)
-    T_world_cam = imu_kinematics(excitation, target, T_rig_cam_imu, times)[0] @ np.linalg.inv(T_cam_imu)
-    T_cam_target = np.linalg.inv(T_world_cam) @ T_world_target  # (K, 4, 4)
-    p = np.einsum("kij,kj->ki", T_cam_target[:, :3, :3], target.points[ids]) + T_cam_target[:, :3, 3]
-    return camera.project(p)[0]
+    T_imu_cam = np.linalg.inv(np.asarray(rig.T_cam_imu, float))
+    for _ in range(MAX_ROLLING_SHUTTER_ITERATIONS):
+        times = t + rig.line_delay * uv[:, 1]
+        T_world_cam = imu_kinematics(excitation, target, T_rig_cam_imu, times)[0] @ T_imu_cam
+        T_cam_target = np.linalg.inv(T_world_cam) @ T_world_target  # (K, 4, 4)
+        p = np.einsum("kij,kj->ki", T_cam_target[:, :3, :3], target.points[ids]) + T_cam_target[:, :3, 3]
+        new = rig.camera.project(p)[0]
+        moved = np.max(np.abs(new - uv))
+        uv = new
+        if moved < ROLLING_SHUTTER_TOLERANCE_PX:
+            return uv
+    raise RuntimeError(f"the rolling shutter's rows did not settle (last step {moved:.2g} px): line delay too long")
 
 
 def default_camera(distortion: str = "radtan") -> CameraModel:
@@ -307,7 +316,7 @@ def make_recording(
     target: Target | None = None,
     camera_rate_hz: float = 10.0,
     seed: int = 0,
-    rolling_shutter: float = 0.0,
+    line_delay: float = 0.0,
     other_cameras: dict[str, RigCamera] | None = None,
     imu_intrinsics: ImuIntrinsics | None = None,
 ) -> Recording:
@@ -326,11 +335,12 @@ def make_recording(
         target: checkerboard (the paper's 7 x 6 inner corners, 7 cm) if None.
         camera_rate_hz: [Hz] frame rate.
         seed: seed of the noise generator.
-        rolling_shutter: [s] readout time of a rolling shutter (0: global shutter): image row ``v``
-            is exposed ``rolling_shutter * (v / height - 0.5)`` after the frame's timestamp, an effect
-            the calibrator does not model.
+        line_delay: [s/row] the camera's rolling shutter (0: global shutter): image row ``v`` (the corner's
+            pixel row, 0 at the top) is exposed ``line_delay * v`` after the frame's timestamp (row 0 at the
+            timestamp, ``docs/formats.md``).
         other_cameras: a rig's other cameras (``cam1``, ...) on the same trigger: each one's frames
-            carry the same stamps and show the scene at IMU time ``t_cam + its time_offset``.
+            carry the same stamps and show the scene at IMU time ``t_cam + its time_offset`` (row 0; each
+            its own ``line_delay``).
         imu_intrinsics: the IMU's scale, misalignment and g-sensitivity (None: exact axes), applied to
             the true readings before biases and noise.
     """
@@ -359,10 +369,10 @@ def make_recording(
         int(0.1 * NS_PER_S), int((duration - 0.1) * NS_PER_S) + 1, round(NS_PER_S / camera_rate_hz), dtype=np.int64
     )
     T_world_target = _T_world_target(target)
-    scene = (excitation, target, T_cam_imu, T_world_target, pixel_sigma, rolling_shutter, rng)
-    corners, ids = _camera_frames(scene, RigCamera(camera, T_cam_imu, time_offset), t_cam_ns)
+    scene = (excitation, target, T_cam_imu, T_world_target, pixel_sigma, rng)
+    corners, ids = _camera_frames(scene, RigCamera(camera, T_cam_imu, time_offset, line_delay), t_cam_ns)
     others = {name: _camera_frames(scene, rig, t_cam_ns) for name, rig in (other_cameras or {}).items()}
-    truth = SensorTruth(camera, T_cam_imu, float(time_offset), noise, gb, ab, intrinsics)
+    truth = SensorTruth(camera, T_cam_imu, float(time_offset), noise, gb, ab, intrinsics, float(line_delay))
     trajectory = Trajectory(EPOCH_NS + t_imu_ns, T_wi, v_w, gyro_true)
     return Recording(
         imu=ImuSamples(EPOCH_NS + t_imu_ns, gyro, accel),
@@ -376,7 +386,9 @@ def make_recording(
         metadata={"source": "vical.calib.synthetic", "seed": int(seed), "pixel_sigma": float(pixel_sigma)},
         other_frames={name: CameraFrames(EPOCH_NS + t_cam_ns, *frames) for name, frames in others.items()},
         other_truths={
-            name: SensorTruth(rig.camera, rig.T_cam_imu, float(rig.time_offset), noise, gb, ab)
+            name: SensorTruth(
+                rig.camera, rig.T_cam_imu, float(rig.time_offset), noise, gb, ab, line_delay=float(rig.line_delay)
+            )
             for name, rig in (other_cameras or {}).items()
         },
     )
@@ -384,11 +396,13 @@ def make_recording(
 
 @dataclass(frozen=True)
 class RigCamera:
-    """One camera of a rig: its model, ``T_cam_imu`` (4, 4) and time offset [s] (Kalibr's sign), |.| < 0.1 s."""
+    """One camera of a rig: its model, ``T_cam_imu`` (4, 4), time offset [s] (Kalibr's sign, |.| < 0.1 s) and line
+    delay [s/row] (0: a global shutter)."""
 
     camera: CameraModel
     T_cam_imu: np.ndarray
     time_offset: float = 0.0
+    line_delay: float = 0.0
 
 
 def _camera_frames(scene: tuple, rig: RigCamera, t_cam_ns: np.ndarray) -> tuple[list, list]:
@@ -396,9 +410,11 @@ def _camera_frames(scene: tuple, rig: RigCamera, t_cam_ns: np.ndarray) -> tuple[
 
     The excitation moves the first camera (``T_rig_cam_imu``); every camera rides on the IMU pose it gives.
     """
-    excitation, target, T_rig_cam_imu, T_world_target, pixel_sigma, rolling_shutter, rng = scene
+    excitation, target, T_rig_cam_imu, T_world_target, pixel_sigma, rng = scene
     if abs(rig.time_offset) >= 0.1:
         raise ValueError(f"time_offset must be within +-0.1 s for this generator, got {rig.time_offset}")
+    if not 0.0 <= rig.line_delay * rig.camera.height < 0.1:
+        raise ValueError(f"line_delay must give a readout within [0, 0.1) s for this generator, got {rig.line_delay}")
     T_cam_imu = np.asarray(rig.T_cam_imu, float)
     t_exposure = t_cam_ns / NS_PER_S + rig.time_offset
     T_wi_exposure = imu_kinematics(excitation, target, T_rig_cam_imu, t_exposure)[0]
@@ -406,10 +422,8 @@ def _camera_frames(scene: tuple, rig: RigCamera, t_cam_ns: np.ndarray) -> tuple[
     corners, ids = [], []
     for t, T in zip(t_exposure, T_wi_exposure, strict=True):
         uv, i = _observe(rig.camera, target, T @ T_imu_cam, T_world_target)
-        if rolling_shutter and len(i):
-            uv = _rolling_shutter(
-                rig.camera, target, excitation, T_cam_imu, T_rig_cam_imu, T_world_target, t, uv, i, rolling_shutter
-            )
+        if rig.line_delay and len(i):
+            uv = _rolling_shutter(rig, target, excitation, T_rig_cam_imu, T_world_target, t, uv, i)
         corners.append(uv + rng.normal(0.0, pixel_sigma, size=uv.shape) if pixel_sigma > 0 else uv)
         ids.append(i)
     return corners, ids

@@ -27,6 +27,8 @@ class SensorTruth:
         imu_noise: the IMU noise model.
         gyro_bias: (3,) [rad/s] initial gyro bias; accel_bias: (3,) [m/s^2] initial accel bias.
         imu_intrinsics: the IMU's scale, misalignment and g-sensitivity (identity: exact axes).
+        line_delay: [s/row] the camera's rolling shutter: image row ``v`` is exposed ``line_delay * v`` after
+            the image's timestamp (row 0 at the timestamp, ``docs/formats.md``); 0: a global shutter.
     """
 
     camera: CameraModel
@@ -36,6 +38,7 @@ class SensorTruth:
     gyro_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
     accel_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
     imu_intrinsics: ImuIntrinsics = field(default_factory=ImuIntrinsics)
+    line_delay: float = 0.0
 
     def __post_init__(self) -> None:
         T = np.asarray(self.T_cam_imu, dtype=np.float64)
@@ -57,6 +60,7 @@ class SensorTruth:
             "gyro_bias": self.gyro_bias.tolist(),
             "accel_bias": self.accel_bias.tolist(),
             "imu_intrinsics": self.imu_intrinsics.to_dict(),
+            "line_delay": float(self.line_delay),
         }
 
     @classmethod
@@ -69,4 +73,5 @@ class SensorTruth:
             gyro_bias=np.asarray(d.get("gyro_bias", [0, 0, 0]), dtype=np.float64),
             accel_bias=np.asarray(d.get("accel_bias", [0, 0, 0]), dtype=np.float64),
             imu_intrinsics=ImuIntrinsics.from_dict(d["imu_intrinsics"]) if "imu_intrinsics" in d else ImuIntrinsics(),
+            line_delay=float(d.get("line_delay", 0.0)),
         )

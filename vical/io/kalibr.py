@@ -60,6 +60,9 @@ CAMERA_MODEL_NAMES = ("pinhole", *WIDE_ANGLE_CAMERA_MODELS)
 # (key, whether the stored matrix is T_imu_cam and must be inverted)
 EXTRINSIC_KEYS = (("T_cam_imu", False), ("T_imu_cam", True), ("T_BS", True), ("T_SC", True), ("body_T_cam0", True))
 TIMESHIFT_KEYS = ("timeshift_cam_imu", "td")
+# A rolling shutter's line delay [ns per image row], row 0 exposed at the image's timestamp (docs/formats.md): the key
+# of Kalibr's rolling-shutter camera-IMU calibration's camchains and of the aslam camera models.
+LINE_DELAY_KEY = "line_delay_nanoseconds"
 # max |R R^T - I| of a stored rotation: exact below the first (float noise), rounded when written (a few
 # decimals) below the second, and re-orthonormalised with a warning; beyond it, not a rotation.
 EXACT_ROTATION_ERROR = 1e-9
@@ -72,8 +75,9 @@ def camera_entry(
     T_cam_imu: np.ndarray | None = None,
     timeshift_cam_imu: float | None = None,
     rostopic: str = "/cam0/image_raw",
+    line_delay: float | None = None,
 ) -> dict[str, Any]:
-    """The Kalibr ``cam0`` mapping of a camera (plus extrinsic and time shift when given)."""
+    """The Kalibr ``cam0`` mapping of a camera (plus extrinsic, time shift and line delay [s/row] when given)."""
     if np.any(camera.distortion_center_offset != 0):
         warnings.warn(
             "Kalibr's pinhole models have the distortion centre at the principal point; the camera's "
@@ -90,6 +94,8 @@ def camera_entry(
         entry["T_cam_imu"] = np.asarray(T_cam_imu, dtype=np.float64).reshape(4, 4).tolist()
     if timeshift_cam_imu is not None:
         entry["timeshift_cam_imu"] = float(timeshift_cam_imu)
+    if line_delay is not None:
+        entry[LINE_DELAY_KEY] = round(float(line_delay) * 1e9, 6)  # [ns/row] to the femtosecond, not to float noise
     return entry
 
 
@@ -117,6 +123,7 @@ def write_camchain_imucam(
     T_cam_imu: np.ndarray | None,
     timeshift_cam_imu: float | None,
     rostopic: str = "/cam0/image_raw",
+    line_delay: float | None = None,
 ) -> None:
     """Write a one-camera Kalibr ``camchain-imucam.yaml`` (or ``camchain.yaml`` when both are None).
 
@@ -125,8 +132,9 @@ def write_camchain_imucam(
         T_cam_imu: (4, 4) maps IMU points into the camera frame, or None.
         timeshift_cam_imu: [s] ``t_imu = t_cam + timeshift_cam_imu``, or None.
         rostopic: the image topic Kalibr associates with ``cam0``.
+        line_delay: [s/row] a rolling shutter's line delay (``LINE_DELAY_KEY``), or None (a global shutter).
     """
-    dump_yaml(path, {"cam0": camera_entry(camera, T_cam_imu, timeshift_cam_imu, rostopic)})
+    dump_yaml(path, {"cam0": camera_entry(camera, T_cam_imu, timeshift_cam_imu, rostopic, line_delay)})
 
 
 def read_camchain(path: str | os.PathLike, camera: str = "cam0") -> tuple[CameraModel, np.ndarray | None, float | None]:
@@ -135,6 +143,17 @@ def read_camchain(path: str | os.PathLike, camera: str = "cam0") -> tuple[Camera
     ``camera`` selects the ``camN`` section; a file without ``camN`` sections (EuRoC's
     ``cam0/sensor.yaml``, single-camera VIO configs) is read as one flat camera section.
     """
+    entry, where = _section_of(path, camera)
+    return _camera_model(entry, where), _extrinsic(entry, where), _timeshift(entry, where)
+
+
+def read_line_delay(path: str | os.PathLike, camera: str = "cam0") -> float | None:
+    """A camchain camera's rolling-shutter line delay [s/row] (``LINE_DELAY_KEY``), or None (a global shutter)."""
+    return line_delay_of(*_section_of(path, camera))
+
+
+def _section_of(path: str | os.PathLike, camera: str) -> tuple[dict[str, Any], str]:
+    """A camchain's ``camera`` section (a flat file's whole mapping) and where it is, for messages."""
     data = load_mapping(path, KalibrFormatError)
     if camera in data:
         entry, where = data[camera], f"{path} [{camera}]"
@@ -144,7 +163,7 @@ def read_camchain(path: str | os.PathLike, camera: str = "cam0") -> tuple[Camera
         entry, where = data, str(path)
     if not isinstance(entry, dict):
         raise KalibrFormatError(f"{where} is not a mapping")
-    return _camera_model(entry, where), _extrinsic(entry, where), _timeshift(entry, where)
+    return entry, where
 
 
 def _camera_model(entry: dict[str, Any], where: str) -> CameraModel:
@@ -238,6 +257,19 @@ def _timeshift(entry: dict[str, Any], where: str) -> float | None:
             logger.info("%s: camera-IMU time shift from %r (t_imu = t_cam + shift)", where, key)
             return float(value)
     return None
+
+
+def line_delay_of(entry: dict[str, Any], where: str) -> float | None:
+    """[s/row] a camera section's line delay (``LINE_DELAY_KEY``, ns/row), or None; refused when negative."""
+    if LINE_DELAY_KEY not in entry:
+        return None
+    value = float(_floats(entry, LINE_DELAY_KEY, 1, where)[0])
+    if value < 0:
+        raise KalibrFormatError(
+            f"{where}: {LINE_DELAY_KEY} must be >= 0 (ns from one image row's exposure to the next; 0: a global "
+            f"shutter), got {value:g}"
+        )
+    return value * 1e-9
 
 
 # ------------------------------------------------------------------------------- IMU

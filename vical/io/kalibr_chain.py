@@ -2,8 +2,8 @@
 
 ``read_chain`` reads every ``camN`` section of a Kalibr ``camchain(-imucam).yaml`` or an OpenVINS
 ``kalibr_imucam_chain.yaml``; ``write_chain`` writes it back. What vical interprets (camera model,
-``T_cam_imu`` or its variants, ``timeshift_cam_imu``, ``T_cn_cnm1``, ``cam_overlaps``, ``rostopic``,
-``resolution``) is written from the values, in the spelling the file used (``T_imu_cam`` stays
+``T_cam_imu`` or its variants, ``timeshift_cam_imu``, ``line_delay_nanoseconds``, ``T_cn_cnm1``, ``cam_overlaps``,
+``rostopic``, ``resolution``) is written from the values, in the spelling the file used (``T_imu_cam`` stays
 ``T_imu_cam``, ``distortion_coefficients`` stays so; a matrix whose value is the one read is written as
 read, digit for digit); every other key, per camera and at the top,
 is written back as read, in the file's order. OpenCV's ``%YAML:1.0`` header (OpenVINS reads its
@@ -40,12 +40,14 @@ from vical.io.errors import FormatError, KalibrFormatError, read_text_file
 from vical.io.kalibr import (
     DISTORTION_ALIASES,
     EXTRINSIC_KEYS,
+    LINE_DELAY_KEY,
     TIMESHIFT_KEYS,
     _camera_model,
     _extrinsic,
     _timeshift,
     camera_entry,
     imu_noise_of,
+    line_delay_of,
     parse_transform,
 )
 from vical.io.sample_checks import FormatWarning
@@ -72,6 +74,7 @@ class ChainCamera:
             ``T_cn_cnm1``; None for ``cam0`` or when the file has none).
         rostopic: the camera's image topic, or None.
         cam_overlaps: indices of the cameras whose views overlap this one's.
+        line_delay: [s/row] its rolling shutter's line delay (``line_delay_nanoseconds``), or None.
         section: the mapping as read (empty for a camera vical made); its keys' order and spelling
             and every key vical does not interpret are written back.
     """
@@ -84,6 +87,7 @@ class ChainCamera:
     rostopic: str | None = None
     cam_overlaps: tuple[int, ...] = ()
     section: dict[str, Any] = field(default_factory=dict)
+    line_delay: float | None = None
 
     @property
     def kept(self) -> dict[str, Any]:
@@ -99,7 +103,7 @@ class ChainCamera:
 
 def _interpreted_camera_keys() -> set[str]:
     keys = {"camera_model", "intrinsics", "distortion_model", "distortion_coeffs", "distortion_coefficients"}
-    keys |= {"resolution", "rostopic", "cam_overlaps", "T_cn_cnm1", *TIMESHIFT_KEYS}
+    keys |= {"resolution", "rostopic", "cam_overlaps", "T_cn_cnm1", LINE_DELAY_KEY, *TIMESHIFT_KEYS}
     return keys | {key for key, _ in EXTRINSIC_KEYS}
 
 
@@ -191,6 +195,7 @@ def _read_camera(entry: Any, name: str, where: str, count: int) -> ChainCamera:
         rostopic=rostopic,
         cam_overlaps=_overlaps(entry.get("cam_overlaps", []), name, where, count),
         section=dict(entry),
+        line_delay=line_delay_of(entry, where),
     )
 
 
@@ -263,7 +268,7 @@ def write_chain(path: str | os.PathLike, chain: CameraChain) -> None:
 
 def _camera_section(camera: ChainCamera, T_cn_cnm1: np.ndarray | None) -> dict[str, Any]:
     old = camera.section
-    new = camera_entry(camera.camera, None, None, camera.rostopic or f"/{camera.name}/image_raw")
+    new = camera_entry(camera.camera, None, None, camera.rostopic or f"/{camera.name}/image_raw", camera.line_delay)
     if camera.rostopic is None and "rostopic" not in old:
         del new["rostopic"]
     new["cam_overlaps"] = list(camera.cam_overlaps)
@@ -275,6 +280,8 @@ def _camera_section(camera: ChainCamera, T_cn_cnm1: np.ndarray | None) -> dict[s
     if camera.timeshift_cam_imu is not None:
         key = next((k for k in TIMESHIFT_KEYS if k in old), TIMESHIFT_KEYS[0])
         new[key] = float(camera.timeshift_cam_imu)
+    if LINE_DELAY_KEY in new and LINE_DELAY_KEY in old and line_delay_of(old, camera.name) == camera.line_delay:
+        new[LINE_DELAY_KEY] = old[LINE_DELAY_KEY]  # as read, digit for digit (not through seconds and back)
     _keep_spelling(old, new)
     section = {k: new.pop(k) if k in new else v for k, v in old.items()}
     return section | new

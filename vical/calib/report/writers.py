@@ -58,6 +58,9 @@ def _extrinsic_lines(result: CalibrationResult) -> list[str]:
     for axis, value in zip("xyz", T[:3, 3], strict=True):
         lines.append(_value_line(f"t_{axis}", value, sig[f"t_{axis}"], "mm", 1e3))
     lines.append(_value_line("time offset", result.time_offset, sig["time_offset"], "ms (t_imu = t_cam + offset)", 1e3))
+    if result.line_delay is not None:  # estimated (with its sigma) or the known one the solve used
+        unit = "us/row (a rolling shutter: row v exposed line_delay * v after the timestamp)"
+        lines.append(_value_line("line delay", result.line_delay, sig.get("line_delay"), unit, 1e6))
     lines.append("  gyro bias [rad/s]: " + " ".join(f"{v:.6f}" for v in result.gyro_bias))
     lines.append("  accel bias [m/s^2]: " + " ".join(f"{v:.5f}" for v in result.accel_bias))
     return lines
@@ -92,6 +95,7 @@ _DISPLAY_UNITS = {
     **dict.fromkeys(("rot_x", "rot_y", "rot_z"), (float(np.rad2deg(1.0)), "deg")),
     **dict.fromkeys(("t_x", "t_y", "t_z"), (1e3, "mm")),
     "time_offset": (1e3, "ms"),
+    "line_delay": (1e6, "us/row"),
     **dict.fromkeys(("bg_x", "bg_y", "bg_z"), (1.0, "rad/s")),
     **dict.fromkeys(("ba_x", "ba_y", "ba_z"), (1.0, "m/s^2")),
 }
@@ -237,6 +241,9 @@ def summary_table(result: CalibrationResult, errors: CalibrationErrors | None = 
         st = [sig[f"t_{a}"] * 1e3 for a in "xyz"]
         rows.append(("t_cam_imu [mm]", f"{t[0]:.2f} {t[1]:.2f} {t[2]:.2f}", f"+- {st[0]:.2f} {st[1]:.2f} {st[2]:.2f}"))
         rows.append(("time offset [ms]", f"{result.time_offset * 1e3:.3f}", f"+- {sig['time_offset'] * 1e3:.3f}"))
+    if result.line_delay is not None:
+        sigma = f"+- {sig['line_delay'] * 1e6:.3f}" if "line_delay" in sig else "(given)"
+        rows.append(("line delay [us/row]", f"{result.line_delay * 1e6:.3f}", sigma))
     rows.append(("reprojection rms [px]", f"{result.reprojection.rms:.4f}", ""))
     rows.append(("solve time [s]", f"{result.solve_time:.3f}", f"{result.iterations} iterations, {result.status}"))
     if errors is not None:

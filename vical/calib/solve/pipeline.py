@@ -65,6 +65,7 @@ def calibrate_rig(
     initial_time_offsets: dict[str, float] | None = None,
     options: ViOptions | None = None,
     intrinsic_frames: dict[str, CameraFrames] | None = None,
+    line_delays: dict[str, float] | None = None,
 ) -> RigCalibration:
     """Calibrate every camera of ``frames`` as ``task`` says (``"intrinsic"``, ``"extrinsic"``, ``"joint"`` or
     ``"two_stage"``); the camera-IMU tasks put every camera and the IMU in one factor graph.
@@ -87,6 +88,8 @@ def calibrate_rig(
             camera's guess through their simultaneous views.
         options: solver settings (``ViOptions()`` if None); the intrinsic stage uses its ``pixel_sigma``,
             ``huber_k`` and ``frame_stride``.
+        line_delays: [s/row] known rolling-shutter line delays by name (0: a global shutter), the prior's centre
+            with ``options.rolling_shutter`` (row 0 exposed at the timestamp, ``docs/formats.md``).
     """
     start = time.perf_counter()
     if task not in TASKS:
@@ -105,8 +108,11 @@ def calibrate_rig(
     models = {n: known[n] if r is None else r.camera for n, r in stage.items()}
     guesses, offsets = initial_T_cam_imu or {}, initial_time_offsets or {}
     posed = {n: _start_poses(stage[n], task) for n in frames}
+    delays = line_delays or {}
     inputs = [
-        CameraInput(n, observations[n], models[n], guesses.get(n), offsets.get(n, 0.0), frames[n], posed[n])
+        CameraInput(
+            n, observations[n], models[n], guesses.get(n), offsets.get(n, 0.0), frames[n], posed[n], delays.get(n, 0.0)
+        )
         for n in frames
     ]
     solved = run_visual_inertial(

@@ -41,6 +41,7 @@ class OtherCamera:
         sigma_px: [px] its corner noise.
         T_cam_imu: (4, 4) and tau0 [s]: the current extrinsic and time-offset estimates.
         initial_T_cam_imu: (4, 4) guess whose translation is used, or None (from the first camera's).
+        readout: [s] its current readout time (line delay times image height); readout_given: its given one.
     """
 
     name: str
@@ -55,6 +56,8 @@ class OtherCamera:
     initial_T_cam_imu: np.ndarray | None = None
     warnings: list[str] = field(default_factory=list)
     outliers: list[int] = field(default_factory=list)  # frame indices of its frames dropped as outliers
+    readout: float = 0.0
+    readout_given: float = 0.0
 
 
 def prepare_other(

@@ -42,6 +42,12 @@ _COEFFICIENT_THRESHOLDS = {  # [-]
 _FOCAL_THRESHOLD = {"ds": 0.006, "omni": 0.006}  # of the focal length; 0.002 for the other models
 
 
+LINE_DELAY_HINT = (
+    "pan and tilt fast (1 rad/s and more) with the target spanning most of the image height: a rolling shutter "
+    "shows as rows that drift apart while the image moves"
+)
+
+
 def thresholds(camera: CameraModel) -> dict[str, float]:
     """1-sigma above which each parameter counts as weakly observed (in the parameter's unit)."""
     t = {
@@ -56,6 +62,7 @@ def thresholds(camera: CameraModel) -> dict[str, float]:
         "t_y": 0.002,  # [m]
         "t_z": 0.002,  # [m]
         "time_offset": 0.0005,  # [s]
+        "line_delay": 0.5e-6,  # [s/row] 0.24 ms of readout at 480 rows
     }
     t.update(_COEFFICIENT_THRESHOLDS[camera.distortion])
     return t
@@ -102,6 +109,8 @@ def hint(name: str) -> str:
         return _rotate_others_hint(name[-1], "the lever arm")
     if name == "time_offset":
         return "move with faster and changing rotation rates: the time offset shows only in fast motion"
+    if name == "line_delay":
+        return LINE_DELAY_HINT
     return "record longer and hold the sensor in several orientations relative to gravity"
 
 
@@ -130,6 +139,7 @@ GROUPS = {
     "extrinsic rotation": ("rot_x", "rot_y", "rot_z"),
     "extrinsic translation": ("t_x", "t_y", "t_z"),
     "time offset": ("time_offset",),
+    "line delay": ("line_delay",),
     "accelerometer bias": ("ba_x", "ba_y", "ba_z"),
     "gyroscope bias": ("bg_x", "bg_y", "bg_z"),
     "accelerometer intrinsics": tuple(n for n in IMU_INTRINSIC_THRESHOLDS if n.startswith("accel_")),
@@ -147,6 +157,7 @@ _PAIR_HINTS = {
     frozenset(("focal length", "distortion")): _BORDER_HINT,
     frozenset(("principal point", "distortion")): _BORDER_HINT,
     frozenset(("time offset", "extrinsic translation")): "move with faster and changing rotation rates",
+    frozenset(("time offset", "line delay")): LINE_DELAY_HINT,
     frozenset(("time offset", "extrinsic rotation")): "move with faster and changing rotation rates",
     frozenset(("extrinsic translation", "accelerometer bias")): (
         "rotate more about all axes and hold the sensor in several orientations relative to gravity"

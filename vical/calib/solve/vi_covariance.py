@@ -121,19 +121,20 @@ class ViMarginals:
         return model, robust, considered
 
 
-def _camera_keys(index: int, joint: bool, fixed_offset: bool) -> list[int]:
+def _camera_keys(index: int, joint: bool, fixed_offset: bool, rolling: bool) -> list[int]:
     return (
         ([state_key("k", index)] if joint else [])
         + [state_key("e", index)]
         + ([] if fixed_offset else [state_key("d", index)])
+        + ([state_key("l", index)] if rolling else [])
     )
 
 
 def solution_marginals(
     problem: ViProblem, g: ViGraph, values: gtsam.Values, joint: bool, estimated_imu: bool
 ) -> ViMarginals:
-    fixed = not problem.options.estimate_time_offset
-    keys = [k for index in range(len(problem.others) + 1) for k in _camera_keys(index, joint, fixed)]
+    fixed, rolling = not problem.options.estimate_time_offset, problem.options.rolling_shutter
+    keys = [k for index in range(len(problem.others) + 1) for k in _camera_keys(index, joint, fixed, rolling)]
     keys += [state_key("b", 0)] + ([I_KEY] if estimated_imu else [])
     linear = g.graph.linearize(values)
     system = LinearSystem(linear, values, _clusters(g, linear.size()), variance_scale(problem, g, linear.size()))
@@ -163,22 +164,25 @@ def parameter_covariance(
     fixed_offset: bool,
     index: int = 0,
     imu_theta: np.ndarray | None = None,
+    rows: int | None = None,
+    centre: float = 0.0,
 ):
     """(P, P) covariance in the order of the result's parameter names and its widening (P,) over the noise model's.
 
-    Of camera ``index``'s variables (0: the first camera's), the first bias and, with ``imu_theta`` (the
-    estimated IMU intrinsics), those. The covariance under the measured noise levels widened wherever the
+    Of camera ``index``'s variables (0: the first camera's), its line delay when it has ``rows`` (its image height:
+    the graph's variable is the readout, the line delay times the rows), the first bias and, with ``imu_theta``
+    (the estimated IMU intrinsics), those. The time offset (row 0's) is the graph's (``centre``'s row's) less the
+    readout up to that row. The covariance under the measured noise levels widened wherever the
     cluster-robust one (``vical.calib.solve.robust_covariance``) is larger, plus what the gyro's unmodelled scales and
     misalignments add where the data show them (``vical.calib.solve.gyro_model``; not part of the widening, which
     is the robust one's); a fixed time offset gets zero variance.
     """
     intrinsic_keys = [] if imu_theta is None else [I_KEY]
-    keys = [*_camera_keys(index, joint, fixed_offset), state_key("b", 0), *intrinsic_keys]
+    keys = [*_camera_keys(index, joint, fixed_offset, rows is not None), state_key("b", 0), *intrinsic_keys]
     model, robust, considered = marginals.block(keys)
     cov = model if robust is None else widen(model, robust)
-    offset_block = np.zeros((1, 0)) if fixed_offset else np.eye(1)
     camera_block = [np.eye(values.atVector(state_key("k", index)).size)] if joint else []
-    blocks = camera_block + [_extrinsic_jacobian(T_cam_imu), offset_block, np.eye(6)]
+    blocks = camera_block + [_extrinsic_jacobian(T_cam_imu), _timing_block(fixed_offset, rows, centre), np.eye(6)]
     blocks += [] if imu_theta is None else [np.eye(len(imu_theta))]
     J = np.zeros((sum(b.shape[0] for b in blocks), cov.shape[0]))
     r = c = 0
@@ -189,6 +193,12 @@ def parameter_covariance(
     with np.errstate(divide="ignore", invalid="ignore"):
         widening = np.sqrt(np.diag(final) / np.diag(noise_model))
     return final + J @ considered @ J.T, np.where(np.isfinite(widening), widening, 1.0)
+
+
+def _timing_block(fixed_offset: bool, rows: int | None, centre: float) -> np.ndarray:
+    """Rows (time offset, [line delay]) from the columns (offset correction unless ``fixed_offset``, [readout])."""
+    block = np.eye(1) if rows is None else np.array([[1.0, -centre], [0.0, 1.0 / rows]])
+    return block[:, 1:] if fixed_offset else block
 
 
 def widening_warning(names: list[str], widening: np.ndarray) -> list[str]:

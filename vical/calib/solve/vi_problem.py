@@ -48,14 +48,27 @@ MIN_GAP_WARNING = 0.5  # [s] a stretch without target views this long (and ...
 GAP_WARNING_FACTOR = 5.0  # ... this many typical frame intervals) is reported
 TRACE_HALF_WIDTH = 0.05  # [s] the report's time-offset plot shows the mismatch this far either side of the estimate
 TRACE_POINTS = 201
+# The readout's prior (a rolling shutter's line delay times the image height): centred on the given line delay
+# (0 unless a camchain gives one), as wide as a readout can be (5-30 ms for 480-1080 rows), so that observed
+# readouts are the data's alone. A readout whose 1-sigma stays above READOUT_UNOBSERVED of the prior's is
+# left at its prior (vical.calib.solve.rolling_shutter).
+READOUT_PRIOR_SIGMA = 0.03  # [s]
 
-E_KEY, G_KEY, D_KEY, K_KEY, I_KEY = (gtsam.symbol(c, 0) for c in "egdki")
+E_KEY, G_KEY, D_KEY, K_KEY, I_KEY, L_KEY = (gtsam.symbol(c, 0) for c in "egdkil")
 EXTRINSIC_NAMES = ["rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "time_offset"]
+LINE_DELAY_NAME = "line_delay"  # [s/row], after time_offset when the graph estimates it
 BIAS_NAMES = ["ba_x", "ba_y", "ba_z", "bg_x", "bg_y", "bg_z"]  # GTSAM's ConstantBias order: accel, then gyro
 
 
 def state_key(c: str, i: int) -> int:
     return gtsam.symbol(c, i)
+
+
+def row_centre(options: ViOptions) -> float:
+    """The image row (a fraction of its height) whose exposure the states' times are: the middle while the time
+    offset is estimated (its correction then hardly moves with the readout's), row 0 (the timestamp's) when it is
+    held (``vical.calib.solve.corner_factors``)."""
+    return 0.5 if options.estimate_time_offset else 0.0
 
 
 @dataclass(frozen=True)
@@ -78,6 +91,10 @@ class ViOptions:
             starting from ``imu_intrinsics``; Kalibr's model of that name).
         g_sensitivity: with ``scale-misalignment``, also estimate the gyro's g-sensitivity.
         imu_intrinsics: the IMU's known intrinsics (e.g. from Kalibr's imu.yaml), or None (identity).
+        noise_weighting: how the sensors' measured noise enters the solve (``NOISE_WEIGHTINGS``).
+        rolling_shutter: estimate each camera's line delay (a rolling shutter) with the time offset, every
+            corner seen at its row's time; without it a camera's given line delay (``CameraInput.line_delay``,
+            0: a global shutter) is used as it is.
     """
 
     estimate_time_offset: bool = True
@@ -92,6 +109,7 @@ class ViOptions:
     g_sensitivity: bool = False
     imu_intrinsics: ImuIntrinsics | None = None
     noise_weighting: str = "declared-or-less"
+    rolling_shutter: bool = False
 
     def __post_init__(self) -> None:
         checks = {
@@ -153,6 +171,7 @@ class ViProblem:
     warnings: list[str] = field(default_factory=list)
     others: list[OtherCamera] = field(default_factory=list)  # a rig's other cameras
     outliers: list[int] = field(default_factory=list)  # frame indices of the frames dropped as outliers
+    readout_given: float = 0.0  # [s] the first camera's given line delay times its height (the readout's prior)
 
 
 @dataclass
@@ -164,6 +183,7 @@ class ViEstimate:
     gyro_bias: np.ndarray
     accel_bias: np.ndarray
     imu_theta: np.ndarray | None = None  # IMU intrinsics (ImuIntrinsics.vector) when estimated
+    readout: float = 0.0  # [s] the first camera's readout time (line delay times image height)
 
 
 # ---------------------------------------------------------------------------------------- preparation
@@ -240,8 +260,9 @@ def initial_estimate(problem: ViProblem, T_guess: np.ndarray, tau_guess: float) 
     alignment = align(problem.t_imu, problem.gyro, inc, opts.max_time_offset, tau_guess, opts.estimate_time_offset)
     theta = opts.initial_imu_theta() if opts.estimate_imu_intrinsics else None
     return ViEstimate(
-        make_transform(alignment.R_cam_imu, T_guess[:3, 3]), alignment.time_offset, alignment.gyro_bias, np.zeros(3),
-        theta,
+        make_transform(alignment.R_cam_imu, T_guess[:3, 3]),
+        alignment.time_offset - row_centre(opts) * problem.readout_given,  # the PnP poses time the middle rows
+        alignment.gyro_bias, np.zeros(3), theta, problem.readout_given,
     )  # fmt: skip
 
 
@@ -257,6 +278,7 @@ class CameraInput:
         frames: its input frames (``observations`` were collected from them), for its frame log; None: no log
             (the first camera always has them).
         start_poses: its frames' poses from the joint task's intrinsic start (PnP poses the others).
+        line_delay: [s/row] its known line delay (0: a global shutter), the centre of its prior when estimated.
     """
 
     name: str
@@ -266,3 +288,4 @@ class CameraInput:
     initial_time_offset: float = 0.0
     frames: CameraFrames | None = None
     start_poses: FramePoses | None = None
+    line_delay: float = 0.0

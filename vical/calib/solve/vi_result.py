@@ -18,6 +18,7 @@ from vical.calib.solve.intrinsics import intrinsic_names
 from vical.calib.solve.model_fit import given_intrinsics_warnings, lens_misfit
 from vical.calib.solve.observations import FrameObservation
 from vical.calib.solve.rig import OtherCamera
+from vical.calib.solve.rolling_shutter import evidence_warning, readout_in_residuals
 from vical.calib.solve.time_alignment import increment_mismatch, rotation_increments
 from vical.calib.solve.uncertainty import assess
 from vical.calib.solve.vi_covariance import ViMarginals, parameter_covariance, widening_warning
@@ -26,12 +27,14 @@ from vical.calib.solve.vi_problem import (
     BIAS_NAMES,
     EXTRINSIC_NAMES,
     G_KEY,
+    LINE_DELAY_NAME,
     TRACE_HALF_WIDTH,
     TRACE_POINTS,
     CameraInput,
     ViEstimate,
     ViOptions,
     ViProblem,
+    row_centre,
     state_key,
 )
 from vical.data import CameraFrames
@@ -111,23 +114,30 @@ def first_camera_result(
     joint = task == "joint"
     values = solution.values
     camera = problem.camera
+    rows = camera.height if problem.options.rolling_shutter else None
     covariance, widening = parameter_covariance(
-        marginals, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset, imu_theta=est.imu_theta
-    )
-    names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
+        marginals, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset, imu_theta=est.imu_theta,
+        rows=rows, centre=row_centre(problem.options),
+    )  # fmt: skip
+    names = _parameter_names(camera, joint, rows is not None)
     if est.imu_theta is not None:
         names += ImuIntrinsics.parameter_names(problem.options.g_sensitivity)
     assessment = assess(names, covariance, camera)
     problem.warnings += widening_warning(names, widening) + assessment.warnings
+    line_delay = _line_delay(est.readout, camera, problem.options)
     estimate = np.concatenate(
         ([camera.intrinsics, camera.dist] if joint else [])
-        + [np.zeros(3), est.T_cam_imu[:3, 3], [est.tau0], est.accel_bias, est.gyro_bias]
+        + [np.zeros(3), est.T_cam_imu[:3, 3], [est.tau0]]
+        + ([[line_delay]] if rows is not None else [])
+        + [est.accel_bias, est.gyro_bias]
         + ([] if est.imu_theta is None else [est.imu_theta])
     )
     residuals, frame_index = _reprojection(problem, g, values)
     misfit = lens_misfit(camera, g.corners.points, g.corners.measured, residuals, g.corners.frame_of)
     if not joint:  # the joint task's start judged its own model (with the other models' fit)
         problem.warnings += given_intrinsics_warnings(camera, misfit)
+    if not g.corners.rolling:
+        problem.warnings += evidence_warning(readout_in_residuals(g.corners, values), problem.sigma_px)
     gravity = np.asarray(values.atUnit3(G_KEY).point3()) * problem.options.gravity_magnitude
     return CalibrationResult(
         task=task,
@@ -163,7 +173,20 @@ def first_camera_result(
             np.linalg.inv(problem.T_target_cam),
         ),
         lens_misfit=misfit,
+        line_delay=line_delay,
     )
+
+
+def _parameter_names(camera, joint: bool, line_delay: bool) -> list[str]:
+    intrinsics = intrinsic_names(camera.distortion) if joint else []
+    return intrinsics + EXTRINSIC_NAMES + ([LINE_DELAY_NAME] if line_delay else []) + BIAS_NAMES
+
+
+def _line_delay(readout: float, camera, options: ViOptions) -> float | None:
+    """[s/row] a camera's line delay from its readout; None for a global shutter (nothing estimated, none given)."""
+    if not options.rolling_shutter and readout == 0.0:
+        return None
+    return readout / camera.height
 
 
 def _imu_intrinsics(options: ViOptions, est: ViEstimate) -> ImuIntrinsics | None:
@@ -187,23 +210,30 @@ def other_camera_result(
     other, factors, paired, frame_index = entry
     joint = task == "joint"
     values = solution.values
-    covariance, widening = parameter_covariance(
-        marginals, values, other.T_cam_imu, joint, not problem.options.estimate_time_offset, other.index
-    )
     camera = other.camera
-    names = (intrinsic_names(camera.distortion) if joint else []) + EXTRINSIC_NAMES + BIAS_NAMES
+    rows = camera.height if problem.options.rolling_shutter else None
+    covariance, widening = parameter_covariance(
+        marginals, values, other.T_cam_imu, joint, not problem.options.estimate_time_offset, other.index, rows=rows,
+        centre=row_centre(problem.options),
+    )  # fmt: skip
+    names = _parameter_names(camera, joint, rows is not None)
     assessment = assess(names, covariance, camera)
     dropped = len(other.observations) - len(paired)
     unpaired = [f"{other.name}: {dropped} views without a simultaneous view of the first camera were not used"]
     notes = other.warnings + widening_warning(names, widening) + (unpaired if dropped else []) + assessment.warnings
+    line_delay = _line_delay(other.readout, camera, problem.options)
     estimate = np.concatenate(
         ([camera.intrinsics, camera.dist] if joint else [])
-        + [np.zeros(3), other.T_cam_imu[:3, 3], [other.tau0], est.accel_bias, est.gyro_bias]
+        + [np.zeros(3), other.T_cam_imu[:3, 3], [other.tau0]]
+        + ([[line_delay]] if rows is not None else [])
+        + [est.accel_bias, est.gyro_bias]
     )
     residuals = factors.residuals(values)
     misfit = lens_misfit(camera, factors.points, factors.measured, residuals, factors.frame_of)
     if not joint:
         notes += [f"{other.name}: {w}" for w in given_intrinsics_warnings(camera, misfit)]
+    if not factors.rolling:
+        notes += [f"{other.name}: {w}" for w in evidence_warning(readout_in_residuals(factors, values), other.sigma_px)]
     used_frames = frame_index[factors.frame_of]
     trace = _time_offset_trace(problem, other.frame_times, other.T_target_cam, other.T_cam_imu, other.tau0,
                                est.gyro_bias)  # fmt: skip
@@ -229,6 +259,7 @@ def other_camera_result(
             np.array([o.t_ns for o in other.observations], dtype=np.int64), np.linalg.inv(other.T_target_cam)
         ),
         lens_misfit=misfit,
+        line_delay=line_delay,
     )
 
 

@@ -35,6 +35,7 @@ from vical.calib.solve.gyro_model import gyro_model_warning
 from vical.calib.solve.intrinsics import check_model
 from vical.calib.solve.nominal import nominal_T_cam_imu
 from vical.calib.solve.rig import OtherCamera, initialise_other, prepare_other
+from vical.calib.solve.rolling_shutter import unobserved, unobserved_warning
 from vical.calib.solve.vi_covariance import gap_warnings, imu_noise_warning, solution_marginals, span_warnings
 from vical.calib.solve.vi_graph import measured_noise, reweighted_solve, solve_rounds
 from vical.calib.solve.vi_problem import (  # noqa: F401 (GRAVITY_MAGNITUDE, NOISE_WEIGHTINGS: the public names' home)
@@ -46,6 +47,7 @@ from vical.calib.solve.vi_problem import (  # noqa: F401 (GRAVITY_MAGNITUDE, NOI
     ViProblem,
     initial_estimate,
     prepare_problem,
+    row_centre,
 )
 from vical.calib.solve.vi_result import first_camera_result, first_frame_log, other_camera_result
 from vical.data import ImuNoise, ImuSamples, Target
@@ -64,9 +66,38 @@ def run_visual_inertial(
     """The camera-IMU graph of the extrinsic (``task="extrinsic"``) and joint (``task="joint"``) solves
     (``vical.calib.solve.pipeline.calibrate_rig`` calls it).
 
+    With ``options.rolling_shutter``, a line delay the recording's motion does not tell
+    (``vical.calib.solve.rolling_shutter.unobserved``) sends the whole rig back to its given line delays, solved again
+    without estimating them, with a warning.
+
     Returns the first camera's result, then one per camera of ``others`` (a rig in one graph).
     """
     others = others or []
+    results = _solve(task, first, imu, target, imu_noise, options, start, others)
+    if not options.rolling_shutter:
+        return results
+    cameras = [first, *others]
+    sigmas = unobserved(
+        {c.name: r for c, r in zip(cameras, results, strict=True)}, {c.name: c.camera.height for c in cameras}
+    )
+    if not sigmas:
+        return results
+    results = _solve(task, first, imu, target, imu_noise, replace(options, rolling_shutter=False), start, others)
+    note = unobserved_warning(sigmas, {c.name: c.line_delay for c in cameras})
+    return [replace(results[0], warnings=[note, *results[0].warnings]), *results[1:]]
+
+
+def _solve(
+    task: str,
+    first: CameraInput,
+    imu: ImuSamples,
+    target: Target,
+    imu_noise: ImuNoise,
+    options: ViOptions,
+    start: float,
+    others: list[CameraInput],
+) -> list[CalibrationResult]:
+    """One solve of ``run_visual_inertial``."""
     camera, frames, initial_time_offset = first.camera, first.frames, first.initial_time_offset
     for c in [camera] + [o.camera for o in others]:
         check_model(c.distortion)
@@ -84,6 +115,7 @@ def run_visual_inertial(
         observations, imu, camera, target, imu_noise, options, float(initial_time_offset), first.start_poses
     )
     problem.warnings += noise_warnings
+    problem.readout_given = first.line_delay * camera.height
     est = initial_estimate(problem, T_guess, float(initial_time_offset))
     problem.others = [_initial_other(problem, est, index, other) for index, other in enumerate(others, start=1)]
     joint = task == "joint"
@@ -110,8 +142,10 @@ def _initial_other(problem: ViProblem, est: ViEstimate, index: int, given: Camer
         given.name, index, given.observations[:: opts.frame_stride], given.camera, problem.target,
         problem.t0_ns, opts.pixel_sigma, given.initial_T_cam_imu, given.start_poses,
     )  # fmt: skip
+    other.readout = other.readout_given = given.line_delay * given.camera.height
     initialise_other(
         other, problem.frame_times, problem.T_target_cam, est.T_cam_imu, (problem.t_imu, problem.gyro),
         opts.max_time_offset, float(given.initial_time_offset), opts.estimate_time_offset,
     )  # fmt: skip
+    other.tau0 -= row_centre(opts) * other.readout_given  # its PnP poses time its middle rows
     return other
