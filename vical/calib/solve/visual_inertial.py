@@ -73,31 +73,6 @@ def run_visual_inertial(
     Returns the first camera's result, then one per camera of ``others`` (a rig in one graph).
     """
     others = others or []
-    results = _solve(task, first, imu, target, imu_noise, options, start, others)
-    if not options.rolling_shutter:
-        return results
-    cameras = [first, *others]
-    sigmas = unobserved(
-        {c.name: r for c, r in zip(cameras, results, strict=True)}, {c.name: c.camera.height for c in cameras}
-    )
-    if not sigmas:
-        return results
-    results = _solve(task, first, imu, target, imu_noise, replace(options, rolling_shutter=False), start, others)
-    note = unobserved_warning(sigmas, {c.name: c.line_delay for c in cameras})
-    return [replace(results[0], warnings=[note, *results[0].warnings]), *results[1:]]
-
-
-def _solve(
-    task: str,
-    first: CameraInput,
-    imu: ImuSamples,
-    target: Target,
-    imu_noise: ImuNoise,
-    options: ViOptions,
-    start: float,
-    others: list[CameraInput],
-) -> list[CalibrationResult]:
-    """One solve of ``run_visual_inertial``."""
     camera, frames, initial_time_offset = first.camera, first.frames, first.initial_time_offset
     for c in [camera] + [o.camera for o in others]:
         check_model(c.distortion)
@@ -129,10 +104,21 @@ def _solve(
     problem.warnings += gyro_model_warning(marginals.gyro)
     result = first_camera_result(task, problem, g, solution, est, iterations + more, start, marginals)
     result = replace(result, frame_log=first_frame_log(frames, every, problem, g, result.reprojection_frames))
-    return [result] + [
+    results = [result] + [
         other_camera_result(task, problem, g, solution, est, entry, given, result, marginals)
         for entry, given in zip(g.others, others, strict=True)
     ]
+    cameras = [first, *others]
+    sigmas = unobserved(
+        {c.name: r for c, r in zip(cameras, results, strict=True)}, {c.name: c.camera.height for c in cameras}
+    )
+    if not sigmas:
+        return results
+    again = run_visual_inertial(
+        task, first, imu, target, imu_noise, replace(options, rolling_shutter=False), start, others
+    )
+    note = unobserved_warning(sigmas, {c.name: c.line_delay for c in cameras})
+    return [replace(again[0], warnings=[note, *again[0].warnings]), *again[1:]]
 
 
 def _initial_other(problem: ViProblem, est: ViEstimate, index: int, given: CameraInput) -> OtherCamera:
