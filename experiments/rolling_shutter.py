@@ -13,16 +13,20 @@ Sections (each prints a table; ``docs/calibration.md``, "Rolling shutter", holds
   taken to first order in its time from the state).
 - ``cost``: the joint solve with and without the line delay on the same recording (a 40 us/row one and a global-
   shutter one), medians of ``--repeats`` runs one after the other.
+- ``rendered``: ``vical-record sensor=rolling_shutter sensor.backend=render`` (MuJoCo images in bands of rows, the
+  checkerboard detector) at 0, 10, 20, 40 us/row, 3 seeds each, 8 pose steps (4 s at 20 Hz): the extrinsic and
+  joint tasks with and without the line delay, against the recording's truth.
 - ``realdata``: the real global-shutter recording (``../shared/realdata``, 0-30 s; ``bench_realdata.py``'s inputs):
   the estimated line delay, its sigma, how far the extrinsic moves from the global-shutter solve, the warnings.
 
-    python experiments/rolling_shutter.py                  # everything (~15 min alone on 2 cores)
+    python experiments/rolling_shutter.py                  # everything (~25 min alone on 2 cores)
     python experiments/rolling_shutter.py --only cost --repeats 5
 """
 
 from __future__ import annotations
 
 import argparse
+import subprocess
 import sys
 import tempfile
 import time
@@ -35,13 +39,21 @@ from vical.calib.solve.vi_problem import ViOptions
 from vical.calib.synthetic import make_recording
 from vical.data import ImuNoise, Target
 from vical.geometry import so3_log
+from vical.io.recording import load_recording
 
 HERE = Path(__file__).resolve().parent
 US = 1e-6
 DELAYS_US = (0.0, 10.0, 20.0, 40.0)
 TOLERANCES = {"rotation_deg": 0.1, "translation_mm": 2.0, "time_offset_ms": 0.5}
 Z_PARAMETERS = ("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z", "time_offset", "line_delay")
-SECTIONS = ("synthetic", "first-order", "cost", "realdata")
+SECTIONS = ("synthetic", "first-order", "cost", "rendered", "realdata")
+# vical-record's pose steps for the rendered recordings: [dx, dy, dz, droll, dpitch, dyaw] (conf/record.yaml), the
+# default four and four more that pan, tilt and roll both ways.
+RENDERED_STEPS = (
+    "[[0.0,0.08,0.0,0.0,0.0,0.25],[0.0,-0.16,0.05,0.2,-0.1,-0.5],[0.1,0.08,-0.08,-0.35,0.2,0.25],"
+    "[-0.1,0.0,0.03,0.15,-0.1,0.0],[0.0,0.08,0.0,0.2,0.2,0.25],[0.05,-0.16,0.0,-0.3,-0.2,-0.4],"
+    "[-0.05,0.08,0.05,0.25,0.1,0.3],[0.0,0.0,-0.05,-0.2,0.0,-0.15]]"
+)
 
 
 def recording(line_delay: float, seed: int, noisy: bool = True):
@@ -54,11 +66,13 @@ def recording(line_delay: float, seed: int, noisy: bool = True):
     )  # fmt: skip
 
 
-def calibrate(rec, task: str, rolling: bool):
-    options = ViOptions(rolling_shutter=rolling)
+def calibrate(rec, task: str, rolling: bool, noise: ImuNoise | None = None):
+    """``task``'s solve of ``rec`` with (``rolling``) or without the line delay, the IMU declared as ``noise`` (the
+    paper's densities by default)."""
+    options, noise = ViOptions(rolling_shutter=rolling), noise or ImuNoise()
     if task == "joint":
-        return calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", (640, 480), ImuNoise(), options=options)
-    return calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, ImuNoise(), options=options)
+        return calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", (640, 480), noise, options=options)
+    return calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, noise, options=options)
 
 
 def errors(result, truth) -> dict[str, float]:
@@ -72,7 +86,8 @@ def errors(result, truth) -> dict[str, float]:
         "translation_mm": float(np.linalg.norm(translation) * 1e3),
         "time_offset_ms": float(abs(signed["time_offset"]) * 1e3),
     }
-    if result.line_delay is not None and "line_delay" in result.parameter_names:
+    out["kept"] = any("could not be told" in w for w in result.warnings)  # left at its prior: not estimated
+    if "line_delay" in result.parameter_names:
         signed["line_delay"] = result.line_delay - truth.line_delay
         out["line_delay_us"] = float(abs(signed["line_delay"]) / US)
         out["line_delay_ok"] = abs(signed["line_delay"]) <= max(0.05 * truth.line_delay, 0.5 * US)
@@ -100,13 +115,13 @@ def synthetic(seeds: int) -> None:
 
 def _synthetic_row(delay: float, task: str, rolling: bool, rows: list[dict]) -> str:
     def spread(key: str, fmt: str) -> str:
-        values = np.array([r[key] for r in rows])
-        return f"{np.median(values):{fmt}} / {np.max(values):{fmt}}"
+        values = np.array([r[key] for r in rows if key in r])
+        return f"{np.median(values):{fmt}} / {np.max(values):{fmt}}" if len(values) else "-"
 
     within = np.mean([all(r[k] <= t for k, t in TOLERANCES.items()) for r in rows])
     z = np.abs(np.concatenate([r["z"] for r in rows]))
     line = spread("line_delay_us", ".3f") if rolling else "-"
-    ok = f"{np.mean([r['line_delay_ok'] for r in rows]):.0%}" if rolling else "-"
+    ok = f"{np.mean([r.get('line_delay_ok', False) for r in rows]):.0%}" if rolling else "-"
     warned = "-" if rolling else f"{np.mean([r['warned'] for r in rows]):.0%}"
     return (
         f"| {delay:g} | {task} | {'rolling' if rolling else 'global'} | {line} | {ok} | "
@@ -151,6 +166,44 @@ def cost(repeats: int) -> None:
         print(f"| synthetic, {delay:g} us/row | {g:.2f} | {r:.2f} | {r / g:.2f} | {iterations[False]} / "
               f"{iterations[True]} |", flush=True)  # fmt: skip
     realdata_cost(repeats)
+
+
+def rendered(seeds: int) -> None:
+    print(f"\n## rendered: vical-record sensor=rolling_shutter sensor.backend=render, {seeds} seeds per line delay")
+    print(
+        "| line delay [us/row] | task | model | line delay err median / max [us/row] | rot err median / max [deg] "
+        "| trans err median / max [mm] | offset err median / max [ms] | RS warning |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    record = Path(sys.executable).parent / "vical-record"
+    with tempfile.TemporaryDirectory(prefix="vical-rolling-shutter-") as work:
+        for delay in DELAYS_US:
+            recs = []
+            for seed in range(seeds):
+                out = Path(work) / f"{delay:g}-{seed}"
+                args = [str(record), "sensor=rolling_shutter", "sensor.backend=render", f"seed={seed}",
+                        f"sensor.camera.line_delay.mean={delay * US}", "sensor.camera.line_delay.std=0",
+                        f"out={out}", "progress=false", "settle_time=0", f"steps={RENDERED_STEPS}"]  # fmt: skip
+                subprocess.run(args, check=True, capture_output=True, text=True)
+                recs.append(load_recording(out))
+            for task in ("extrinsic", "joint"):
+                for rolling in (True, False):
+                    rows = [errors(calibrate(rec, task, rolling, rec.truth.imu_noise), rec.truth) for rec in recs]
+                    print(_rendered_row(delay, task, rolling, rows), flush=True)
+
+
+def _rendered_row(delay: float, task: str, rolling: bool, rows: list[dict]) -> str:
+    def spread(key: str, fmt: str) -> str:
+        values = np.array([r[key] for r in rows if key in r])
+        return f"{np.median(values):{fmt}} / {np.max(values):{fmt}}" if len(values) else "-"
+
+    kept = sum(r["kept"] for r in rows)
+    line = spread("line_delay_us", ".3f") + (f" ({kept} kept at 0)" if kept else "") if rolling else "-"
+    warned = "-" if rolling else f"{np.mean([r['warned'] for r in rows]):.0%}"
+    return (
+        f"| {delay:g} | {task} | {'rolling' if rolling else 'global'} | {line} | {spread('rotation_deg', '.3f')} | "
+        f"{spread('translation_mm', '.2f')} | {spread('time_offset_ms', '.3f')} | {warned} |"
+    )
 
 
 def _bench():
@@ -220,6 +273,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only", choices=SECTIONS, action="append", help="run these sections (default: all)")
     p.add_argument("--seeds", type=int, default=20, help="recordings per line delay (synthetic)")
     p.add_argument("--repeats", type=int, default=5, help="runs per timed solve (cost)")
+    p.add_argument("--rendered-seeds", type=int, default=3, help="rendered recordings per line delay")
     args = p.parse_args(argv)
     chosen = args.only or SECTIONS
     if "synthetic" in chosen:
@@ -228,6 +282,8 @@ def main(argv: list[str] | None = None) -> int:
         first_order()
     if "cost" in chosen:
         cost(args.repeats)
+    if "rendered" in chosen:
+        rendered(args.rendered_seeds)
     if "realdata" in chosen:
         realdata()
     return 0

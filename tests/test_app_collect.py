@@ -206,6 +206,22 @@ def test_collect_records_and_calibrates_with_a_random_policy(tmp_path):
     assert "steps: 12" in summary and "done: the step limit" in summary
 
 
+@pytest.mark.integration
+def test_a_rolling_shutter_camera_is_collected_rendered_and_its_line_delay_calibrated(tmp_path):
+    """sensor=rolling_shutter renders every frame in bands of rows (vical.sim.camera.RenderBackend.rolling_image);
+    rolling_shutter=true calibrates with --rolling-shutter: the line delay comes back within 5 %."""
+    out = tmp_path / "out"
+    line_delay = 30e-6
+    args = [f"out={out}", "sensor=rolling_shutter", f"sensor.camera.line_delay.mean={line_delay}",
+            "sensor.camera.line_delay.std=0", "rolling_shutter=true", "limits.max_steps=4", "report=false",
+            "progress=false"]  # fmt: skip
+    assert collect(config(*args)) == 0
+    written = yaml.safe_load((out / "calibration" / "camchain-imucam.yaml").read_text())["cam0"]
+    assert abs(written["line_delay_nanoseconds"] * 1e-9 - line_delay) <= 0.05 * line_delay
+    with pytest.raises(ConfigError, match="rolling_shutter must be true or false"):
+        check_settings(config(f"out={tmp_path / 'o'}", "rolling_shutter=1"))
+
+
 def test_a_trajectory_baseline_stops_on_the_arm_by_the_learned_policys_rule(tmp_path):
     """stop=information: the expert's motion, ended by the shipped policy's information state at its goal."""
     out = tmp_path / "out"

@@ -102,6 +102,7 @@ PAIRS: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [
     ("sensor/paper.yaml", (), dataclass_defaults(SensorSampling)),
     ("sensor/stereo.yaml", (), dataclass_defaults(SensorSampling)),
     ("sensor/practitioner.yaml", (), dataclass_defaults(SensorSampling)),
+    ("sensor/rolling_shutter.yaml", (), dataclass_defaults(SensorSampling)),
     ("task/intrinsic.yaml", (), dataclass_defaults(CalibrationTask)),
     ("task/extrinsic.yaml", (), dataclass_defaults(CalibrationTask)),
     ("task/joint.yaml", (), dataclass_defaults(CalibrationTask)),
@@ -149,6 +150,9 @@ DIFFERS = {
     ("sensor/stereo.yaml", "rig"): "a stereo rig is the point of this file (its other camera); the default has none",
     ("sensor/practitioner.yaml", "time_offset.std"): "a practitioner's camera and IMU are not synchronised",
     ("sensor/practitioner.yaml", "products"): "the products drawn per episode are the point of this file",
+    ("sensor/rolling_shutter.yaml", "camera.line_delay.mean"): "a rolling shutter is the point of this file",
+    ("sensor/rolling_shutter.yaml", "camera.line_delay.std"): "its line delay drawn per episode",
+    ("sensor/rolling_shutter.yaml", "camera.rate_hz"): "20 Hz, as the rolling-shutter cameras it stands for",
     # The information MDP: conf/env/information.yaml composes from conf/env/calibration.yaml (MdpConfig's defaults,
     # the paper's coverage MDP) and changes the mode, its step limit and its reward.
     ("env/information.yaml", "state"): "the information mode is the point of this file",

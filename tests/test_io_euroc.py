@@ -32,6 +32,17 @@ def test_euroc_round_trip_is_lossless(tmp_path):
     assert back.truth.time_offset == rec.truth.time_offset and back.truth.imu_noise == rec.truth.imu_noise
 
 
+def test_euroc_sensor_yaml_holds_a_rolling_shutters_line_delay(tmp_path):
+    rec = make_recording()
+    rec = replace(rec, truth=replace(rec.truth, line_delay=27.5e-6))
+    write_euroc(rec, tmp_path / "seq")
+    sensor = yaml.safe_load((tmp_path / "seq" / "mav0" / "cam0" / "sensor.yaml").read_text())
+    assert sensor["line_delay_nanoseconds"] == 27500.0
+    assert read_euroc(tmp_path / "seq", rec.target).truth.line_delay == pytest.approx(27.5e-6, rel=1e-12)
+    write_euroc(replace(rec, truth=replace(rec.truth, line_delay=0.0)), tmp_path / "global")
+    assert "line_delay" not in (tmp_path / "global" / "mav0" / "cam0" / "sensor.yaml").read_text()
+
+
 def test_euroc_sensor_yaml_holds_a_double_sphere_camera_as_kalibr_names_it(tmp_path):
     rec = make_recording()
     camera = CameraModel("ds", 64, 48, 20.5, 20.4, 31.7, 24.1, [-0.21, 0.59])

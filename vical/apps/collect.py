@@ -68,6 +68,7 @@ class CollectSettings:
     limits: Limits
     camchain: Path | None
     imu_yaml: Path | None
+    rolling_shutter: bool = False
 
 
 def _existing_file(value: Any, key: str) -> Path | None:
@@ -110,8 +111,10 @@ def check_settings(cfg: DictConfig) -> CollectSettings:
         limits = from_mapping(Limits, plain(cfg.limits), "limits")
     except ValueError as err:
         raise ConfigError(str(err)) from None
+    rolling = cfg.get("rolling_shutter", False)
+    require(isinstance(rolling, bool), "rolling_shutter", "true or false", rolling)
     return CollectSettings(path, overwrite, task, align, limits, camchain,
-                           _readable_file(guess.get("imu_yaml"), "guess.imu_yaml", read_imu_yaml))  # fmt: skip
+                           _readable_file(guess.get("imu_yaml"), "guess.imu_yaml", read_imu_yaml), rolling)  # fmt: skip
 
 
 def mdp_config(cfg: DictConfig, policy: Policy) -> MdpConfig:
@@ -274,6 +277,8 @@ def _calibrate_args(s: CollectSettings) -> list[str]:
         args += ["--imu-yaml", str(s.out / "imu.yaml")]
     if s.camchain is not None and s.task == "extrinsic":
         args += ["--intrinsics", str(s.camchain)]
+    if s.rolling_shutter and s.task != "intrinsic":
+        args += ["--rolling-shutter"]
     return args + ["--out", str(s.out / "calibration")]
 
 

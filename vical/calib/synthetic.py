@@ -38,11 +38,10 @@ from vical.data import (
     Trajectory,
 )
 from vical.geometry import CameraModel, euler_to_matrix, make_transform, so3_exp
+from vical.geometry.rolling_shutter import exposed_rows
 
 GRAVITY = np.array([0.0, 0.0, -9.81])  # [m/s^2] world frame, z up
 EPOCH_NS = 1_700_000_000 * NS_PER_S  # a realistic epoch so int64 ns handling is exercised
-ROLLING_SHUTTER_TOLERANCE_PX = 1e-6  # a rolling shutter's corners are iterated to their row's time to this
-MAX_ROLLING_SHUTTER_ITERATIONS = 20
 
 # The nominal camera looks along world +x (optical z = world x, image x = world -y, image y = world -z).
 R_WORLD_CAM_NOMINAL = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
@@ -201,24 +200,16 @@ def _rolling_shutter(
     uv: np.ndarray,
     ids: np.ndarray,
 ) -> np.ndarray:
-    """Pixels (K, 2) of corners ``ids``, each seen at its own row's exposure time ``t + line_delay * v``.
-
-    The row a corner lands in depends on when it is exposed: fixed-point iterations from the global-shutter
-    ``uv`` until no pixel moves by more than ``ROLLING_SHUTTER_TOLERANCE_PX`` (2-3 iterations at 40 us/row).
-    ``T_rig_cam_imu`` is the extrinsic of the camera whose motion the excitation describes (the first one).
-    """
+    """Pixels (K, 2) of corners ``ids``, each seen at its own row's time ``t + line_delay * v``
+    (``vical.geometry.rolling_shutter``). ``T_rig_cam_imu`` is the extrinsic of the camera whose motion the
+    excitation describes (the first one)."""
     T_imu_cam = np.linalg.inv(np.asarray(rig.T_cam_imu, float))
-    for _ in range(MAX_ROLLING_SHUTTER_ITERATIONS):
-        times = t + rig.line_delay * uv[:, 1]
-        T_world_cam = imu_kinematics(excitation, target, T_rig_cam_imu, times)[0] @ T_imu_cam
-        T_cam_target = np.linalg.inv(T_world_cam) @ T_world_target  # (K, 4, 4)
-        p = np.einsum("kij,kj->ki", T_cam_target[:, :3, :3], target.points[ids]) + T_cam_target[:, :3, 3]
-        new = rig.camera.project(p)[0]
-        moved = np.max(np.abs(new - uv))
-        uv = new
-        if moved < ROLLING_SHUTTER_TOLERANCE_PX:
-            return uv
-    raise RuntimeError(f"the rolling shutter's rows did not settle (last step {moved:.2g} px): line delay too long")
+
+    def pose_at(dt: np.ndarray) -> np.ndarray:
+        return imu_kinematics(excitation, target, T_rig_cam_imu, t + dt)[0] @ T_imu_cam
+
+    points = target.points[ids] @ T_world_target[:3, :3].T + T_world_target[:3, 3]
+    return exposed_rows(rig.camera, points, pose_at, rig.line_delay, uv)
 
 
 def default_camera(distortion: str = "radtan") -> CameraModel:

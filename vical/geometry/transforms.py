@@ -35,6 +35,20 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
     return np.eye(3) + np.sin(theta) / theta * K + (1.0 - np.cos(theta)) / theta**2 * K @ K
 
 
+def so3_exp_batch(w: np.ndarray) -> np.ndarray:
+    """Rotation matrices (K, 3, 3) of rotation vectors ``w`` (K, 3) [rad] (Rodrigues, one pass)."""
+    w = np.asarray(w, dtype=float).reshape(-1, 3)
+    theta = np.linalg.norm(w, axis=1)
+    small = theta < _SMALL_ANGLE
+    t = np.where(small, 1.0, theta)
+    a = np.where(small, 1.0, np.sin(t) / t)
+    b = np.where(small, 0.5, (1.0 - np.cos(t)) / t**2)
+    K = np.zeros((len(w), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
+    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
+
+
 def so3_log(R: np.ndarray) -> np.ndarray:
     """Rotation vector (3,) [rad] of the rotation matrix ``R`` (3, 3); angle in [0, pi]."""
     R = np.asarray(R, dtype=float)
@@ -150,6 +164,22 @@ def step_pose(T: np.ndarray, translation: np.ndarray, euler_increment: np.ndarra
 def slerp_rotation(R0: np.ndarray, R1: np.ndarray, s: float) -> np.ndarray:
     """Geodesic interpolation between rotations: ``R0 @ exp(s * log(R0^T R1))``, ``s`` in [0, 1]."""
     return R0 @ so3_exp(s * so3_log(R0.T @ R1))
+
+
+def interpolate_transforms(t: np.ndarray, T: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Poses (K, 4, 4) at times ``query`` (K,) between the poses ``T`` (M, 4, 4) at increasing times ``t`` (M,),
+    as ``interpolate_transform`` between the two around each (held at the ends)."""
+    t, query = np.asarray(t, dtype=float), np.asarray(query, dtype=float)
+    if len(t) == 1:
+        return np.repeat(np.asarray(T, dtype=float)[:1], len(query), axis=0)
+    after = np.clip(np.searchsorted(t, query, side="right"), 1, len(t) - 1)
+    s = np.clip((query - t[after - 1]) / (t[after] - t[after - 1]), 0.0, 1.0)
+    steps = np.array([so3_log(T[j - 1, :3, :3].T @ T[j, :3, :3]) for j in range(1, len(t))])  # (M - 1, 3)
+    out = np.zeros((len(query), 4, 4))
+    out[:, :3, :3] = T[after - 1, :3, :3] @ so3_exp_batch(s[:, None] * steps[after - 1])
+    out[:, :3, 3] = (1.0 - s)[:, None] * T[after - 1, :3, 3] + s[:, None] * T[after, :3, 3]
+    out[:, 3, 3] = 1.0
+    return out
 
 
 def interpolate_transform(T0: np.ndarray, T1: np.ndarray, s: float) -> np.ndarray:

@@ -46,7 +46,14 @@ from vical.io.csvfiles import (
 )
 from vical.io.errors import CsvFormatError, EmptyCsvError, FormatError, KalibrFormatError
 from vical.io.images import ImageDetector, frames_from_images, read_gray, write_png
-from vical.io.kalibr import kalibr_intrinsics, read_camchain, read_imu_yaml
+from vical.io.kalibr import (
+    LINE_DELAY_KEY,
+    camera_entry,
+    kalibr_intrinsics,
+    read_camchain,
+    read_imu_yaml,
+    read_line_delay,
+)
 from vical.io.sample_checks import check_camera_rates, check_sampling, sort_and_dedupe, warn
 from vical.io.yamlfile import as_floats, dump_yaml, load_mapping
 
@@ -141,6 +148,8 @@ def _camera_sensor_yaml(frames: CameraFrames, truth: SensorTruth | None) -> dict
         data["distortion_model"] = EUROC_DISTORTION_NAMES.get(kalibr["distortion_model"], kalibr["distortion_model"])
         data["distortion_coefficients"] = kalibr["distortion_coeffs"]
         data["timeshift_cam_imu"] = float(truth.time_offset)
+        if truth.line_delay > 0:
+            data[LINE_DELAY_KEY] = camera_entry(cam, line_delay=truth.line_delay)[LINE_DELAY_KEY]
     return data
 
 
@@ -372,7 +381,10 @@ def _read_reference(root: Path, name: str) -> tuple[SensorTruth | None, tuple[in
     camera, T_cam_imu, shift = read_camchain(cam_yaml)
     if T_cam_imu is None:
         return None, resolution
-    truth = SensorTruth(camera, T_cam_imu, 0.0 if shift is None else shift, read_imu_yaml(imu_yaml))
+    line_delay = read_line_delay(cam_yaml) or 0.0
+    truth = SensorTruth(
+        camera, T_cam_imu, 0.0 if shift is None else shift, read_imu_yaml(imu_yaml), line_delay=line_delay
+    )
     return truth, (camera.width, camera.height)
 
 

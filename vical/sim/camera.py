@@ -22,6 +22,7 @@ The exposure pose is interpolated between the physics steps around the exposure 
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -32,6 +33,7 @@ import numpy as np
 from vical.config_checks import require_range
 from vical.data import Target
 from vical.geometry import CameraModel, interpolate_transform
+from vical.geometry.rolling_shutter import exposed_rows
 
 Detector = Callable[[np.ndarray, Target], tuple[np.ndarray, np.ndarray]]
 """``detector(image (H, W) uint8, target) -> (corners (K, 2) float64 [px], ids (K,) int64)``."""
@@ -219,6 +221,26 @@ class ProjectBackend:
             return _NO_CORNERS
         return uv + self.pixel_noise_px * rng.standard_normal(uv.shape), ids
 
+    def observe_rolling(
+        self,
+        camera: CameraModel,
+        pose_at: Callable[[np.ndarray], np.ndarray],
+        line_delay: float,
+        rng: np.random.Generator,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """A rolling shutter's ``observe``: each corner seen from the pose at its own row's time.
+
+        ``pose_at(dt)`` gives ``T_world_cam`` (K, 4, 4) at ``dt`` (K,) [s] after the timestamp (row 0's exposure);
+        which corners are seen is decided at the middle row's pose (``vical.geometry.rolling_shutter``).
+        """
+        middle = pose_at(np.array([0.5 * line_delay * camera.height]))[0]
+        uv, ids = self.ideal_observation(camera, middle)
+        if not len(ids):
+            return _NO_CORNERS
+        points = self.target.points[ids] @ self.T_world_board[:3, :3].T + self.T_world_board[:3, 3]
+        uv = exposed_rows(camera, points, pose_at, line_delay, uv)
+        return uv + self.pixel_noise_px * rng.standard_normal(uv.shape), ids
+
     def _faces_camera(self, R_cam_board: np.ndarray, t_cam_board: np.ndarray) -> bool:
         center = R_cam_board @ self.target.center + t_cam_board
         distance = float(np.sqrt(center @ center))
@@ -237,6 +259,30 @@ class ProjectBackend:
 
 
 # ---------------------------------------------------------------------------------- rendering
+# A rolling shutter is rendered in bands of rows, each at its middle row's time: a row is then off its own time by at
+# most half a band's readout, and off its place by the image's motion over that time. Bands are thin enough for that
+# to stay within BAND_ERROR_PX, half the detector's noise on rendered boards (0.07-0.12 px RMS, docs/sensors.md).
+BAND_ERROR_PX = 0.05
+
+
+def rolling_bands(shift_px: float, height: int) -> int:
+    """Bands of rows a rolling shutter's render needs when the image moves ``shift_px`` [px] during the readout."""
+    return int(np.clip(np.ceil(abs(shift_px) / (2.0 * BAND_ERROR_PX)), 1, height))
+
+
+def readout_shift(camera: CameraModel, points_world: np.ndarray, pose_at: Callable, line_delay: float) -> float:
+    """[px] the farthest any of ``points_world`` (K, 3) in front of the camera moves in the image during the readout
+    (between row 0's and the last row's poses); 0 when none is in front at both."""
+    T = pose_at(np.array([0.0, line_delay * camera.height]))
+    uv = []
+    for T_world_cam in T:
+        p = (points_world - T_world_cam[:3, 3]) @ T_world_cam[:3, :3]
+        uv.append(camera.project(p))
+    (first, front_first), (last, front_last) = uv
+    both = front_first & front_last
+    return float(np.max(np.linalg.norm(last[both] - first[both], axis=1))) if both.any() else 0.0
+
+
 def render_pinhole(camera: CameraModel, width: int, height: int, margin_px: float = 2.0) -> CameraModel:
     """The undistorted pinhole camera (W x H render) whose image covers every ray of ``camera``'s image.
 
@@ -404,6 +450,29 @@ class RenderBackend:
 
         ``data`` supplies the scene state (the board, lights); the camera pose is ``T_world_cam``.
         """
+        image = self._warp(self._atlas(data, T_world_cam), slice(None))
+        image[~self.views.seen] = 0
+        return image
+
+    def rolling_image(
+        self, data: mujoco.MjData, pose_at: Callable[[np.ndarray], np.ndarray], line_delay: float, shift_px: float
+    ) -> np.ndarray:
+        """A rolling shutter's ``image``: bands of rows, each rendered at the pose of its middle row's time.
+
+        ``pose_at(dt)`` gives ``T_world_cam`` (K, 4, 4) at ``dt`` (K,) [s] after the timestamp (row 0's exposure);
+        ``shift_px``: how far the image moves during the readout (``rolling_bands`` makes the bands thin enough).
+        """
+        height = self.camera.height
+        edges = np.linspace(0, height, rolling_bands(shift_px, height) + 1).round().astype(int)
+        image = np.zeros((height, self.camera.width), np.uint8)
+        for top, bottom in itertools.pairwise(edges):
+            T = pose_at(np.array([line_delay * 0.5 * (top + bottom - 1)]))[0]
+            image[top:bottom] = self._warp(self._atlas(data, T), slice(top, bottom))
+        image[~self.views.seen] = 0
+        return image
+
+    def _atlas(self, data: mujoco.MjData, T_world_cam: np.ndarray) -> np.ndarray:
+        """The undistorted render(s) the warp samples: one pinhole, or a fisheye's cube faces stacked."""
         views = self.views
         if views is None:
             raise RuntimeError("RenderBackend.set_camera(camera) must be called before rendering")
@@ -417,14 +486,24 @@ class RenderBackend:
             for gl_camera in self._renderer.scene.camera:
                 set_gl_camera(gl_camera, T_world_view, views.pinhole)
             renders.append(cv2.cvtColor(self._renderer.render(), cv2.COLOR_RGB2GRAY))
-        atlas = renders[0] if len(renders) == 1 else np.vstack(renders)
-        image = cv2.remap(atlas, views.map_x, views.map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        image[~views.seen] = 0
-        return image
+        return renders[0] if len(renders) == 1 else np.vstack(renders)
+
+    def _warp(self, atlas: np.ndarray, rows: slice) -> np.ndarray:
+        """The image ``rows`` of the camera, sampled from ``atlas`` through the lens distortion."""
+        views = self.views
+        return cv2.remap(atlas, views.map_x[rows], views.map_y[rows], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
 
     def observe(self, data: mujoco.MjData, T_world_cam: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Detected corners (K, 2) [px], ids (K,) and the image (H, W) uint8 at ``T_world_cam``."""
-        image = self.image(data, T_world_cam)
+        return self._detect(self.image(data, T_world_cam))
+
+    def observe_rolling(
+        self, data: mujoco.MjData, pose_at: Callable[[np.ndarray], np.ndarray], line_delay: float, shift_px: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A rolling shutter's ``observe`` (``rolling_image``)."""
+        return self._detect(self.rolling_image(data, pose_at, line_delay, shift_px))
+
+    def _detect(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         corners, ids = self.detector(image, self.target)
         return np.asarray(corners, dtype=float).reshape(-1, 2), np.asarray(ids, dtype=np.int64).reshape(-1), image
 

@@ -11,7 +11,11 @@ costs the recorder nothing, and the result does not depend on when it is asked.
 
 Clocks. The IMU clock is the simulation clock (the steps' ``t_ns``). Camera frames are
 stamped on a grid of the camera period in the camera clock; the frame stamped ``t_cam`` is
-exposed at IMU time ``t_cam + time_offset`` (Kalibr's sign, ``docs/conventions.md``). Only frames
+exposed at IMU time ``t_cam + time_offset`` (Kalibr's sign, ``docs/conventions.md``). A rolling
+shutter (``SensorTruth.line_delay``) exposes row ``v`` ``line_delay * v`` later (row 0 at the
+timestamp): the recorder keeps the camera poses of every step through the readout and sees each
+corner from the pose interpolated at its row's time (``ProjectBackend.observe_rolling``), or renders
+the image in bands of rows, each at its middle row's pose (``RenderBackend.rolling_image``). Only frames
 whose exposure falls inside the span of the IMU samples are kept (as a hardware-synchronised
 sensor would deliver them: the IMU's first sample needs its averaging window, so it starts a
 few physics steps after the motion).
@@ -27,8 +31,15 @@ import mujoco
 import numpy as np
 
 from vical.data import CameraFrames, ImuSamples, PathProfile, Recording, SensorTruth, Target, Trajectory
-from vical.geometry import invert_transform
-from vical.sim.camera import Detector, ProjectBackend, RenderBackend, VisibilityRules, interpolate_pose
+from vical.geometry import interpolate_transforms, invert_transform
+from vical.sim.camera import (
+    Detector,
+    ProjectBackend,
+    RenderBackend,
+    VisibilityRules,
+    interpolate_pose,
+    readout_shift,
+)
 from vical.sim.imu import ImuSimulator, ImuSiteReader, SiteReadings, row_dot
 from vical.sim.motion import MotionResult
 from vical.sim.panda import PandaSim, StepPoses
@@ -85,6 +96,8 @@ class SensorRecorder:
         self._cam_period_ns = step_ns * physics.steps_per_period(sampling.camera.rate_hz, "sensor.camera.rate_hz")
         self._step_ns = step_ns
         self.project = ProjectBackend(target, sim.T_world_board, sampling.pixel_noise_px, rules)
+        T_world_board = np.asarray(sim.T_world_board, dtype=float)
+        self._board_points = target.points @ T_world_board[:3, :3].T + T_world_board[:3, 3]  # a readout's image shift
         needs_render = sampling.backend == "render" or keep_images
         self.render = RenderBackend(sim.model, target, detector, render_size) if needs_render else None
         model = sim.model
@@ -112,6 +125,8 @@ class SensorRecorder:
                 )
         self.truth = truth
         self._start_others(dict(others or {}))
+        cameras = [truth, *self.others.values()]
+        self._readout_ns = max(round(c.line_delay * c.camera.height * 1e9) for c in cameras)
         set_imu_pose(self.sim.model, sensor_imu_pose(truth))
         mujoco.mj_forward(self.sim.model, self.sim.data)
         self._reader.reset(self.sim.time_ns)
@@ -130,7 +145,7 @@ class SensorRecorder:
             self.render.set_camera(truth.camera)
         self._offset_ns = round(truth.time_offset * 1e9)
         self._next_stamp: int | None = None
-        self._before: tuple[int, np.ndarray] | None = None
+        self._window: list[tuple[int, np.ndarray]] = []  # (t_ns, T_world_cam) of the steps through an exposure
         self._frames: dict[str, list] = _no_frames()
         self._log = _TruthLog([], [], [], [])
         self._path_length = 0.0
@@ -142,28 +157,32 @@ class SensorRecorder:
         self._path_log: tuple[list[np.ndarray], list[np.ndarray]] = ([], [])
 
     def live_steps(self, t0_ns: int, num_steps: int, step_ns: int) -> list[int]:
-        """The steps of a motion around each camera exposure: the one it falls in and the first at or after it."""
+        """The steps of a motion through each camera exposure: from the one it starts in to the first at or after
+        its readout's end (with a global shutter: the one it falls in and the first at or after it)."""
         self._require_started("a motion")
         self._reader.check_next(t0_ns)  # before the motion runs: it must follow the steps recorded so far
         if self._next_stamp is None:
             self._next_stamp = self._first_stamp(t0_ns)
         steps, stamp = set(), self._next_stamp
         while (exposure := stamp + self._offset_ns) < t0_ns + num_steps * step_ns:
-            within, after = (exposure - t0_ns) // step_ns, -((t0_ns - exposure) // step_ns)
-            steps |= {k for k in (within, after) if 0 <= k < num_steps}
+            within = (exposure - t0_ns) // step_ns
+            after = -((t0_ns - exposure - self._readout_ns) // step_ns)
+            steps |= set(range(max(within, 0), min(after, num_steps - 1) + 1))
             stamp += self._cam_period_ns
         return sorted(steps)
 
     def on_live_step(self, sim: PandaSim, t_ns: int) -> None:
-        """``data``'s derived quantities belong to time ``t_ns``: keep or observe the camera pose of an exposure."""
+        """``data``'s derived quantities belong to time ``t_ns``: keep the camera pose of a step through an exposure,
+        and observe once the exposure (its readout) is over."""
         exposure = self._next_stamp + self._offset_ns
         if t_ns <= exposure < t_ns + self._step_ns:
-            self._before = (t_ns, camera_pose_cv(sim.model, sim.data))
-        if t_ns >= exposure and self._before is not None:
-            T_world_cam = interpolate_pose(exposure, *self._before, t_ns, camera_pose_cv(sim.model, sim.data))
-            self._observe(self._next_stamp, T_world_cam)
+            self._window = [(t_ns, camera_pose_cv(sim.model, sim.data))]
+        elif self._window:
+            self._window.append((t_ns, camera_pose_cv(sim.model, sim.data)))
+        if self._window and t_ns >= exposure + self._readout_ns:
+            self._observe(self._next_stamp, exposure)
             self._next_stamp += self._cam_period_ns
-            self._before = None
+            self._window = []
 
     def on_steps(self, poses: StepPoses) -> None:
         """Keep the IMU site's poses and the end effector's positions of a motion's physics steps."""
@@ -245,22 +264,45 @@ class SensorRecorder:
                 self._other_render[name].set_camera(other.camera)
         self._other_frames = {name: _no_frames() for name in others}
 
-    def _observe(self, stamp: int, T_world_cam: np.ndarray) -> None:
-        self._observe_camera(self._frames, self.truth.camera, self.render, stamp, T_world_cam)
+    def _observe(self, stamp: int, exposure: int) -> None:
+        """Every camera's exposure of the frame ``stamp`` from the window's poses (exposure at ``exposure`` [ns])."""
+        (t0, T0), (t1, T1) = self._window[0], self._window[-1]
+        T_world_cam = interpolate_pose(exposure, t0, T0, t1, T1)  # the last step is at or after the exposure
+        times = np.array([t for t, _ in self._window], dtype=float)
+        poses = np.array([T for _, T in self._window])
+
+        def pose_at(dt: np.ndarray) -> np.ndarray:  # the cam0 poses dt [s] after the exposure (a rolling shutter's)
+            return interpolate_transforms(times, poses, exposure + np.asarray(dt) * 1e9)
+
+        self._observe_camera(self._frames, self.truth, self.render, stamp, T_world_cam, pose_at)
         for name, other in self.others.items():
             T_cam0_cam = self.truth.T_cam_imu @ invert_transform(other.T_cam_imu)
             frames, render = self._other_frames[name], self._other_render.get(name)
-            self._observe_camera(frames, other.camera, render, stamp, T_world_cam @ T_cam0_cam)
+            self._observe_camera(
+                frames, other, render, stamp, T_world_cam @ T_cam0_cam, lambda dt, c=T_cam0_cam: pose_at(dt) @ c
+            )
 
-    def _observe_camera(self, frames: dict[str, list], camera, render, stamp: int, T_world_cam: np.ndarray) -> None:
-        """One camera's exposure at pose ``T_world_cam``: its corners (and image) appended to ``frames``."""
-        image = None
+    def _observe_camera(self, frames: dict[str, list], truth: SensorTruth, render, stamp: int, T_world_cam, pose_at):
+        """One camera's exposure at pose ``T_world_cam`` (its rows' poses ``pose_at``, a rolling shutter's): its
+        corners (and image) appended to ``frames``."""
+        image, camera, delay = None, truth.camera, truth.line_delay
+        shift = readout_shift(camera, self._board_points, pose_at, delay) if delay > 0 and render is not None else 0.0
         if self.sampling.backend == "render":
-            corners, ids, image = render.observe(self.sim.data, T_world_cam)
+            if delay > 0:
+                corners, ids, image = render.observe_rolling(self.sim.data, pose_at, delay, shift)
+            else:
+                corners, ids, image = render.observe(self.sim.data, T_world_cam)
         else:
-            corners, ids = self.project.observe(camera, T_world_cam, self._cam_rng)
+            if delay > 0:
+                corners, ids = self.project.observe_rolling(camera, pose_at, delay, self._cam_rng)
+            else:
+                corners, ids = self.project.observe(camera, T_world_cam, self._cam_rng)
             if self.keep_images:
-                image = render.image(self.sim.data, T_world_cam)
+                image = (
+                    render.rolling_image(self.sim.data, pose_at, delay, shift)
+                    if delay > 0
+                    else render.image(self.sim.data, T_world_cam)
+                )
         frames["t"].append(stamp)
         frames["corners"].append(corners)
         frames["ids"].append(ids)

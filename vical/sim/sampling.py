@@ -83,6 +83,9 @@ class CameraSampling:
         tangential_std: sigma of p1, p2 [-] (radtan, asymmetric distortion only).
         center_offset_std: sigma of the distortion-centre offset from the principal point, in
             units of the image width (x) and height (y) (asymmetric distortion only).
+        line_delay: [s/row] a rolling shutter's line delay (row ``v`` exposed ``line_delay * v`` after the
+            timestamp, ``docs/formats.md``), drawn per episode (at 0 and above); 0: a global shutter. Its mean
+            readout (times ``height``) must be shorter than the frame interval.
     """
 
     width: int = 640
@@ -97,6 +100,7 @@ class CameraSampling:
     beta: Normal = field(default_factory=lambda: Normal(1.1, 0.05))
     tangential_std: float = 0.001
     center_offset_std: float = 0.05
+    line_delay: Normal = field(default_factory=Normal)
 
     def __post_init__(self) -> None:
         key = "sensor.camera"
@@ -114,6 +118,11 @@ class CameraSampling:
         self._check_wide_angle_means(key)
         require_range(f"{key}.tangential_std", self.tangential_std, 0.0)
         require_range(f"{key}.center_offset_std", self.center_offset_std, 0.0)
+        self.line_delay.check(f"{key}.line_delay")
+        frame = 1.0 / self.rate_hz
+        mean = self.line_delay.mean
+        readout = f"[s/row] >= 0 whose readout (x {self.height} rows) is shorter than a frame ({frame:g} s)"
+        require(0.0 <= mean < frame / self.height, f"{key}.line_delay.mean", readout, mean)
 
     def _check_wide_angle_means(self, key: str) -> None:
         """Name the coefficient (or the field of view) whose mean the lens model cannot take: draws around
@@ -466,7 +475,16 @@ def sample_sensor(cfg: SensorSampling, rng: np.random.Generator, asymmetric: boo
         gyro_bias=gyro_bias,
         accel_bias=accel_bias,
         imu_intrinsics=intrinsics,
+        line_delay=_line_delay(cfg.camera, rng),
     )
+
+
+def _line_delay(cfg: CameraSampling, rng: np.random.Generator) -> float:
+    """[s/row] one episode's line delay: drawn (after every other draw, so sensors without a spread are unchanged)
+    and held at 0 and above and below a frame's readout."""
+    if cfg.line_delay.std == 0:
+        return float(cfg.line_delay.mean)
+    return float(np.clip(cfg.line_delay.draw(rng), 0.0, 0.99 / (cfg.rate_hz * cfg.height)))
 
 
 def sample_rig(cfg: SensorSampling, rng: np.random.Generator, first: SensorTruth) -> dict[str, SensorTruth]:
@@ -491,7 +509,10 @@ def mean_sensor(cfg: SensorSampling) -> SensorTruth:
         cfg.camera.distortion,
     )
     T_body_imu = make_transform(euler_to_matrix(cfg.extrinsic.rpy_mean), np.asarray(cfg.extrinsic.position_mean))
-    return SensorTruth(camera, cam_imu_from_body_imu(T_body_imu), cfg.time_offset.mean, cfg.imu.kalibr_noise())
+    return SensorTruth(
+        camera, cam_imu_from_body_imu(T_body_imu), cfg.time_offset.mean, cfg.imu.kalibr_noise(),
+        line_delay=cfg.camera.line_delay.mean,
+    )  # fmt: skip
 
 
 def sensor_imu_pose(truth: SensorTruth) -> np.ndarray:
