@@ -679,14 +679,28 @@ def wrong_settings(result: CalibrationResult, frames, rec: Recording, args) -> l
     elif unit == "m/s^2":
         found.append(f"the accelerometer reads {accel:.3g} g in the median where gravity alone is 1 g: it logs "
                      "m/s^2; leave out --accel-unit g")  # fmt: skip
-    board = board_scale(posed, rec.imu, result.T_cam_imu[:3, :3], result.time_offset)
+    offset = result.time_offset
+    if result.line_delay is not None:
+        # The joint task's start posed the views with a global-shutter camera, which a rolling shutter bends (the
+        # board read 3.2x too small from them): the views posed again with the solved camera, timed by their
+        # middle rows, as PnP poses of a rolling shutter's views are.
+        posed = posed_frames(frames, rec.target, result.camera)
+        offset += 0.5 * result.line_delay * result.camera.height
+    board = board_scale(posed, rec.imu, result.T_cam_imu[:3, :3], offset)
     if wrong_board_scale(board):
         size, scale = rec.target.row_spacing, board.centre[0]
-        found.append(
-            f"the camera's accelerations are {scale:.2f}x the IMU's: the board is {scale:.2f}x smaller than "
-            f"--target says ({size:g} m; the data suggest {size / scale:.3g} m); give the board's true size in "
-            "--target"
-        )
+        suggested = f"{size:g} m; the data suggest {size / scale:.3g} m"
+        smaller = f"the board is {scale:.2f}x smaller than --target says ({suggested})"
+        readout = result.rolling_shutter_evidence
+        if readout is None:
+            found.append(f"the camera's accelerations are {scale:.2f}x the IMU's: {smaller}; give the board's true "
+                         "size in --target")  # fmt: skip
+        else:  # the camera's accelerations come from poses that an unmodelled rolling shutter bends
+            found.append(
+                f"the camera's accelerations are {scale:.2f}x the IMU's, and the corner residuals show an unmodelled "
+                f"rolling shutter (a readout of {readout * 1e3:.1f} ms or more) that bends the poses they come from: "
+                f"calibrate with --rolling-shutter; should the ratio stay, {smaller}"
+            )
     return found
 
 

@@ -181,6 +181,8 @@ class CalibrationResult:
         frame_poses: the PnP poses the camera-IMU solve started from, or None (intrinsic task).
         line_delay: [s/row] the camera's rolling shutter (row ``v`` exposed ``line_delay * v`` after the
             timestamp): estimated, or the known one the solve used; None for a global shutter.
+        rolling_shutter_evidence: [s] the readout a global-shutter solve's residuals show where they show one
+            (``vical.calib.solve.rolling_shutter``: a lower bound), else None.
     """
 
     task: str
@@ -218,6 +220,7 @@ class CalibrationResult:
     # the same in every view, beside their noise (vical.calib.solve.model_fit.lens_misfit); None where not measured.
     lens_misfit: tuple[float, float] | None = None
     line_delay: float | None = None
+    rolling_shutter_evidence: float | None = None
 
     @property
     def sigmas(self) -> dict[str, float]:

@@ -136,8 +136,8 @@ def first_camera_result(
     misfit = lens_misfit(camera, g.corners.points, g.corners.measured, residuals, g.corners.frame_of)
     if not joint:  # the joint task's start judged its own model (with the other models' fit)
         problem.warnings += given_intrinsics_warnings(camera, misfit)
-    if not g.corners.rolling:
-        problem.warnings += evidence_warning(readout_in_residuals(g.corners, values), problem.sigma_px)
+    evidence = None if g.corners.rolling else readout_in_residuals(g.corners, values)
+    problem.warnings += evidence_warning(evidence, problem.sigma_px)
     gravity = np.asarray(values.atUnit3(G_KEY).point3()) * problem.options.gravity_magnitude
     return CalibrationResult(
         task=task,
@@ -174,7 +174,12 @@ def first_camera_result(
         ),
         lens_misfit=misfit,
         line_delay=line_delay,
+        rolling_shutter_evidence=_evident_readout(evidence, problem.sigma_px),
     )
+
+
+def _evident_readout(evidence, pixel_sigma: float) -> float | None:
+    return evidence.readout if evidence is not None and evidence.evident(pixel_sigma) else None
 
 
 def _parameter_names(camera, joint: bool, line_delay: bool) -> list[str]:
@@ -232,8 +237,8 @@ def other_camera_result(
     misfit = lens_misfit(camera, factors.points, factors.measured, residuals, factors.frame_of)
     if not joint:
         notes += [f"{other.name}: {w}" for w in given_intrinsics_warnings(camera, misfit)]
-    if not factors.rolling:
-        notes += [f"{other.name}: {w}" for w in evidence_warning(readout_in_residuals(factors, values), other.sigma_px)]
+    evidence = None if factors.rolling else readout_in_residuals(factors, values)
+    notes += [f"{other.name}: {w}" for w in evidence_warning(evidence, other.sigma_px)]
     used_frames = frame_index[factors.frame_of]
     trace = _time_offset_trace(problem, other.frame_times, other.T_target_cam, other.T_cam_imu, other.tau0,
                                est.gyro_bias)  # fmt: skip
@@ -260,6 +265,7 @@ def other_camera_result(
         ),
         lens_misfit=misfit,
         line_delay=line_delay,
+        rolling_shutter_evidence=_evident_readout(evidence, other.sigma_px),
     )
 
 
