@@ -10,7 +10,9 @@ evaluation (``vical.calib.tasks``) and ``vical-collect`` all call it.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -114,9 +116,10 @@ def calibrate_rig(
         for n in frames
     }
     if task == "joint" and opts.rolling_shutter:
-        for n in frames:
-            stage[n] = _slow_start(stage[n], imu, model, known.get(n), sizes.get(n), frames[n], observations[n], target,
-                                   opts)  # fmt: skip
+        for n in frames:  # each camera's start calibrated again on its slow views where the readout bent it
+            restart = partial(_intrinsic_stage, task, model, n, known.get(n), sizes.get(n), frames[n], target=target,
+                              opts=opts)  # fmt: skip
+            stage[n] = _slow_start(stage[n], imu, observations[n], restart)
     if task == "intrinsic":
         return RigCalibration(stage)
     models = {n: known[n] if r is None else r.camera for n, r in stage.items()}
@@ -185,13 +188,8 @@ def _intrinsic_stage(
 def _slow_start(
     start: CalibrationResult,
     imu: ImuSamples | None,
-    model: str,
-    known: CameraModel | None,
-    size: tuple[int, int] | None,
-    frames: CameraFrames,
     observations: list[FrameObservation],
-    target: Target,
-    opts: ViOptions,
+    restart: Callable[[list[FrameObservation]], CalibrationResult],
 ) -> CalibrationResult:
     """A rolling shutter's joint start: the camera-only calibration of the ``ROLLING_START_FRACTION`` of the views
     taken while the gyro turned slowest (at their stamps; the time offset hardly matters here) where its focal length
@@ -205,7 +203,7 @@ def _slow_start(
     slow = [o for o, rate in zip(observations, rates, strict=True) if rate <= limit]
     if len(slow) < ROLLING_START_MIN_VIEWS:
         return start
-    slow_start = _intrinsic_stage("joint", model, "cam", known, size, frames, slow, target, opts)
+    slow_start = restart(slow)
     return slow_start if abs(start.camera.fx / slow_start.camera.fx - 1.0) > ROLLING_START_DISAGREEMENT else start
 
 
