@@ -36,17 +36,33 @@ def so3_exp(w: np.ndarray) -> np.ndarray:
 
 
 def so3_exp_batch(w: np.ndarray) -> np.ndarray:
-    """Rotation matrices (K, 3, 3) of rotation vectors ``w`` (K, 3) [rad] (Rodrigues, one pass)."""
+    """Rotation matrices (K, 3, 3) of rotation vectors ``w`` (K, 3) [rad]: Rodrigues'
+    ``cos(theta) I + a [w]x + b w w^T`` (``a = sin(theta) / theta``, ``b = (1 - cos(theta)) / theta^2``), element by
+    element (no 3 x 3 products: one per corner of a rolling shutter, ``vical.calib.solve.corner_factors``)."""
     w = np.asarray(w, dtype=float).reshape(-1, 3)
+    theta, a, b = _rodrigues_coefficients(w)
+    R = b[:, None, None] * w[:, :, None] * w[:, None, :]
+    for i in range(3):
+        R[:, i, i] += 1.0 - b * theta**2  # cos(theta)
+    aw = a[:, None] * w
+    R[:, 0, 1] -= aw[:, 2]
+    R[:, 0, 2] += aw[:, 1]
+    R[:, 1, 2] -= aw[:, 0]
+    R[:, 1, 0] += aw[:, 2]
+    R[:, 2, 0] -= aw[:, 1]
+    R[:, 2, 1] += aw[:, 0]
+    return R
+
+
+def _rodrigues_coefficients(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``theta = |w|``, ``a = sin(theta) / theta`` and ``b = (1 - cos(theta)) / theta^2`` (K,) of rotation vectors
+    (K, 3), their Taylor series below ``_SMALL_ANGLE``."""
     theta = np.linalg.norm(w, axis=1)
     small = theta < _SMALL_ANGLE
     t = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0, np.sin(t) / t)
-    b = np.where(small, 0.5, (1.0 - np.cos(t)) / t**2)
-    K = np.zeros((len(w), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -w[:, 2], w[:, 1], -w[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = w[:, 2], -w[:, 1], w[:, 0]
-    return np.eye(3) + a[:, None, None] * K + b[:, None, None] * (K @ K)
+    a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(t) / t)
+    b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
+    return theta, a, b
 
 
 def so3_log(R: np.ndarray) -> np.ndarray:

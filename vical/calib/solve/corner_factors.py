@@ -47,7 +47,7 @@ import gtsam
 import numpy as np
 
 from vical.calib.solve.observations import FrameObservation
-from vical.geometry import CameraModel, CameraModelError, skew
+from vical.geometry import CameraModel, CameraModelError, skew, so3_exp_batch
 
 
 @dataclass(frozen=True)
@@ -81,30 +81,17 @@ class CornerKeys:
 
 
 def _se3_exp(xi: np.ndarray) -> np.ndarray:
-    """Transforms (F, 4, 4) of twists ``[w; v]`` (F, 6) (GTSAM's ``Pose3.Expmap``).
-
-    Rodrigues' ``R = cos(theta) I + a [w]x + b w w^T`` and ``t = v + b w x v + c w x (w x v)``, written with
-    vectors (one per corner with a rolling shutter: no 3 x 3 products).
-    """
+    """Transforms (F, 4, 4) of twists ``[w; v]`` (F, 6) (GTSAM's ``Pose3.Expmap``): the rotation
+    ``so3_exp_batch(w)`` and ``t = v + b w x v + c w x (w x v)``, written with vectors (one per corner with a rolling
+    shutter)."""
     w, v = xi[:, :3], xi[:, 3:]
     theta = np.linalg.norm(w, axis=1)
     small = theta < 1e-8
     t = np.where(small, 1.0, theta)
-    a = np.where(small, 1.0 - theta**2 / 6.0, np.sin(t) / t)
     b = np.where(small, 0.5 - theta**2 / 24.0, (1.0 - np.cos(t)) / t**2)
     c = np.where(small, 1.0 / 6.0 - theta**2 / 120.0, (t - np.sin(t)) / t**3)
     T = np.zeros((len(xi), 4, 4))
-    R = T[:, :3, :3]
-    R[:] = b[:, None, None] * w[:, :, None] * w[:, None, :]
-    for i in range(3):
-        R[:, i, i] += 1.0 - b * theta**2  # cos(theta)
-    aw = a[:, None] * w
-    R[:, 0, 1] -= aw[:, 2]
-    R[:, 0, 2] += aw[:, 1]
-    R[:, 1, 2] -= aw[:, 0]
-    R[:, 1, 0] += aw[:, 2]
-    R[:, 2, 0] -= aw[:, 1]
-    R[:, 2, 1] += aw[:, 0]
+    T[:, :3, :3] = so3_exp_batch(w)
     wv = np.cross(w, v)
     T[:, :3, 3] = v + b[:, None] * wv + c[:, None] * np.cross(w, wv)
     T[:, 3, 3] = 1.0
