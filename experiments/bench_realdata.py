@@ -121,7 +121,7 @@ def run_one(spec: dict) -> dict:
             "sigma_rot_deg": float(np.degrees(np.linalg.norm(sigma[[at["rot_x"], at["rot_y"], at["rot_z"]]]))),
             "sigma_t_mm": float(1e3 * np.linalg.norm(sigma[[at["t_x"], at["t_y"], at["t_z"]]])),
             "sigma_offset_ms": float(1e3 * sigma[at["time_offset"]]), "solve_time": r.solve_time,
-            "noise_scale": r.imu_noise_scale,
+            "noise_scale": r.imu_noise_scale, "pixel_sigma": r.pixel_sigma, "iterations": r.iterations,
             "sigmas": {n: float(sigma[at[n]]) for n in CONSISTENCY_PARAMETERS if n in at},
             "line_delay": r.line_delay, "warnings": list(r.warnings),
             "sigma_line_delay": float(sigma[at["line_delay"]]) if "line_delay" in at else None,

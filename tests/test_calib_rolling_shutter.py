@@ -15,8 +15,11 @@ import pytest
 
 from vical.apps.calibrate import main
 from vical.calib.solve.corner_factors import CornerFactors, CornerKeys
+from vical.calib.solve.corner_noise import _readout_fit, corner_noise
+from vical.calib.solve.initialization import starting_poses
 from vical.calib.solve.nominal import nominal_T_cam_imu
 from vical.calib.solve.observations import collect_observations
+from vical.calib.solve.outliers import reject_outliers
 from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint, calibrate_rig
 from vical.calib.solve.vi_problem import ViOptions
 from vical.calib.synthetic import Excitation, RigCamera, default_camera, imu_kinematics, make_recording
@@ -157,6 +160,54 @@ def test_global_shutter_data_give_no_rolling_shutter_warning():
     rec = recording(0.0, seed=4)
     plain = calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, ImuNoise())
     assert not [w for w in plain.warnings if "rolling shutter" in w]
+
+
+def _pnp_views(rec):
+    """The views the camera-IMU solve starts from: PnP poses with the true camera, outliers screened."""
+    camera = rec.truth.camera
+    observations = collect_observations(rec.frames, rec.target)
+    screened = reject_outliers(camera, observations, starting_poses(camera, observations, 12, None), 12)
+    return [(screened.observations[k], screened.poses[k]) for k in sorted(screened.poses)]
+
+
+@pytest.mark.parametrize("line_delay_us", [0.0, 40.0])
+def test_the_starting_corner_noise_is_not_inflated_by_the_readout(line_delay_us):
+    """The PnP residuals of a 40 us/row recording read 0.48 px for 0.3 px of noise; with the views' poses moving
+    through one readout they read the noise, and that readout is the truth's. On a global shutter: as PnP's."""
+    rec = recording(line_delay_us * US, seed=6)
+    views = _pnp_views(rec)
+    global_noise = corner_noise(rec.truth.camera, views, rolling_shutter=False)
+    rolling_noise = corner_noise(rec.truth.camera, views, rolling_shutter=True)
+    assert rolling_noise == pytest.approx(0.3, rel=0.03)
+    _, _, readout = _readout_fit(rec.truth.camera, views)
+    truth = rec.truth.line_delay * rec.truth.camera.height
+    assert readout == pytest.approx(truth, rel=0.02, abs=0.2e-3)
+    if line_delay_us:
+        assert global_noise > 1.4 * rolling_noise
+    else:
+        assert rolling_noise == pytest.approx(global_noise, rel=0.005)
+
+
+def test_a_strong_rolling_shutter_is_solved_without_reweighting_its_corners():
+    """The joint solve of a 40 us/row recording starts from the right corner noise, so it is not solved again with
+    the corners reweighted: at most one iteration (the readout's) more than the global-shutter solve of the same
+    data (10 for 3 when it started from the PnP residuals' 0.48 px)."""
+    rec = recording(40 * US, seed=7)
+    solves = {
+        rolling: calibrate_joint(
+            rec.frames,
+            rec.imu,
+            rec.target,
+            "radtan",
+            (640, 480),
+            ImuNoise(),
+            options=ViOptions(rolling_shutter=rolling),
+        )
+        for rolling in (False, True)
+    }
+    assert solves[True].iterations <= solves[False].iterations + 1
+    assert solves[True].pixel_sigma == pytest.approx(0.3, rel=0.05)
+    assert solves[False].pixel_sigma > 0.4
 
 
 def test_a_rigs_cameras_get_their_own_line_delays_in_the_joint_task():

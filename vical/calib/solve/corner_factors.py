@@ -123,7 +123,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
 
 
-def _point_to_pose(d_point: np.ndarray, q: np.ndarray) -> np.ndarray:
+def pose_jacobians(d_point: np.ndarray, q: np.ndarray) -> np.ndarray:
     """(N, 2, 6) pixel Jacobians w.r.t. a right perturbation of the camera pose, from those (N, 2, 3) w.r.t. the
     camera-frame point ``q`` (N, 3): ``C Exp([w; u])`` moves ``q`` to ``q + q x w - u``."""
     d_pose = np.empty((len(q), 2, 6))
@@ -327,7 +327,7 @@ class CornerFactors:
             return _Pass(inputs, self._huber((camera.project(q)[0] - self.measured) / self.sigma_px)[0])
         uv, d_point, d_parameters = camera.project_jacobians(q)
         residuals, kernel = self._huber((uv - self.measured) / self.sigma_px)
-        d_pose = _point_to_pose(d_point, q) / self.sigma_px
+        d_pose = pose_jacobians(d_point, q) / self.sigma_px
         d_parameters = d_parameters / self.sigma_px
         if kernel is not None:
             d_pose = np.einsum("nij,njk->nik", kernel, d_pose)
@@ -449,7 +449,7 @@ class CornerFactors:
         inputs = self._read(values)
         shift, q = self._camera_points(inputs)
         d_point = self.camera.with_parameters(inputs.camera).project_jacobians(q)[1]
-        unwhitened = _Pass(inputs, self.measured, d_pose=_point_to_pose(d_point, q))
+        unwhitened = _Pass(inputs, self.measured, d_pose=pose_jacobians(d_point, q))
         self._chain(unwhitened, shift)
         if unwhitened.corner_jacobians is not None:
             return unwhitened.corner_jacobians["time"][:, :, 0]
@@ -460,4 +460,4 @@ class CornerFactors:
         return float(np.sum(self._evaluate(self._read(values), need_jacobians=False).residuals ** 2))
 
 
-__all__ = ["CornerFactors", "CornerKeys", "adjoint", "skew", "skew_batch"]
+__all__ = ["CornerFactors", "CornerKeys", "adjoint", "pose_jacobians", "skew", "skew_batch"]

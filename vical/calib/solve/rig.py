@@ -17,8 +17,8 @@ import numpy as np
 
 from vical.calib.errors import CalibrationError
 from vical.calib.result import FramePoses
+from vical.calib.solve.corner_noise import corner_noise
 from vical.calib.solve.initialization import MIN_INIT_CORNERS, starting_poses
-from vical.calib.solve.intrinsics import estimated_pixel_sigma
 from vical.calib.solve.observations import FrameObservation
 from vical.calib.solve.outliers import reject_outliers
 from vical.calib.solve.time_alignment import align, rotation_increments
@@ -26,7 +26,6 @@ from vical.data import Target, seconds_since
 from vical.geometry import CameraModel, invert_transform, make_transform
 
 PAIR_TOLERANCE = 0.005  # [s] a frame joins the first camera's frame taken this close (first-order exposure shift)
-MIN_PIXEL_SIGMA = 0.01  # [px] floor of the estimated corner noise
 
 
 @dataclass
@@ -70,8 +69,10 @@ def prepare_other(
     pixel_sigma: float | None,
     initial_T_cam_imu: np.ndarray | None,
     start_poses: FramePoses | None = None,
+    rolling_shutter: bool = False,
 ) -> OtherCamera:
-    """Starting poses (``starting_poses``; outliers rejected) and the corner noise of another camera's frames."""
+    """Starting poses (``starting_poses``; outliers rejected) and the corner noise of another camera's frames
+    (``corner_noise``: ``rolling_shutter`` when its line delay is estimated)."""
     min_corners = min(MIN_INIT_CORNERS, target.num_points)
     initial = starting_poses(camera, observations, min_corners, start_poses)
     rejection = reject_outliers(camera, observations, initial, min_corners)
@@ -82,8 +83,8 @@ def prepare_other(
         )
     ids = sorted(poses)
     used = [rejection.observations[k] for k in ids]
-    residuals = np.concatenate([o.residuals(camera, poses[k]) for o, k in zip(used, ids, strict=True)])
-    sigma = pixel_sigma or max(estimated_pixel_sigma(residuals, 6 * len(ids)), MIN_PIXEL_SIGMA)
+    views = [(o, poses[k]) for o, k in zip(used, ids, strict=True)]
+    sigma = pixel_sigma or corner_noise(camera, views, rolling_shutter)
     t_ns = np.array([o.t_ns for o in used], dtype=np.int64)
     T_target_cam = np.array([invert_transform(poses[k]) for k in ids])
     warnings = [f"{name}: {w}" for w in rejection.warnings]

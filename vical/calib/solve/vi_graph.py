@@ -11,6 +11,7 @@ import numpy as np
 
 from vical.calib.errors import CalibrationError
 from vical.calib.solve.corner_factors import CornerFactors, CornerKeys
+from vical.calib.solve.corner_noise import MIN_PIXEL_SIGMA
 from vical.calib.solve.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
 from vical.calib.solve.imu_intrinsics import IntervalReadings, IntrinsicImuFactor, prior_sigmas
 from vical.calib.solve.rig import OtherCamera, pair
@@ -29,7 +30,6 @@ from vical.calib.solve.vi_problem import (
     L_KEY,
     MAX_REWEIGHTS,
     MAX_ROUNDS,
-    MIN_PIXEL_SIGMA,
     READOUT_PRIOR_SIGMA,
     RECENTRE_OFFSET,
     REWEIGHT_EXPONENT_DOWN,

@@ -11,10 +11,10 @@ import numpy as np
 
 from vical.calib.errors import CalibrationError, CalibrationSettingError
 from vical.calib.result import FramePoses
+from vical.calib.solve.corner_noise import corner_noise
 from vical.calib.solve.imu_intrinsics import check_excitation
 from vical.calib.solve.imu_intrinsics import check_model as check_imu_model
 from vical.calib.solve.initialization import MIN_INIT_CORNERS, starting_poses
-from vical.calib.solve.intrinsics import estimated_pixel_sigma
 from vical.calib.solve.observations import FrameObservation
 from vical.calib.solve.outliers import reject_outliers
 from vical.calib.solve.rig import OtherCamera
@@ -26,7 +26,6 @@ from vical.geometry import CameraModel, invert_transform, make_transform
 GRAVITY_MAGNITUDE = 9.81  # [m/s^2]
 GYRO_BIAS_PRIOR_SIGMA = 0.1  # [rad/s] weak prior on the first gyro bias (keeps short recordings well posed)
 ACCEL_BIAS_PRIOR_SIGMA = 1.0  # [m/s^2] weak prior on the first accelerometer bias
-MIN_PIXEL_SIGMA = 0.01  # [px] floor of the estimated corner noise (noise-free data would weight pixels infinitely)
 RECENTRE_OFFSET = 1e-3  # [s] re-linearise the states at the new offset when the in-graph correction exceeds this
 MAX_ROUNDS = 3
 # Noise levels (vical.calib.solve.variance): a sensor whose residuals say its noise is off by more than this
@@ -225,10 +224,9 @@ def prepare_problem(
             f"only {len(poses)} frames have a usable target pose; camera-IMU calibration needs a sequence of views"
         )
     ids = sorted(poses)
-    residuals = np.concatenate([frames_obs[k].residuals(camera, poses[k]) for k in ids])
     sigma = options.pixel_sigma
     if sigma is None:
-        sigma = max(estimated_pixel_sigma(residuals, 6 * len(ids)), MIN_PIXEL_SIGMA)
+        sigma = corner_noise(camera, [(frames_obs[k], poses[k]) for k in ids], options.rolling_shutter)
     gyro, accel = imu.gyro, imu.accel
     if options.estimate_imu_intrinsics:
         check_excitation(gyro, accel)

@@ -126,7 +126,7 @@ def _initial_other(problem: ViProblem, est: ViEstimate, index: int, given: Camer
     opts = problem.options
     other = prepare_other(
         given.name, index, given.observations[:: opts.frame_stride], given.camera, problem.target,
-        problem.t0_ns, opts.pixel_sigma, given.initial_T_cam_imu, given.start_poses,
+        problem.t0_ns, opts.pixel_sigma, given.initial_T_cam_imu, given.start_poses, opts.rolling_shutter,
     )  # fmt: skip
     other.readout = other.readout_given = given.line_delay * given.camera.height
     initialise_other(
