@@ -19,7 +19,7 @@ from vical.calib.solve.plausibility import (
 )
 from vical.calib.synthetic import make_recording
 from vical.data import ImuNoise, ImuSamples, Target
-from vical.geometry import make_transform, so3_exp
+from vical.geometry import make_transform, so3_exp, so3_log
 
 
 @pytest.fixture(scope="module")
@@ -101,8 +101,8 @@ def test_the_boards_scale_is_the_cameras_accelerations_over_the_imus(ten_seconds
 
 def turning_in_place(declared_over_true: float, seconds: float = 10.0):
     """A camera that mostly turns about its own centre (1 m before the board; the centre sways 3 cm), its IMU
-    10 cm off: the camera's PnP poses at 20 Hz (positions k times the truth) and the IMU's specific force at
-    200 Hz, from the exact kinematics (second derivatives by central differences of a 2 kHz trajectory)."""
+    10 cm off: the camera's PnP poses at 20 Hz (positions k times the truth) and the IMU's specific force and rate at
+    200 Hz, from the exact kinematics (derivatives by central differences of a 2 kHz trajectory)."""
     fine = np.arange(0.0, seconds, 5e-4)
     angles = 0.4 * np.sin(2 * np.pi * np.outer(fine, [0.31, 0.53, 0.23]) + [0.0, 1.0, 2.0])
     R_board_cam = np.array([so3_exp(a) for a in angles]) @ np.diag([1.0, -1.0, -1.0])  # looking at the board (-z)
@@ -114,7 +114,11 @@ def turning_in_place(declared_over_true: float, seconds: float = 10.0):
     force = np.einsum("nji,nj->ni", R_board_cam, accel_board - gravity)  # R_cam_imu = I: the IMU's axes the camera's
     imu_every, frame_every = 10, 100
     t_ns = np.round(fine * 1e9).astype(np.int64)
-    imu = ImuSamples(t_ns[::imu_every], np.zeros((len(t_ns[::imu_every]), 3)), force[::imu_every])
+    at = np.arange(0, len(fine), imu_every)
+    ahead, behind = np.minimum(at + 1, len(fine) - 1), np.maximum(at - 1, 0)
+    gyro = np.array([so3_log(R_board_cam[b].T @ R_board_cam[a]) for a, b in zip(ahead, behind, strict=True)])
+    gyro /= (fine[ahead] - fine[behind])[:, None]  # the body rate by central differences
+    imu = ImuSamples(t_ns[at], gyro, force[at])
     T_cam_board = np.tile(np.eye(4), (len(fine[::frame_every]), 1, 1))
     R = R_board_cam[::frame_every]
     T_cam_board[:, :3, :3] = np.transpose(R, (0, 2, 1))
