@@ -21,7 +21,7 @@ from omegaconf import OmegaConf
 ROOT = Path(__file__).resolve().parents[1]
 CONF = ROOT / "conf"
 SNAPSHOTS = Path(__file__).resolve().parent / "data" / "composed"
-APPS = ("train", "evaluate", "record", "collect")
+APPS = ("train", "evaluate", "record", "collect", "guide")
 # train_*.yaml configure vical-train, the others vical-evaluate (as tests/test_config_compose.py composes them).
 EXPERIMENTS = sorted(f.stem for f in (CONF / "experiment").glob("*.yaml"))
 CASES = [*APPS, *(f"{'train' if e.startswith('train_') else 'evaluate'}+{e}" for e in EXPERIMENTS)]

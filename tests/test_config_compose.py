@@ -12,13 +12,14 @@ OPTIONS = [(g, f.stem) for g in GROUPS for f in sorted((CONF / g).glob("*.yaml")
 ROOTS = sorted(f.stem for f in CONF.glob("*.yaml"))
 # Groups whose options interpolate other groups of the root config (env=calibration reads sim, sensor, task and
 # workspace; model_based and stop=information read the workspace's name; a workspace writes into sim; robot=sim
-# reads sim, sensor, task and the seed).
+# and person=sim read sim, sensor, task and the seed).
 NEEDS = {
     "env": ["+sim=default", "+sensor=paper", "+task=joint", "+workspace=practitioner"],
     "policy": ["+workspace=practitioner"],
     "stop": ["+workspace=practitioner"],
     "workspace": ["+sim=default"],
     "robot": ["+sim=default", "+sensor=paper", "+task=joint", "+seed=0"],
+    "person": ["+sim=default", "+sensor=paper", "+task=joint", "+seed=0"],
 }
 
 

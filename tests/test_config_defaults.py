@@ -24,6 +24,8 @@ import pytest
 import yaml
 
 from vical.calib.tasks import CalibrationTask
+from vical.collection.guide import Arrival, Start
+from vical.collection.page import PageSettings
 from vical.collection.runner import Alignment, Limits
 from vical.env.settings import MdpConfig, Workspace
 from vical.evaluation.harness import PolicySpec
@@ -35,10 +37,12 @@ from vical.rl.run_settings import TrainConfig
 from vical.rl.sac import SACConfig
 from vical.robot.franka import FrankaArm
 from vical.robot.realsense import RealSenseSensor
-from vical.robot.rigs import ros
+from vical.robot.rigs import ros, ros_in_hand
 from vical.robot.ros import RosArm, RosSensor
 from vical.robot.ur import URArm
 from vical.sim.adapters import RigFaults
+from vical.sim.hand_held import hand_held_rig
+from vical.sim.person import HandModel
 from vical.sim.sampling import SensorSampling
 from vical.sim.settings import SimConfig
 
@@ -130,12 +134,21 @@ PAIRS: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [
     ("robot/ros.yaml", (), argument_defaults(ros)),
     ("robot/ros.yaml", ("arm",), argument_defaults(RosArm, T_flange_tool=IDENTITY)),
     ("robot/ros.yaml", ("sensor",), argument_defaults(RosSensor)),
+    ("guide.yaml", ("start",), dataclass_defaults(Start)),
+    ("guide.yaml", ("arrival",), dataclass_defaults(Arrival)),
+    ("guide.yaml", ("limits",), dataclass_defaults(Limits)),
+    ("guide.yaml", ("page",), dataclass_defaults(PageSettings)),
+    ("person/sim.yaml", (), {**argument_defaults(hand_held_rig), **dataclass_defaults(HandModel)}),
+    ("person/realsense.yaml", ("sensor",), argument_defaults(RealSenseSensor)),
+    ("person/ros.yaml", (), argument_defaults(ros_in_hand)),
+    ("person/ros.yaml", ("sensor",), argument_defaults(RosSensor)),
 ]
 
 # Files whose keys no dataclass or constructor default reads, so they are the only home of their values.
 NO_COUNTERPART = {
     "collect.yaml": "the app's own settings (read by vical.apps.collect) besides `align` and `limits` (PAIRS)",
     "evaluate.yaml": "the app's own settings, read by vical.apps.evaluate; no dataclass holds defaults of them",
+    "guide.yaml": "the app's own settings (read by vical.apps.guide) besides start, arrival, limits, page (PAIRS)",
     "record.yaml": "the app's own settings, checked by vical.apps.record.check_settings (no defaults)",
     "train.yaml": "seed, torch_threads, run_dir, resume: RunSettings has no defaults; `train` is in PAIRS",
     "env/pendulum.yaml": "gymnasium.make's arguments (the env id)",
@@ -166,6 +179,9 @@ DIFFERS = {
     ("agent/sac_authors.yaml", "n_q"): "the authors' code's setting",
     ("agent/sac_authors.yaml", "alpha"): "the authors' code's setting",
     ("stop/information.yaml", "rule"): "the information state's rule for every baseline is the point of this option",
+    ("guide.yaml", "limits.time_limit"): "a guided person's limit is seconds of recording (the arm's 900 s are wall "
+    "time, alignment and all)",
+    ("person/realsense.yaml", "sensor.exposure_us"): "a sensor in a hand moves: a short fixed exposure against blur",
     # A Ray cluster instead of local processes.
     ("parallel/ray.yaml", "workers"): "a cluster runs more than one worker",
     ("parallel/ray.yaml", "backend"): "the point of this option",

@@ -96,9 +96,9 @@ def test_the_guide_sends_the_person_to_the_start_then_where_the_policy_goes():
 @pytest.mark.parametrize(
     ("make", "message"),
     [
-        (lambda: Arrival(still_s=0.0), r"guide\.arrival\.still_s must be a number in \(0\.0, inf\)"),
-        (lambda: Start(distance=-0.5), r"guide\.start\.distance must be a number in \(0\.0, inf\)"),
-        (lambda: Start(distance=0.7, min_corners=3), r"guide\.start\.min_corners must be a number in \[4, inf\)"),
+        (lambda: Arrival(still_s=0.0), r"arrival\.still_s must be a number in \(0\.0, inf\)"),
+        (lambda: Start(distance=-0.5), r"start\.distance must be a number in \(0\.0, inf\)"),
+        (lambda: Start(distance=0.7, min_corners=3), r"start\.min_corners must be a number in \[4, inf\)"),
     ],
 )
 def test_bad_guide_settings_are_refused_by_key(make, message):

@@ -1,12 +1,12 @@
-"""The tutorials print what their pages show: every ``$ command`` of docs/tutorial-export-to-kalibr.md and then
-docs/tutorial-calibrate-your-recording.md runs (in one working directory, in page order), and its output is
-compared with the lines below it on the page.
+"""The tutorials print what their pages show: every ``$ command`` of docs/tutorial-export-to-kalibr.md,
+docs/tutorial-calibrate-your-recording.md and docs/tutorial-guided.md runs (in one working directory, in page order),
+and its output is compared with the lines below it on the page.
 
 Comparison: line by line; a page line ``...`` stands for any number of output lines; numbers agree to 1e-6
 relative or 1e-9 absolute (the last digits of full-precision floats may differ between machines); solve times are
 not compared.
-``vical-record`` runs as its console script (Hydra), the other apps through their ``main(argv)``; every file a
-page uses is made by a command on it.
+``vical-record`` and ``vical-guide`` run as their console scripts (Hydra), the other apps through their
+``main(argv)``; every file a page uses is made by a command on it.
 """
 
 from __future__ import annotations
@@ -26,7 +26,8 @@ import pytest
 from vical.apps import calibrate, export, imu_noise
 
 DOCS = Path(__file__).resolve().parents[1] / "docs"
-PAGES = ("tutorial-export-to-kalibr.md", "tutorial-calibrate-your-recording.md")  # the second uses the first's files
+# The second uses the first's files; the third runs on a simulated person.
+PAGES = ("tutorial-export-to-kalibr.md", "tutorial-calibrate-your-recording.md", "tutorial-guided.md")
 NUMBER = re.compile(r"[-+]?(?:\d+\.\d*|\.\d+|\d+)(?:[eE][-+]?\d+)?")
 # Wall-clock times vary from run to run: "solve time [s]  0.107", "solver: converged, 3 iterations, 0.107 s".
 SOLVE_TIME = re.compile(r"(?<=solve time \[s\])\s+[\d.]+|(?<=iterations, )[\d.]+(?= s)")
@@ -66,7 +67,7 @@ def _in_process(main, argv: list[str], cwd: Path) -> str:
 def run(command: str, cwd: Path) -> str:
     """What ``command`` prints, run in ``cwd``."""
     program, *argv = shlex.split(command)
-    if program == "vical-record":
+    if program in ("vical-record", "vical-guide"):  # Hydra apps: their console scripts
         done = subprocess.run(
             [str(Path(sys.executable).parent / program), *argv], cwd=cwd, capture_output=True, text=True, timeout=300
         )

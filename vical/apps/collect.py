@@ -19,7 +19,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import hydra
 from hydra.errors import InstantiationException
@@ -55,6 +55,18 @@ USER_ERRORS = (ConfigError, FileExistsError, FileNotFoundError)
 FAULTS = (CollectionStopped, MotionRefused, SensorStreamError)
 EXIT_FAULT = 1
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
+
+
+class CollectionOutput(Protocol):
+    """What a collection's writing and calibration read of its settings (``check_output``): ``CollectSettings``
+    and ``vical.apps.guide.GuideSettings``."""
+
+    out: Path
+    overwrite: bool
+    task: str
+    camchain: Path | None
+    imu_yaml: Path | None
+    rolling_shutter: bool
 
 
 @dataclass(frozen=True)
@@ -95,6 +107,18 @@ def _readable_file(value: Any, key: str, reader) -> Path | None:
 
 def check_settings(cfg: DictConfig) -> CollectSettings:
     """The settings of ``cfg``, checked before anything connects; ``ConfigError`` naming the key otherwise."""
+    try:
+        align = from_mapping(Alignment, plain(cfg.align), "align")
+        limits = from_mapping(Limits, plain(cfg.limits), "limits")
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    return CollectSettings(align=align, limits=limits, **check_output(cfg))
+
+
+def check_output(cfg: DictConfig) -> dict[str, Any]:
+    """The settings ``vical-collect`` and ``vical-guide`` share (where the collection goes, what is calibrated from
+    which nominal files), checked: ``out``, ``overwrite``, ``task``, ``camchain``, ``imu_yaml``,
+    ``rolling_shutter``."""
     out = cfg.get("out")
     require(isinstance(out, str) and bool(out), "out", "a directory path", out)
     overwrite = bool(cfg.get("overwrite"))
@@ -106,15 +130,11 @@ def check_settings(cfg: DictConfig) -> CollectSettings:
     camchain = _readable_file(guess.get("camchain"), "guess.camchain", read_camchain)
     if task == "extrinsic" and camchain is None:
         raise ConfigError("the extrinsic task calibrates with known intrinsics: pass guess.camchain=<camchain.yaml>")
-    try:
-        align = from_mapping(Alignment, plain(cfg.align), "align")
-        limits = from_mapping(Limits, plain(cfg.limits), "limits")
-    except ValueError as err:
-        raise ConfigError(str(err)) from None
     rolling = cfg.get("rolling_shutter", False)
     require(isinstance(rolling, bool), "rolling_shutter", "true or false", rolling)
-    return CollectSettings(path, overwrite, task, align, limits, camchain,
-                           _readable_file(guess.get("imu_yaml"), "guess.imu_yaml", read_imu_yaml), rolling)  # fmt: skip
+    imu_yaml = _readable_file(guess.get("imu_yaml"), "guess.imu_yaml", read_imu_yaml)
+    return {"out": path, "overwrite": overwrite, "task": task, "camchain": camchain, "imu_yaml": imu_yaml,
+            "rolling_shutter": rolling}  # fmt: skip
 
 
 def mdp_config(cfg: DictConfig, policy: Policy) -> MdpConfig:
@@ -123,7 +143,7 @@ def mdp_config(cfg: DictConfig, policy: Policy) -> MdpConfig:
     return MdpConfig.from_config({**env, **policy_mdp(policy)})
 
 
-def nominal_sensor(s: CollectSettings, rig: Any) -> SensorTruth:
+def nominal_sensor(s: CollectionOutput, rig: Any) -> SensorTruth:
     """The sensor's nominal values: the ``guess`` files, else the adapter's datasheet."""
     datasheet: SensorTruth | None = getattr(rig, "datasheet", None)
     if datasheet is None and (s.camchain is None or s.imu_yaml is None):
@@ -143,18 +163,19 @@ def nominal_sensor(s: CollectSettings, rig: Any) -> SensorTruth:
     return SensorTruth(camera, T_cam_imu, shift or 0.0, noise)
 
 
-def build_robot(robot: DictConfig) -> Any:
-    """The ``robot`` group's rig; what its adapter refuses (a bad setting, a missing extra) is a ``ConfigError``."""
+def build_robot(robot: DictConfig, group: str = "robot") -> Any:
+    """The ``group`` config group's rig (``robot``; vical-guide's ``person``); what its adapter refuses (a bad
+    setting, a missing extra) is a ``ConfigError``."""
     try:
         return hydra.utils.instantiate(robot, _convert_="all")
     except InstantiationException as err:
         cause = err.__cause__
         if isinstance(cause, ValueError | ImportError):
-            raise ConfigError(f"robot: {cause}") from None
+            raise ConfigError(f"{group}: {cause}") from None
         raise
 
 
-def _aside(out: Path) -> Path:
+def aside(out: Path) -> Path:
     """Where a run collects: ``out`` when nothing is there, else a fresh sibling (``overwrite=true`` over a
     collection: it replaces the old one once complete, ``replace_directory``)."""
     if not out.exists():
@@ -175,13 +196,13 @@ def collect(cfg: DictConfig) -> int:
         if cfg.get("dry_run"):
             _dry_run(cfg, s, rig, policy, mdp, nominal)
             return 0
-        final, s = s.out, replace(s, out=_aside(s.out))  # a collection there is replaced only by a complete one
+        final, s = s.out, replace(s, out=aside(s.out))  # a collection there is replaced only by a complete one
         result = _run(cfg, s, rig, policy, mdp, nominal)
     finally:
         rig.close()
     if result is None:
         return EXIT_FAULT
-    status = _calibrate_or_stop(s, result, bool(cfg.get("report"))) if cfg.get("calibrate") else 0
+    status = calibrate_or_stop(s, result, bool(cfg.get("report"))) if cfg.get("calibrate") else 0
     if s.out != final:
         replace_directory(s.out, final)
         print(f"the collection in {final} is replaced by this one (the paths above, under {s.out}, are now under it)")
@@ -243,17 +264,17 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
         with rig.arm, rig.sensor:
             result = collector.run(int(cfg.seed))
     except FAULTS as err:
-        _write_summary(s, None, f"stopped: {err}", writer.frames)
+        write_summary(s, None, f"stopped: {err}", writer.frames)
         _write_bag(cfg, s)
         report_error(APP, f"stopped: {err}; the arm is stopped and the recording so far is in {writer.path} "
-                          f"({writer.frames} frames): {_calibrate_hint(s)}")  # fmt: skip
+                          f"({writer.frames} frames): {calibrate_hint(s)}")  # fmt: skip
         return None
     except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (vical.apps.entry)
-        _write_summary(s, None, f"interrupted ({interrupted_by(err)})", writer.frames)
+        write_summary(s, None, f"interrupted ({interrupted_by(err)})", writer.frames)
         print(f"{APP}: interrupted ({interrupted_by(err)}): the arm is stopped and the recording so far is in "
-              f"{writer.path} ({writer.frames} frames): {_calibrate_hint(s)}", file=sys.stderr)  # fmt: skip
+              f"{writer.path} ({writer.frames} frames): {calibrate_hint(s)}", file=sys.stderr)  # fmt: skip
         raise SystemExit(interrupted_status(err)) from None
-    _write_summary(s, result, f"done: {result.reason}", writer.frames)
+    write_summary(s, result, f"done: {result.reason}", writer.frames)
     _write_bag(cfg, s)
     return result
 
@@ -271,7 +292,7 @@ def _write_bag(cfg: DictConfig, s: CollectSettings) -> None:
     print(f"bag written to {write_bag(recording, s.out / 'recording.bag')}")
 
 
-def _calibrate_args(s: CollectSettings) -> list[str]:
+def _calibrate_args(s: CollectionOutput) -> list[str]:
     args = [str(s.out / "recording"), "--task", s.task, "--target", str(s.out / "target.yaml"), "--stored-corners"]
     if s.task != "intrinsic":
         args += ["--imu-yaml", str(s.out / "imu.yaml")]
@@ -282,30 +303,30 @@ def _calibrate_args(s: CollectSettings) -> list[str]:
     return args + ["--out", str(s.out / "calibration")]
 
 
-def _calibrate_hint(s: CollectSettings) -> str:
+def calibrate_hint(s: CollectionOutput) -> str:
     return "calibrate it with: vical-calibrate " + " ".join(_calibrate_args(s))
 
 
-def _calibrate_or_stop(s: CollectSettings, result: CollectResult, report: bool) -> int:
+def calibrate_or_stop(s: CollectionOutput, result: CollectResult, report: bool) -> int:
     """``_calibrate``; an interrupt there keeps the recording, says how to calibrate it, and is recorded in
     ``collect.yaml``."""
     try:
         return _calibrate(s, report)
     except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (vical.apps.entry)
         by = interrupted_by(err)
-        _write_summary(s, result, f"done: the recording; the calibration interrupted ({by})", result.frames)
-        print(f"{APP}: interrupted ({by}) in the calibration: the recording is in {s.out}: {_calibrate_hint(s)}",
+        write_summary(s, result, f"done: the recording; the calibration interrupted ({by})", result.frames)
+        print(f"{APP}: interrupted ({by}) in the calibration: the recording is in {s.out}: {calibrate_hint(s)}",
               file=sys.stderr)  # fmt: skip
         raise SystemExit(interrupted_status(err)) from None
 
 
-def _calibrate(s: CollectSettings, report: bool) -> int:
+def _calibrate(s: CollectionOutput, report: bool) -> int:
     """``vical-calibrate`` on the recording; its exit status (1 when it failed)."""
     status = calibrate.main(_calibrate_args(s) + ([] if report else ["--no-report"]))
     return 0 if status == 0 else EXIT_FAULT
 
 
-def _write_summary(s: CollectSettings, result: CollectResult | None, outcome: str, frames: int) -> None:
+def write_summary(s: CollectionOutput, result: CollectResult | None, outcome: str, frames: int) -> None:
     summary: dict[str, Any] = {"outcome": outcome, "frames": frames, "task": s.task}
     if result is not None:
         summary.update({"steps": result.steps, "path_length_m": round(result.path_length, 4),

@@ -103,5 +103,9 @@ def collect() -> NoReturn:
     run("vical-collect", "vical.apps.collect:main")
 
 
+def guide() -> NoReturn:
+    run("vical-guide", "vical.apps.guide:main")
+
+
 def imu_noise() -> NoReturn:
     run("vical-imu-noise", "vical.apps.imu_noise:main")

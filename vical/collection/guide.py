@@ -73,7 +73,7 @@ class Arrival:
 
     def __post_init__(self) -> None:
         for name in ("min_s", "still_s", "still_m", "still_deg", "patience_s"):
-            require_range(f"guide.arrival.{name}", getattr(self, name), 0.0, low_open=True)
+            require_range(f"arrival.{name}", getattr(self, name), 0.0, low_open=True)
 
 
 @dataclass(frozen=True)
@@ -91,9 +91,9 @@ class Start:
     min_corners: int = 8
 
     def __post_init__(self) -> None:
-        require_range("guide.start.distance", self.distance, 0.0, low_open=True)
-        require_range("guide.start.start_rest", self.start_rest, 0.0, low_open=True)
-        require_range("guide.start.min_corners", self.min_corners, 4)
+        require_range("start.distance", self.distance, 0.0, low_open=True)
+        require_range("start.start_rest", self.start_rest, 0.0, low_open=True)
+        require_range("start.min_corners", self.min_corners, 4)
 
 
 def upright_board_frame(T_board_cam: np.ndarray, up_board: np.ndarray) -> np.ndarray:

@@ -126,15 +126,12 @@ class Limits:
 
     def __post_init__(self) -> None:
         if self.max_steps is not None and int(self.max_steps) < 1:
-            raise ValueError(f"collect.limits.max_steps must be >= 1 or null, got {self.max_steps}")
+            raise ValueError(f"limits.max_steps must be >= 1 or null, got {self.max_steps}")
         for name in ("time_limit", "max_imu_gap", "wait_timeout"):
             if not float(getattr(self, name)) > 0:
-                raise ValueError(f"collect.limits.{name} must be > 0, got {getattr(self, name)}")
+                raise ValueError(f"limits.{name} must be > 0, got {getattr(self, name)}")
         if int(self.lost_frames) < 1 or int(self.max_refused) < 1 or float(self.poll_interval) < 0:
-            raise ValueError(
-                "collect.limits.lost_frames and collect.limits.max_refused must be >= 1, "
-                "collect.limits.poll_interval >= 0"
-            )
+            raise ValueError("limits.lost_frames and limits.max_refused must be >= 1, limits.poll_interval >= 0")
 
 
 @dataclass(frozen=True)
@@ -176,6 +173,8 @@ class SensorStream:
         self.limits = limits
         self.recording = False
         self.keep_imu = False  # keep the IMU samples without recording (the dry run)
+        # Shown every frame with its detections as it is read (vical-guide's page), when set.
+        self.viewer: Callable[[CameraImage | CameraDetections, np.ndarray, np.ndarray], None] | None = None
         self.frames = 0  # recorded
         self._imu: list[ImuSamples] = []
         self._last_imu: int | None = None
@@ -202,6 +201,8 @@ class SensorStream:
         for frame in data.frames:
             corners, ids = self.corners_of(frame)
             self._lost = 0 if len(ids) else self._lost + 1
+            if self.viewer is not None:
+                self.viewer(frame, corners, ids)
             if self.recording:
                 if self.writer is not None:
                     self._write(frame, corners, ids)

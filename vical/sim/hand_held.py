@@ -17,7 +17,9 @@ samples, time passing as it is read) as a live sensor is read.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -162,3 +164,20 @@ class HandHeldRig(Person):
     def close(self) -> None:
         """Free the renderer."""
         self.recorder.close()
+
+
+def hand_held_rig(
+    sim: Mapping[str, Any],
+    sensor: Mapping[str, Any],
+    seed: int,
+    images: bool = True,
+    asymmetric_distortion: bool = False,
+    **hand: Any,
+) -> HandHeldRig:
+    """The ``person=sim`` factory of ``vical-guide`` (``conf/person/sim.yaml``): a simulated person (``HandModel``
+    settings in ``hand``) with the simulated sensor drawn with ``seed``; ``images``: render every frame (the page's
+    live image and the EuRoC recording need them; false: the board's analytic corners only)."""
+    if "tremor_band_hz" in hand:
+        hand["tremor_band_hz"] = tuple(hand["tremor_band_hz"])
+    return HandHeldRig(SimConfig.from_mapping(sim), SensorSampling.from_config(sensor), int(seed), HandModel(**hand),
+                       keep_images=bool(images), asymmetric_distortion=bool(asymmetric_distortion))  # fmt: skip
