@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -164,15 +165,20 @@ def build_guide(
     mdp: MdpConfig,
     nominal: SensorTruth,
     page: GuidePage | None,
+    recording: Path | None,
+    progress: Callable[[str], None] | None = None,
 ) -> Guide:
-    """The guide on ``holder``'s sensor, writing ``<out>/recording``, showing the page and the simulated person."""
+    """The guide on ``holder``'s sensor, writing the EuRoC folder ``recording`` (None: nothing, as a comparison at
+    corner level), showing the page and the simulated person; ``progress`` defaults to the page's stage and a
+    printed line when ``cfg.progress``."""
     sensor = holder.sensor
-    writer = EurocStreamWriter(s.out / "recording", sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz,
-                               nominal.imu_noise)  # fmt: skip
+    writer = None if recording is None else EurocStreamWriter(
+        recording, sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz, nominal.imu_noise)  # fmt: skip
     guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise,
                   mdp.information.pixel_sigma, lens_spread(cfg, mdp, nominal))  # fmt: skip
     people = [p for p in (page, holder) if isinstance(p, Person)]
-    progress = (lambda line: _say(page, line)) if cfg.get("progress") else (lambda line: None)
+    if progress is None:
+        progress = (lambda line: _say(page, line)) if cfg.get("progress") else (lambda line: None)
     guide = Guide(sensor, Shown(people), policy, mdp, s.task, board(cfg, holder), guess, writer, s.start, s.arrival,
                   limits=s.limits, progress=progress)  # fmt: skip
     if page is not None:
@@ -185,7 +191,7 @@ def _run(cfg, s: GuideSettings, holder, policy, mdp, nominal, page) -> CollectRe
     s.out.mkdir(parents=True, exist_ok=True)
     write_target_yaml(s.out / "target.yaml", board(cfg, holder))
     write_imu_yaml(s.out / "imu.yaml", nominal.imu_noise)
-    guide_ = build_guide(cfg, s, holder, policy, mdp, nominal, page)
+    guide_ = build_guide(cfg, s, holder, policy, mdp, nominal, page, s.out / "recording")
     writer = guide_.stream.writer
     try:
         result = guide_.run(int(cfg.seed))

@@ -1,0 +1,124 @@
+"""A simulated person, guided or following written instructions: which way reaches the tolerances sooner?
+
+The same simulated person (``person=sim``: 7 cm / 10 deg placement error per pose, 1.5 s minimum-jerk reaches,
+1 mm / 0.3 deg tremor at 8-12 Hz; docs/simulation.md) holds each sensor and follows, pose by pose, in
+``vical-guide``'s loop (``vical.collection.guide.Guide``, at corner level: nothing rendered, nothing written):
+
+- **guided, learned**: the shipped collection policy (``policy=learned``), "done" by its own stopping rule;
+- **guided, greedy planner**: the information-greedy planner (``policy=greedy_information``);
+- **written routine**: Kalibr's recommended routine as written instructions (``policy=expert_long``: views close
+  and far, tilted, rolled, then swings along and about every axis), followed to its end without feedback;
+- **written routine + done**: the same, with a live "done" from the shared stopping rule (``stop=information``).
+
+Per sensor: the recording time and path at the stop, whether "done" came (within the step limit), the joint
+calibration's true errors, and whether a "done" was right (every scored group within its tolerance); the
+table is ``vical-evaluate``'s time-to-tolerance table (paired 95 % intervals against the learned policy).
+
+Sensors: reset seeds from 60000 (held out: no training, fitting, test or doc used them); ``--sensors`` of them.
+
+    python experiments/guided_comparison.py --sensors 30            # ~35 min on 2 cores (2 workers)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+
+import numpy as np
+from hydra import compose, initialize_config_dir
+
+from vical.apps.cli import plain
+from vical.apps.collect import build_robot, mdp_config, nominal_sensor
+from vical.apps.evaluate import stops_table
+from vical.apps.guide import CONF_DIR, build_guide, check_settings
+from vical.calib.tasks import CalibrationTask
+from vical.config_checks import from_mapping
+from vical.evaluation.harness import EpisodeRow, calibrate_row, instantiate_policy
+from vical.evaluation.time_to_tolerance import summarize_stops
+from vical.policies.stopping import StopRule, information_settings, with_stop
+
+FIRST_SEED = 60000
+# A person who loses the board from view goes on with the routine (a live vical-guide stops after 60 frames so that
+# someone notices; here every condition goes on alike, and the frames without the board are no data).
+NEVER_LOST = 1_000_000
+REFERENCE = "guided, learned"
+CONDITIONS = {  # name: (policy, stop)
+    REFERENCE: ("learned", "policy"),
+    "guided, greedy planner": ("greedy_information", "policy"),
+    "written routine": ("expert_long", "policy"),
+    "written routine + done": ("expert_long", "information"),
+}
+
+
+def config(policy: str, stop: str, task: str, seed: int):
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        return compose(config_name="guide", overrides=[
+            f"policy={policy}", f"stop={stop}", f"task={task}", f"seed={seed}", "person.images=false",
+            "page.enabled=false", "progress=false", "out=unused", f"limits.lost_frames={NEVER_LOST}"])  # fmt: skip
+
+
+def guided_row(name: str, policy_name: str, stop: str, task: str, seed: int) -> EpisodeRow:
+    """One sensor (``seed``) held by the simulated person in condition ``name``: the stop and the true errors."""
+    cfg = config(policy_name, stop, task, seed)
+    s = check_settings(cfg)
+    policy = with_stop(instantiate_policy(plain(cfg.policy)[task], name), StopRule.from_config(plain(cfg.stop)))
+    mdp = mdp_config(cfg, policy)
+    rig = build_robot(cfg.person, "person")
+    try:
+        guide = build_guide(cfg, s, rig, policy, mdp, nominal_sensor(s, rig), None, None, lambda line: None)
+        result = guide.run(seed)
+        recording = rig.recording()
+    finally:
+        rig.close()
+    row = EpisodeRow(policy=name, seed=seed, recording_time_s=result.duration, path_length_m=result.path_length,
+                     steps=result.steps, coverage_reached=result.goal_reached)  # fmt: skip
+    return calibrate_row(row, from_mapping(CalibrationTask, plain(cfg.task), "task"), recording)
+
+
+def _row(run: tuple[str, str, str, str, int]) -> EpisodeRow:
+    return guided_row(*run)
+
+
+def tolerances(task: str) -> dict[str, float]:
+    """The shared stopping rule's tolerances (the shipped learned run's information state)."""
+    return information_settings(StopRule.from_config(plain(config("learned", "information", task, 0).stop)))[
+        "information"
+    ]["tolerances"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--sensors", type=int, default=30)
+    p.add_argument("--task", default="joint", choices=("intrinsic", "extrinsic", "joint"))
+    p.add_argument("--workers", type=int, default=2, help="processes (one run each at a time)")
+    args = p.parse_args(argv)
+    rows: dict[str, list[EpisodeRow]] = {name: [] for name in CONDITIONS}
+    runs = [(name, policy, stop, args.task, seed) for seed in range(FIRST_SEED, FIRST_SEED + args.sensors)
+            for name, (policy, stop) in CONDITIONS.items()]  # fmt: skip
+    start = time.perf_counter()
+    with ProcessPoolExecutor(args.workers, mp_context=get_context("spawn")) as pool:
+        for n, row in enumerate(pool.map(_row, runs), start=1):
+            rows[row.policy].append(row)
+            errors = "failed" if row.failed else f"{row.rotation_deg:.3f} deg, {row.translation_mm:.2f} mm"
+            print(f"{n}/{len(runs)} seed {row.seed} {row.policy}: {row.steps} poses, {row.recording_time_s:.1f} s, "
+                  f"{row.path_length_m:.2f} m, done {row.coverage_reached}, {errors} "
+                  f"[{time.perf_counter() - start:.0f} s]", file=sys.stderr, flush=True)  # fmt: skip
+    summaries = summarize_stops(rows, args.task, tolerances(args.task), REFERENCE)
+    print(f"## {args.task} task, {args.sensors} simulated sensors (seeds {FIRST_SEED}-{FIRST_SEED + args.sensors - 1})")
+    print(stops_table(summaries))
+    print("\n| condition | true rotation median [deg] | true translation median [mm] | time offset median [ms] | "
+          "failed calibrations |")  # fmt: skip
+    print("|---|---|---|---|---|")
+    for name, rs in rows.items():
+        ok = [r for r in rs if not r.failed]
+        rotation, translation, offset = (np.median([getattr(r, k) for r in ok]) if ok else np.nan
+                                         for k in ("rotation_deg", "translation_mm", "time_offset_ms"))  # fmt: skip
+        print(f"| {name} | {rotation:.3f} | {translation:.2f} | {offset:.3f} | {len(rs) - len(ok)} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
