@@ -2,6 +2,7 @@
 simulated person that records and calibrates. The page in a real browser: tests/test_guide_page.py."""
 
 import json
+import logging
 import socket
 import urllib.error
 import urllib.request
@@ -64,10 +65,11 @@ def _get(url: str) -> bytes:
         return response.read()
 
 
-def test_the_page_serves_the_guidance_the_live_image_with_the_outline_and_the_result(tmp_path):
+def test_the_page_serves_the_guidance_the_live_image_with_the_outline_and_the_result(tmp_path, caplog):
     """The state as the guide showed it; the frame with the detected corners and the board's outline where the shown
     pose puts it (straight ahead at 1.2 m: a rectangle about the principal point, fx * width / 1.2 wide); the
-    calibration's files, and nothing outside them; Close ends the wait."""
+    calibration's files, and nothing outside them; Close ends the wait; requests are not logged."""
+    caplog.set_level(logging.INFO)
     camera, target = CameraModel.from_hfov(1.0, 640, 480), Target.aprilgrid()  # a pinhole without distortion
     page = GuidePage(camera, target, PageSettings(port=0))
     try:
@@ -114,6 +116,7 @@ def test_the_page_serves_the_guidance_the_live_image_with_the_outline_and_the_re
         page.close()
     with pytest.raises(urllib.error.URLError):
         _get(page.url + "/state.json")
+    assert not [r for r in caplog.records if "GET /" in r.getMessage()]  # no line per request (the guide prints)
 
 
 def test_the_guide_runs_headless_records_and_calibrates(tmp_path, capsys):

@@ -26,7 +26,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 from werkzeug.exceptions import NotFound
-from werkzeug.serving import BaseWSGIServer, make_server, select_address_family
+from werkzeug.serving import BaseWSGIServer, WSGIRequestHandler, make_server, select_address_family
 from werkzeug.utils import safe_join
 from werkzeug.wrappers import Request, Response
 
@@ -193,6 +193,13 @@ class GuidePage(Person):
         return Response(Path(found).read_bytes(), mimetype=mimetypes.get(Path(found).suffix, "text/plain"))
 
 
+class _Quiet(WSGIRequestHandler):
+    """Serves without a log line per request (the page polls four times a second; the guide's lines would drown)."""
+
+    def log_request(self, *args, **kwargs) -> None:
+        pass
+
+
 def _server(host: str, port: int, app) -> BaseWSGIServer:
     """werkzeug's threaded server of ``app`` on a socket bound here: a port in use raises ``OSError`` to the caller
     (werkzeug's own bind prints and exits)."""
@@ -201,7 +208,8 @@ def _server(host: str, port: int, app) -> BaseWSGIServer:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind((host, port))
         sock.listen(64)
-        return make_server(host, sock.getsockname()[1], app, threaded=True, fd=sock.fileno())  # a copy of it
+        return make_server(host, sock.getsockname()[1], app, threaded=True, fd=sock.fileno(),
+                           request_handler=_Quiet)  # fmt: skip
 
 
 NO_CACHE = {"Cache-Control": "no-store"}
