@@ -14,7 +14,8 @@ Per sensor: the recording time and path at the stop, whether "done" came (within
 calibration's true errors, and whether a "done" was right (every scored group within its tolerance); the
 table is ``vical-evaluate``'s time-to-tolerance table (paired 95 % intervals against the learned policy).
 
-Sensors: reset seeds from 60000 (held out: no training, fitting, test or doc used them); ``--sensors`` of them.
+Sensors: reset seeds from 60000 (no training, fitting or test uses them; ``experiments/collect_gap.py`` evaluates
+60000-60019 too); ``--sensors`` of them.
 
     python experiments/guided_comparison.py --sensors 30            # ~35 min on 2 cores (2 workers)
 """
