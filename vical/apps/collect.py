@@ -334,16 +334,22 @@ def write_summary(s: CollectionOutput, result: CollectResult | None, outcome: st
     dump_yaml(s.out / "collect.yaml", summary)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="collect", version_base="1.3")
-def hydra_main(cfg: DictConfig) -> None:
+def finish(app: str, work: Callable[[DictConfig], int], cfg: DictConfig) -> None:
+    """A collection app's ``work`` under Hydra: a user error is one line and status 2, a failed calibration one line
+    and 1, otherwise the work's status (``vical-collect``'s and ``vical-guide``'s)."""
     try:
-        status = collect(cfg)
+        status = work(cfg)
     except USER_ERRORS as err:
-        fail(APP, err)
+        fail(app, err)
     except CalibrationError as err:
-        raise SystemExit(report_error(APP, err)) from None
+        raise SystemExit(report_error(app, err)) from None
     if status:
         raise SystemExit(status)
+
+
+@hydra.main(config_path=CONF_DIR, config_name="collect", version_base="1.3")
+def hydra_main(cfg: DictConfig) -> None:
+    finish(APP, collect, cfg)
 
 
 def main() -> None:

@@ -27,7 +27,7 @@ from typing import Any
 import hydra
 from omegaconf import DictConfig
 
-from vical.apps.cli import check_then_run, fail, plain, report_error
+from vical.apps.cli import check_then_run, plain, report_error
 from vical.apps.collect import (
     EXIT_FAULT,
     FAULTS,
@@ -38,6 +38,7 @@ from vical.apps.collect import (
     calibrate_hint,
     calibrate_or_stop,
     check_output,
+    finish,
     lens_spread,
     mdp_config,
     nominal_sensor,
@@ -45,7 +46,6 @@ from vical.apps.collect import (
 )
 from vical.apps.entry import interrupted_by, interrupted_status
 from vical.apps.entry import run as run_command
-from vical.calib.errors import CalibrationError
 from vical.collection.guide import Arrival, Guide, Start
 from vical.collection.page import GuidePage, PageSettings
 from vical.collection.runner import CollectResult, Limits, RobotEpisode
@@ -242,14 +242,7 @@ def _show_result(page: GuidePage, s: GuideSettings, result: CollectResult | None
 
 @hydra.main(config_path=CONF_DIR, config_name="guide", version_base="1.3")
 def hydra_main(cfg: DictConfig) -> None:
-    try:
-        status = guide(cfg)
-    except USER_ERRORS as err:
-        fail(APP, err)
-    except CalibrationError as err:
-        raise SystemExit(report_error(APP, err)) from None
-    if status:
-        raise SystemExit(status)
+    finish(APP, guide, cfg)
 
 
 def main() -> None:
