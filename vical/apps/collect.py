@@ -19,7 +19,7 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import hydra
 from hydra.errors import InstantiationException
@@ -57,9 +57,11 @@ EXIT_FAULT = 1
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
 
-class CollectionOutput(Protocol):
-    """What a collection's writing and calibration read of its settings (``check_output``): ``CollectSettings``
-    and ``vical.apps.guide.GuideSettings``."""
+@dataclass(frozen=True)
+class CollectionOutput:
+    """Where a collection goes and what calibrates it (``check_output``): the settings ``vical-collect``'s
+    ``CollectSettings`` and ``vical.apps.guide.GuideSettings`` share, and all that the writing and the calibration
+    read of them."""
 
     out: Path
     overwrite: bool
@@ -70,17 +72,11 @@ class CollectionOutput(Protocol):
 
 
 @dataclass(frozen=True)
-class CollectSettings:
+class CollectSettings(CollectionOutput):
     """The checked settings of a collection."""
 
-    out: Path
-    overwrite: bool
-    task: str
     align: Alignment
     limits: Limits
-    camchain: Path | None
-    imu_yaml: Path | None
-    rolling_shutter: bool = False
 
 
 def _existing_file(value: Any, key: str) -> Path | None:

@@ -32,6 +32,7 @@ from vical.apps.collect import (
     EXIT_FAULT,
     FAULTS,
     USER_ERRORS,
+    CollectionOutput,
     aside,
     board,
     build_robot,
@@ -66,15 +67,9 @@ CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
 
 @dataclass(frozen=True)
-class GuideSettings:
+class GuideSettings(CollectionOutput):
     """The checked settings of a guided collection (``check_output``'s, and the guide's own)."""
 
-    out: Path
-    overwrite: bool
-    task: str
-    camchain: Path | None
-    imu_yaml: Path | None
-    rolling_shutter: bool
     start: Start
     arrival: Arrival
     limits: Limits
