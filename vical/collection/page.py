@@ -76,6 +76,7 @@ class GuidePage(Person):
         self._stage = "starting"
         self._result: dict | None = None
         self._files: Path | None = None
+        self._file_list: list[str] = []  # the calibration's files the page links (FILE_SUFFIXES)
         self._results_text = ""
         self._server = _server(settings.host, settings.port, self._wsgi)
         self.url = f"http://{settings.host}:{self._server.socket.getsockname()[1]}"
@@ -103,10 +104,11 @@ class GuidePage(Person):
     def finish(self, result: dict, files: Path | None) -> None:
         """The run's outcome (``result``: what ``collect.yaml`` says, and the calibration's status) and the folder of
         the calibration's files, served under ``/files``."""
-        found = sorted(files.rglob("results.txt")) if files is not None and files.is_dir() else []
-        text = "\n".join(p.read_text() for p in found)
-        with self._lock:
-            self._result, self._files, self._results_text = result, files, text
+        found = sorted(files.rglob("*")) if files is not None and files.is_dir() else []
+        names = sorted(str(p.relative_to(files)) for p in found if p.suffix in FILE_SUFFIXES)
+        text = "\n".join(p.read_text() for p in found if p.name == "results.txt")
+        with self._lock:  # the folder is complete: listed once, not at every poll
+            self._result, self._files, self._file_list, self._results_text = result, files, names, text
 
     def wait_closed(self, seconds: float) -> bool:
         """Serve until the page's Close button or ``seconds`` [s]; whether it was closed."""
@@ -158,13 +160,8 @@ class GuidePage(Person):
                 "frames": self._frames,
                 "result": self._result,
                 "results_text": self._results_text,
-                "files": self._file_names(),
+                "files": list(self._file_list),
             }
-
-    def _file_names(self) -> list[str]:
-        if self._files is None or not self._files.is_dir():
-            return []
-        return sorted(str(p.relative_to(self._files)) for p in self._files.rglob("*") if p.suffix in FILE_SUFFIXES)
 
     # ------------------------------------------------------------------ serving
     @Request.application
