@@ -266,8 +266,10 @@ class SensorRecorder:
 
     def _observe(self, stamp: int, exposure: int) -> None:
         """Every camera's exposure of the frame ``stamp`` from the window's poses (exposure at ``exposure`` [ns])."""
-        (t0, T0), (t1, T1) = self._window[0], self._window[-1]
-        T_world_cam = interpolate_pose(exposure, t0, T0, t1, T1)  # the last step is at or after the exposure
+        # The exposure (row 0's) falls in the window's first step: the pose there is between it and the next step
+        # (the only one with a global shutter; a rolling shutter's window runs on through its readout).
+        (t0, T0), (t1, T1) = self._window[0], self._window[min(1, len(self._window) - 1)]
+        T_world_cam = interpolate_pose(exposure, t0, T0, t1, T1)
         times = np.array([t for t, _ in self._window], dtype=float)
         poses = np.array([T for _, T in self._window])
 
