@@ -50,7 +50,7 @@ from scipy.stats import chi2
 
 from vical.calib.metrics import corner_ray
 from vical.calib.solve.corner_factors import CornerFactors, CornerKeys
-from vical.calib.solve.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
+from vical.calib.solve.imu_integration import interpolate, interval_segments, preintegrate, preintegration_params
 from vical.calib.solve.initialization import MIN_INIT_CORNERS, pnp
 from vical.calib.solve.observations import FrameObservation
 from vical.calib.solve.outliers import robust_sigma_of_norms
@@ -358,7 +358,7 @@ class InformationTracker:
             values.insert(key, value)
         params = preintegration_params(self.guess.imu_noise)
         pim = preintegrate(
-            params, gtsam.imuBias.ConstantBias(), midpoint_segments(t_imu, imu.gyro, imu.accel, t_prev, t)
+            params, gtsam.imuBias.ConstantBias(), interval_segments(t_imu, imu.gyro, imu.accel, t_prev, t)
         )
         factor = gtsam.CombinedImuFactorWithGravityDirection(
             X_KEY, V_KEY, X1_KEY, V1_KEY, B_KEY, B1_KEY, G_KEY, pim, GRAVITY

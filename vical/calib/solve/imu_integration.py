@@ -1,7 +1,8 @@
-"""IMU integration between arbitrary instants: midpoint segments, GTSAM preintegration, gyro angles.
+"""IMU integration between arbitrary instants: Simpson segments of the readings' cubic interpolant, GTSAM
+preintegration, gyro angles.
 
-Times here are float seconds relative to the recording start (IMU clock). Samples are linearly
-interpolated at the interval ends so states can sit at camera times that fall between samples.
+Times here are float seconds relative to the recording start (IMU clock). Readings are interpolated at the
+interval ends so states can sit at camera times that fall between samples.
 """
 
 from __future__ import annotations
@@ -34,29 +35,76 @@ def interpolate(t: np.ndarray, x: np.ndarray, tq: np.ndarray) -> np.ndarray:
     return x[j] * (1.0 - s) + x[j + 1] * s
 
 
-def midpoint_segments(
+def cubic_interpolate(t: np.ndarray, x: np.ndarray, tq: np.ndarray) -> np.ndarray:
+    """Samples ``x`` (N, D) at times ``t`` (N,) [s] at query times ``tq`` (Q,): the cubic through the four
+    samples around each query's sample interval (Lagrange; any spacing), linear for fewer than four samples.
+
+    Why not linear: integrating the linear interpolant (the trapezoid rule) shrinks a motion of frequency f
+    sampled every h by (2 pi f h)^2 / 12 (0.8 % for a hand's 10 Hz tremor at 200 Hz), an error the motion's
+    amplitude scales and the extrinsic's translation absorbs; the cubic's is of fourth order.
+    """
+    if len(t) < 4:
+        return interpolate(t, x, tq)
+    j = np.clip(np.searchsorted(t, tq) - 2, 0, len(t) - 4)  # the stencil's first sample
+    nodes = t[j[:, None] + np.arange(4)]  # (Q, 4)
+    weights = np.ones((len(tq), 4))
+    for i in range(4):
+        for m in range(4):
+            if m != i:
+                weights[:, i] *= (tq - nodes[:, m]) / (nodes[:, i] - nodes[:, m])
+    return np.einsum("qi,qid->qd", weights, x[j[:, None] + np.arange(4)])
+
+
+def interval_knots(t: np.ndarray, ta: float, tb: float) -> np.ndarray:
+    """Knots (4 S + 1,) [s] integrating ``[ta, tb]``: its ends and the samples inside cut it into S pieces,
+    each cut into quarters (two Simpson steps per piece)."""
+    inside = t[(t > ta) & (t < tb)]
+    return _quarters(np.concatenate([[ta], inside, [tb]]))
+
+
+def _quarters(ends: np.ndarray) -> np.ndarray:
+    quarters = ends[:-1, None] + np.diff(ends)[:, None] * np.arange(4) / 4.0
+    return np.append(quarters.ravel(), ends[-1])
+
+
+def interval_segments(
     t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, ta: float, tb: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Constant-rate segments covering ``[ta, tb]`` [s] for integration.
+    """Constant-rate segments covering ``[ta, tb]`` [s] for integration: ``knot_segments`` of the readings'
+    cubic interpolant at ``interval_knots``."""
+    return segments_between(t, gyro, accel, np.array([ta, tb]))[0]
 
-    Each segment between consecutive knots (``ta``, the samples inside, ``tb``) uses the mean
-    angular rate and the rotation-compensated mean specific force ``(a0 + Exp(w dt) a1) / 2``,
-    expressed at the segment start (second order, unlike the left-rectangle rule).
+
+def segments_between(
+    t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, times: np.ndarray
+) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """``interval_segments`` of every interval between consecutive increasing ``times`` (S,) [s] (S - 1 of
+    them), computed in one pass."""
+    inside = t[(t > times[0]) & (t < times[-1])]
+    ends = np.union1d(inside, times)
+    knots = _quarters(ends)
+    dt, omega, acc = knot_segments(knots, cubic_interpolate(t, gyro, knots), cubic_interpolate(t, accel, knots))
+    cuts = 2 * np.searchsorted(ends, times[1:-1])  # two segments per piece between ends
+    return list(zip(np.split(dt, cuts), np.split(omega, cuts), np.split(acc, cuts), strict=True))
+
+
+def knot_segments(knots: np.ndarray, w: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Segments of readings ``w`` (K, 3) [rad/s], ``a`` (K, 3) [m/s^2] at ``interval_knots`` ``knots`` (K,) [s].
+
+    Each pair of knot intervals is one segment with Simpson's means: the angular rate's, and the specific
+    force's rotated into the segment's start by the mean rate (exact for a cubic reading over a steady
+    turn; GTSAM holds each segment's values constant, which leaves a position error of the segment's length
+    squared times the change of the acceleration over the whole interval, / 12).
 
     Returns:
         dt (S,) [s], omega (S, 3) [rad/s], acc (S, 3) [m/s^2].
     """
-    inside = t[(t > ta) & (t < tb)]
-    knots = np.concatenate([[ta], inside, [tb]])
-    return knot_segments(knots, interpolate(t, gyro, knots), interpolate(t, accel, knots))
-
-
-def knot_segments(knots: np.ndarray, w: np.ndarray, a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``midpoint_segments`` of readings ``w`` (K, 3) [rad/s], ``a`` (K, 3) [m/s^2] at the times ``knots`` (K,) [s]."""
-    dt = np.diff(knots)
-    omega = 0.5 * (w[:-1] + w[1:])
-    R = batch_so3_exp(omega * dt[:, None])
-    acc = 0.5 * (a[:-1] + np.einsum("nij,nj->ni", R, a[1:]))
+    start, mid, end = slice(0, -2, 2), slice(1, -1, 2), slice(2, None, 2)
+    dt = knots[end] - knots[start]
+    omega = (w[start] + 4.0 * w[mid] + w[end]) / 6.0
+    half = batch_so3_exp(omega * (0.5 * dt)[:, None])
+    full = half @ half
+    acc = (a[start] + 4.0 * np.einsum("nij,nj->ni", half, a[mid]) + np.einsum("nij,nj->ni", full, a[end])) / 6.0
     return dt, omega, acc
 
 
@@ -76,7 +124,7 @@ def preintegrate(
     bias: gtsam.imuBias.ConstantBias,
     segments: tuple[np.ndarray, np.ndarray, np.ndarray],
 ) -> gtsam.PreintegratedCombinedMeasurements:
-    """Preintegrated measurements of ``midpoint_segments`` output about the bias estimate ``bias``."""
+    """Preintegrated measurements of ``interval_segments`` output about the bias estimate ``bias``."""
     pim = gtsam.PreintegratedCombinedMeasurements(params, bias)
     for dt, w, a in zip(*segments, strict=True):
         if dt > 0:

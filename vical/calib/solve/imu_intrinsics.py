@@ -18,7 +18,12 @@ import gtsam
 import numpy as np
 
 from vical.calib.errors import CalibrationError, CalibrationSettingError
-from vical.calib.solve.imu_integration import interpolate, knot_segments, preintegrate
+from vical.calib.solve.imu_integration import (
+    cubic_interpolate,
+    interval_knots,
+    knot_segments,
+    preintegrate,
+)
 from vical.data.imu_model import ImuIntrinsics
 
 IMU_MODELS = ("calibrated", "scale-misalignment")
@@ -71,10 +76,9 @@ class IntervalReadings:
     """The raw readings of one IMU interval at its knots, corrected on demand."""
 
     def __init__(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, ta: float, tb: float) -> None:
-        inside = t[(t > ta) & (t < tb)]
-        self.knots = np.concatenate([[ta], inside, [tb]])
-        self.gyro = interpolate(t, gyro, self.knots)
-        self.accel = interpolate(t, accel, self.knots)
+        self.knots = interval_knots(t, ta, tb)
+        self.gyro = cubic_interpolate(t, gyro, self.knots)
+        self.accel = cubic_interpolate(t, accel, self.knots)
 
     def preintegrated(self, params, bias: gtsam.imuBias.ConstantBias, theta: np.ndarray):
         gyro, accel = ImuIntrinsics.from_vector(theta).correct(self.gyro, self.accel)

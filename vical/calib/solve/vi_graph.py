@@ -12,7 +12,7 @@ import numpy as np
 from vical.calib.errors import CalibrationError
 from vical.calib.solve.corner_factors import CornerFactors, CornerKeys
 from vical.calib.solve.corner_noise import MIN_PIXEL_SIGMA
-from vical.calib.solve.imu_integration import interpolate, midpoint_segments, preintegrate, preintegration_params
+from vical.calib.solve.imu_integration import interpolate, preintegrate, preintegration_params, segments_between
 from vical.calib.solve.imu_intrinsics import IntervalReadings, IntrinsicImuFactor, prior_sigmas
 from vical.calib.solve.rig import OtherCamera, pair
 from vical.calib.solve.solver import optimize
@@ -98,8 +98,7 @@ def _add_imu_factors(graph: gtsam.NonlinearFactorGraph, problem: ViProblem, time
     if est.imu_theta is not None:
         return _add_intrinsic_imu_factors(graph, problem, times, params, bias)
     factors = []
-    for n in range(len(times) - 1):
-        segments = midpoint_segments(problem.t_imu, problem.gyro, problem.accel, times[n], times[n + 1])
+    for n, segments in enumerate(segments_between(problem.t_imu, problem.gyro, problem.accel, times)):
         pim = preintegrate(params, bias, segments)
         f = gtsam.CombinedImuFactorWithGravityDirection(
             state_key("x", n), state_key("v", n), state_key("x", n + 1), state_key("v", n + 1),
