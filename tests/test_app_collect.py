@@ -13,8 +13,8 @@ import pytest
 import yaml
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
+from stopped_collections import calibrate_joint, file_size_limit
 
-from vical.apps import calibrate
 from vical.apps.collect import CONF_DIR, build_collector, check_settings, collect, mdp_config, nominal_sensor
 from vical.calib.metrics import parameter_errors
 from vical.calib.tasks import CalibrationTask, run_task, task_score
@@ -273,9 +273,22 @@ def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, s
     target = read_target_yaml(out / "target.yaml")
     rec = read_euroc(out / "recording", target)
     assert len(rec.frames) >= 100
-    assert calibrate.main([str(out / "recording"), "--task", "joint", "--target", str(out / "target.yaml"),
-                           "--stored-corners", "--imu-yaml", str(out / "imu.yaml"), "--no-report",
-                           "--out", str(tmp_path / "cal")]) == 0  # fmt: skip
+    assert calibrate_joint(out, tmp_path / "cal") == 0
+
+
+@pytest.mark.integration
+def test_a_disk_that_takes_no_more_stops_the_collection_with_one_line_and_a_calibratable_recording(tmp_path):
+    """No file may grow past 600 kB (the detections' CSV reaches it first, at ~140 frames): the collection stops with
+    status 1 and one line that says so, and what it recorded before calibrates."""
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "vical.apps.collect", f"out={out}", *KILL_ARGS]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600, preexec_fn=file_size_limit(600_000))
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    (line,) = [line for line in done.stderr.splitlines() if line.startswith("vical-collect")]
+    assert line.startswith(f"vical-collect: error: stopped: {out / 'recording'}: the disk took no more (")
+    assert "File too large; is it full?)" in line and "the arm is stopped and the recording so far is in" in line
+    assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 100
+    assert calibrate_joint(out, tmp_path / "cal") == 0
 
 
 def test_a_dry_run_reads_the_rig_moves_nothing_and_writes_nothing(tmp_path, capsys):

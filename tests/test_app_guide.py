@@ -4,6 +4,8 @@ simulated person that records and calibrates. The page in a real browser: tests/
 import json
 import logging
 import socket
+import subprocess
+import sys
 import urllib.error
 import urllib.request
 
@@ -11,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 from hydra import compose, initialize_config_dir
+from stopped_collections import calibrate_joint, file_size_limit
 
 from vical.apps.guide import CONF_DIR, check_settings, guide
 from vical.collection.page import GuidePage, PageSettings
@@ -19,6 +22,7 @@ from vical.data import Target
 from vical.geometry import T_CAM_BODY, CameraModel, make_transform
 from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
+from vical.policies.learned import PAPER_POLICY_DIR
 from vical.robot import CameraDetections, CameraImage, Guidance
 
 
@@ -47,6 +51,10 @@ def test_bad_settings_are_refused_by_key(tmp_path):
         guide(config(out, "person.placement_sigma_m=-1"))
     with pytest.raises(ConfigError, match=r"^person: RealSenseSensor needs the pyrealsense2 package"):
         guide(config(out, "person=realsense", "guess.camchain=null"))
+    # A policy trained for another state layout and workspace (the paper's coverage state): refused before it runs.
+    with pytest.raises(ConfigError) as refused:
+        guide(config(out, f"policy.run_dir={PAPER_POLICY_DIR}"))
+    assert "\n" not in str(refused.value) and "trained in workspace 'paper'" in str(refused.value)
     assert not (tmp_path / "o").exists()
 
 
@@ -135,3 +143,20 @@ def test_the_guide_runs_headless_records_and_calibrates(tmp_path, capsys):
     assert "steps: 6" in summary and "done: the step limit" in summary
     camera, T_cam_imu, _ = read_camchain(out / "calibration" / "camchain-imucam.yaml")
     assert T_cam_imu is not None and camera.width == rec.frames.images.shape[2]
+
+
+@pytest.mark.integration
+def test_a_disk_that_takes_no_more_stops_the_guide_with_one_line_and_a_calibratable_recording(tmp_path):
+    """No file may grow past 450 kB (the detections' CSV reaches it first, at ~10 s): the guide stops with status 1
+    and one line that says so, and what it recorded before calibrates."""
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "vical.apps.guide", f"out={out}", "page.enabled=false", "limits.max_steps=20",
+           "report=false", "seed=3"]  # fmt: skip
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600, preexec_fn=file_size_limit(450_000))
+    assert done.returncode == 1 and "Traceback" not in done.stderr, done.stderr
+    (line,) = [line for line in done.stderr.splitlines() if line.startswith("vical-guide")]
+    assert line.startswith(f"vical-guide: error: stopped: {out / 'recording'}: the disk took no more (")
+    assert "File too large; is it full?)" in line and "the recording so far is in" in line
+    assert "stopped: " in (out / "collect.yaml").read_text()
+    assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 80
+    assert calibrate_joint(out, tmp_path / "cal") == 0

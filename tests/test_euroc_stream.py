@@ -1,4 +1,5 @@
-"""EuRoC folders written while the data arrives: exact round trip, and readable after a kill -9 at any moment."""
+"""EuRoC folders written while the data arrives: exact round trip, and readable after a kill -9 at any moment or a
+disk that stops taking data."""
 
 import signal
 import subprocess
@@ -9,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from stopped_collections import file_size_limit
 
 from vical.data import ImuNoise, ImuSamples, Target
 from vical.io.euroc import EurocStreamWriter, read_euroc
@@ -107,4 +109,28 @@ def test_a_kill_at_any_moment_leaves_a_readable_folder(tmp_path, wait):
         if k < n - 1:
             np.testing.assert_array_equal(rec.frames.corners[k], corners)
     assert len(rec.imu) % 20 == 0 and len(rec.imu) >= 20 * n  # IMU batches whole, none lost before the frames
+    np.testing.assert_array_equal(rec.imu.t, np.arange(len(rec.imu)) * 5_000_000)
+
+
+def test_a_disk_that_stops_taking_data_leaves_whole_lines_and_one_error(tmp_path):
+    """The writer's files may grow to 40 kB (the IMU's CSV reaches it first, at its 17th batch): the write that
+    crosses the limit is cut back, the error says what happened, and the folder reads back whole."""
+    path = tmp_path / "rec"
+    script = WRITER_LOOP.format(tests=str(Path(__file__).parent), path=str(path))
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60,
+                          preexec_fn=file_size_limit(40_000))  # fmt: skip
+    last = done.stderr.strip().splitlines()[-1]
+    assert done.returncode == 1
+    assert last.startswith(f"vical.io.errors.RecordingWriteError: {path}: the disk took no more (")
+    assert "File too large; is it full?); the " in last and " frames and " in last
+    imu_csv = (path / "mav0" / "imu0" / "data.csv").read_bytes()
+    assert 35_000 < len(imu_csv) <= 40_000 and imu_csv.endswith(b"\n")
+    rec = read_euroc(path, TARGET)
+    n = len(rec.frames)
+    assert n >= 10 and len(rec.imu) >= 20 * n and len(rec.imu) % 20 == 0
+    assert f"the {n} frames and {len(rec.imu)} IMU samples before are whole" in last
+    for k in range(n):
+        _, image, corners, _ = frame(k)
+        np.testing.assert_array_equal(rec.frames.images[k], image)
+        np.testing.assert_array_equal(rec.frames.corners[k], corners)
     np.testing.assert_array_equal(rec.imu.t, np.arange(len(rec.imu)) * 5_000_000)

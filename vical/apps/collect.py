@@ -15,6 +15,7 @@ stopped, the recording closed).
 
 from __future__ import annotations
 
+import contextlib
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -40,7 +41,7 @@ from vical.env.settings import MdpConfig
 from vical.evaluation.harness import instantiate_policy, policy_mdp
 from vical.io.atomic import replace_directory, unused_sibling
 from vical.io.bag import write_bag
-from vical.io.errors import FormatError
+from vical.io.errors import FormatError, RecordingWriteError
 from vical.io.euroc import EurocStreamWriter, read_euroc
 from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_imu_yaml, write_target_yaml
 from vical.io.yamlfile import dump_yaml
@@ -52,7 +53,7 @@ from vical.sim.settings import SimConfig
 
 APP = "vical-collect"
 USER_ERRORS = (ConfigError, FileExistsError, FileNotFoundError)
-FAULTS = (CollectionStopped, MotionRefused, SensorStreamError)
+FAULTS = (CollectionStopped, MotionRefused, SensorStreamError, RecordingWriteError)
 EXIT_FAULT = 1
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
@@ -260,8 +261,9 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
         with rig.arm, rig.sensor:
             result = collector.run(int(cfg.seed))
     except FAULTS as err:
-        write_summary(s, None, f"stopped: {err}", writer.frames)
-        _write_bag(cfg, s)
+        with contextlib.suppress(OSError):  # a full disk (the fault, maybe) takes neither; the line below says why
+            write_summary(s, None, f"stopped: {err}", writer.frames)
+            _write_bag(cfg, s)
         report_error(APP, f"stopped: {err}; the arm is stopped and the recording so far is in {writer.path} "
                           f"({writer.frames} frames): {calibrate_hint(s)}")  # fmt: skip
         return None

@@ -191,7 +191,8 @@ def _run(cfg, s: GuideSettings, holder, policy, mdp, nominal, page) -> CollectRe
     try:
         result = guide_.run(int(cfg.seed))
     except FAULTS as err:
-        write_summary(s, None, f"stopped: {err}", writer.frames)
+        with contextlib.suppress(OSError):  # a full disk (the fault, maybe) takes no summary; the line below says why
+            write_summary(s, None, f"stopped: {err}", writer.frames)
         report_error(APP, f"stopped: {err}; the recording so far is in {writer.path} ({writer.frames} frames): "
                           f"{calibrate_hint(s)}")  # fmt: skip
         if page is not None:

@@ -11,6 +11,7 @@ from vical.io.errors import (
     FormatError,
     KalibrFormatError,
     RecordingFormatError,
+    RecordingWriteError,
 )
 from vical.io.euroc import read_euroc, write_euroc
 from vical.io.images import ImageDetector, read_image_folder
@@ -47,6 +48,7 @@ __all__ = [
     "ImuFile",
     "KalibrFormatError",
     "RecordingFormatError",
+    "RecordingWriteError",
     "detect_source",
     "is_recording_dir",
     "load_recording",

@@ -39,6 +39,11 @@ class BagFormatError(FormatError):
     """A ROS bag that is corrupt or lacks the requested topics."""
 
 
+class RecordingWriteError(OSError):
+    """A live recording that the disk stopped taking (full, or a file-size limit); what was written before stays
+    whole and readable."""
+
+
 class BagTopicError(SettingError, BagFormatError):
     """A topic the bag lacks; the message names the topic argument to change."""
 

@@ -18,6 +18,7 @@ The reference calibration in the ``sensor.yaml`` files, when complete, becomes t
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import shutil
@@ -44,7 +45,7 @@ from vical.io.csvfiles import (
     write_corners_csv,
     write_imu_csv,
 )
-from vical.io.errors import CsvFormatError, EmptyCsvError, FormatError, KalibrFormatError
+from vical.io.errors import CsvFormatError, EmptyCsvError, FormatError, KalibrFormatError, RecordingWriteError
 from vical.io.images import ImageDetector, frames_from_images, read_gray, write_png
 from vical.io.kalibr import (
     LINE_DELAY_KEY,
@@ -159,13 +160,18 @@ def _imu_sensor_yaml(rec: Recording) -> dict[str, Any]:
     return _imu_noise_yaml(rec.truth.imu_noise, rec.truth.imu_noise.rate_hz, "written by vical")
 
 
+def _no_progress() -> int:
+    raise OSError(errno.EIO, "a write that wrote nothing")
+
+
 class EurocStreamWriter:
     """Writes an EuRoC folder while the data arrives, so that a kill at any moment leaves a readable one.
 
     The folder holds every IMU sample and every frame handed over before the kill: an image is
     written to a temporary name and renamed, then listed in ``cam0/data.csv``, then its detections
     go to ``cam0/corners.csv``; each batch of CSV lines is one ``write`` to a file opened for
-    appending, so no reader sees half a line. ``read_euroc`` reads it like any EuRoC folder (a
+    appending, so no reader sees half a line, and a write the disk cuts short (full, or a file-size limit) is
+    cut back to the lines before it and raises ``RecordingWriteError``. ``read_euroc`` reads it like any EuRoC folder (a
     frame killed between its listing and its detections reads as undetected). Data is flushed to
     the disk every ``sync_every`` frames and by ``close``.
 
@@ -223,8 +229,11 @@ class EurocStreamWriter:
         if (width, height) != self.image_size:
             raise ValueError(f"frame {t_ns}: {width} x {height} px image, but the recording is {self.image_size}")
         t = int(t_ns)
-        with atomic_file(self.root / "cam0" / "data" / f"{t}.png") as tmp:
-            write_png(tmp, image)
+        try:
+            with atomic_file(self.root / "cam0" / "data" / f"{t}.png") as tmp:
+                write_png(tmp, image)
+        except OSError as err:  # the image is not there (atomic), nor listed: the folder stays readable
+            raise self._stopped(f"the image of frame {t}", err.strerror) from err
         self._append("images", f"{t},{t}.png\n")
         self._append("corners", corner_rows(t, np.asarray(corners).reshape(-1, 2), np.asarray(ids).reshape(-1)))
         self.frames += 1
@@ -233,9 +242,21 @@ class EurocStreamWriter:
 
     def _append(self, name: str, text: str) -> None:
         data = text.encode("utf-8")
-        written = os.write(self._files[name], data)
-        if written != len(data):  # a full disk: say so rather than go on after half a line
-            raise OSError(f"{self.path}: only {written} of {len(data)} bytes of {name} were written (disk full?)")
+        fd = self._files[name]
+        end = os.lseek(fd, 0, os.SEEK_END)
+        written = 0
+        try:
+            while written < len(data):  # a short write goes on; the next says why the disk stopped
+                written += os.write(fd, data[written:]) or _no_progress()
+        except OSError as err:  # cut back what part of the lines went in: a reader sees whole lines only
+            os.ftruncate(fd, end)
+            raise self._stopped(f"{len(data)} bytes of {name}", err.strerror) from err
+
+    def _stopped(self, what: str, cause: str | None) -> RecordingWriteError:
+        return RecordingWriteError(
+            f"{self.path}: the disk took no more ({what}: {cause}; is it full?); the {self.frames} frames and "
+            f"{self.imu_samples} IMU samples before are whole"
+        )
 
     def sync(self) -> None:
         """Flush everything written so far to the disk."""
