@@ -9,11 +9,12 @@ from scipy.spatial.transform import Rotation
 from vical.calib.result import FramePoses
 from vical.calib.solve.plausibility import board_scale, wrong_board_scale
 from vical.calib.tasks import CalibrationTask, run_task
-from vical.collection.runner import Limits, SensorStream
+from vical.collection.runner import Limits, SensorStream, read_until
 from vical.config_checks import from_mapping
 from vical.geometry import T_CAM_BODY, interpolate_transforms, invert_transform, make_transform
 from vical.io.euroc import EurocStreamWriter
 from vical.robot import SensorStreamError
+from vical.sim.adapters import RigFaults
 from vical.sim.hand_held import HandHeldRig
 from vical.sim.panda import PandaSim
 from vical.sim.person import HandModel
@@ -197,3 +198,29 @@ def test_a_hands_tremor_is_no_evidence_of_a_wrong_board(settings):
     found = board_scale(posed, recording.imu, truth.T_cam_imu[:3, :3], truth.time_offset)
     assert found.lever_arm[0] == pytest.approx(1.0, abs=0.05)
     assert not wrong_board_scale(found)
+
+
+@pytest.mark.parametrize(
+    ("faults", "says"),
+    [
+        ({"imu_gap": (0.0, 1e6)}, "no IMU samples for 1 s while the camera streams (limits.wait_timeout); check that"),
+        ({"camera_gap": (0.0, 1e6)}, "no camera images for 1 s while the IMU streams (limits.wait_timeout); check"),
+        ({"imu_gap": (0.0, 1e6), "camera_gap": (0.0, 1e6)}, "no sensor data for 1 s (limits.wait_timeout); check"),
+    ],
+    ids=["no IMU", "no images", "nothing"],
+)
+def test_a_sensor_that_delivers_no_images_or_no_imu_stops_the_reading_naming_the_silent_stream(settings, faults, says):
+    """The person holds a sensor one of whose streams delivers nothing: reading it (as the guide does while the
+    person reaches) stops after ``limits.wait_timeout`` with one line naming that stream."""
+    sim_config, sampling, _ = settings
+    rig = HandHeldRig(sim_config, sampling, 7)
+    rig.faults = RigFaults(**faults)
+    stream = SensorStream(rig.sensor, rig.target, None, Limits(wait_timeout=1.0))
+    rig.sensor.start()
+    try:
+        with pytest.raises(SensorStreamError) as stopped:
+            read_until(stream, lambda: rig.time > 300.0, lambda detections: None)
+        assert str(stopped.value).startswith(says)
+        assert rig.time < 300.0
+    finally:
+        rig.close()

@@ -260,6 +260,10 @@ class SensorStream:
     def last_imu_ns(self) -> int | None:
         return self._last_imu
 
+    def last_stamps(self) -> tuple[int | None, int | None]:
+        """The last IMU sample's and camera frame's stamps [ns] read so far (None: none yet)."""
+        return self._last_imu, self._last_frame
+
 
 def run_policy(
     policy: Policy,
@@ -286,20 +290,32 @@ def run_policy(
 
 
 def read_until(stream: SensorStream, done: Callable[[], bool], take: Callable[[list], None]) -> None:
-    """Read ``stream`` (handing the detections to ``take``) until ``done()``; ``SensorStreamError`` when no data
-    arrive for its ``limits.wait_timeout``."""
+    """Read ``stream`` (handing the detections to ``take``) until ``done()``; ``SensorStreamError`` naming the stream
+    when the IMU or the camera delivers nothing for ``limits.wait_timeout``."""
     limits = stream.limits
-    last_data = time.monotonic()
+    heard = dict.fromkeys(STREAMS, time.monotonic())
     while not done():
-        before = stream.last_imu_ns
+        before = stream.last_stamps()
         take(stream.read())
-        if stream.last_imu_ns != before:
-            last_data = time.monotonic()
-        elif time.monotonic() - last_data > limits.wait_timeout:
-            raise SensorStreamError(
-                f"no sensor data for {limits.wait_timeout:.0f} s; check that the camera and IMU stream"
-            )
+        now = time.monotonic()
+        for name, was, is_ in zip(STREAMS, before, stream.last_stamps(), strict=True):
+            if is_ != was:
+                heard[name] = now
+        silent = tuple(name for name in STREAMS if now - heard[name] > limits.wait_timeout)
+        if silent:
+            raise SensorStreamError(SILENT[silent].format(limits.wait_timeout))
         time.sleep(limits.poll_interval)
+
+
+STREAMS = ("imu", "camera")  # the order of ``SensorStream.last_stamps``
+# What to check when streams are silent (``read_until``).
+SILENT = {
+    ("imu",): "no IMU samples for {:.0f} s while the camera streams (limits.wait_timeout); check that the sensor's "
+    "IMU is enabled and publishes (RealSense: a model with an IMU; ROS: the IMU topic)",
+    ("camera",): "no camera images for {:.0f} s while the IMU streams (limits.wait_timeout); check that the sensor's "
+    "camera is enabled and publishes (ROS: the image topic)",
+    ("imu", "camera"): "no sensor data for {:.0f} s (limits.wait_timeout); check that the camera and the IMU stream",
+}
 
 
 class LiveEpisode:

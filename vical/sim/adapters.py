@@ -57,6 +57,7 @@ class RigFaults:
         tracking_noise_m: [m] standard deviation per axis of where the arm ends relative to its goal.
         tracking_noise_rad: [rad] standard deviation per axis of the orientation it ends with.
         imu_gap: ``(start, duration)`` [s] after ``start()`` during which the IMU delivers nothing, or None.
+        camera_gap: the same for the camera's frames.
         refuse_after: motions after which the arm refuses every goal (a protective stop), or None.
     """
 
@@ -64,6 +65,7 @@ class RigFaults:
     tracking_noise_m: float = 0.0
     tracking_noise_rad: float = 0.0
     imu_gap: tuple[float, float] | None = None
+    camera_gap: tuple[float, float] | None = None
     refuse_after: int | None = None
 
     def __post_init__(self) -> None:
@@ -73,8 +75,10 @@ class RigFaults:
                 raise ValueError(f"RigFaults.{name} must be a number >= 0, got {value}")
         if self.refuse_after is not None and int(self.refuse_after) < 0:
             raise ValueError(f"RigFaults.refuse_after must be a number of motions >= 0, got {self.refuse_after}")
-        if self.imu_gap is not None and (len(self.imu_gap) != 2 or min(self.imu_gap) < 0):
-            raise ValueError(f"RigFaults.imu_gap must be (start, duration) in seconds >= 0, got {self.imu_gap}")
+        for name in ("imu_gap", "camera_gap"):
+            gap = getattr(self, name)
+            if gap is not None and (len(gap) != 2 or min(gap) < 0):
+                raise ValueError(f"RigFaults.{name} must be (start, duration) in seconds >= 0, got {gap}")
 
 
 class SimRig:
@@ -256,18 +260,20 @@ class SimViSensor(ViSensor):
             corners, ids = recorder.detections_since(self._frames_read)
             frames = [CameraDetections(t, uv, i) for t, uv, i in zip(stamps, corners, ids, strict=True)]
         self._frames_read += len(stamps)
+        frames = [f for f, keep in zip(frames, self._outside(self._rig.faults.camera_gap, stamps), strict=True) if keep]
         imu = recorder.imu_samples()
         new = np.arange(self._imu_read, len(imu))
+        new = new[self._outside(self._rig.faults.imu_gap, imu.t[new])]
         self._imu_read = len(imu)
-        return SensorData(frames, self._without_gap(ImuSamples(imu.t[new], imu.gyro[new], imu.accel[new])))
+        return SensorData(frames, ImuSamples(imu.t[new], imu.gyro[new], imu.accel[new]))
 
-    def _without_gap(self, imu: ImuSamples) -> ImuSamples:
-        gap = self._rig.faults.imu_gap
+    def _outside(self, gap: tuple[float, float] | None, t_ns: np.ndarray) -> np.ndarray:
+        """Which of the stamps ``t_ns`` [ns] the stream delivers: those outside ``gap`` (``RigFaults``)."""
+        t_ns = np.asarray(t_ns, dtype=np.int64)
         if gap is None:
-            return imu
+            return np.ones(len(t_ns), dtype=bool)
         start = self._t_start + round(gap[0] * NS_PER_S)
-        keep = (imu.t < start) | (imu.t >= start + round(gap[1] * NS_PER_S))
-        return ImuSamples(imu.t[keep], imu.gyro[keep], imu.accel[keep])
+        return (t_ns < start) | (t_ns >= start + round(gap[1] * NS_PER_S))
 
     def stop(self) -> None:
         self._streaming = False
