@@ -51,6 +51,8 @@ def test_bad_settings_are_refused_by_key(tmp_path):
         guide(config(out, "person.placement_sigma_m=-1"))
     with pytest.raises(ConfigError, match=r"^person: RealSenseSensor needs the pyrealsense2 package"):
         guide(config(out, "person=realsense", "guess.camchain=null"))
+    with pytest.raises(ConfigError, match=r"^person: .*roslibpy package: pip install 'vical\[ros\]'"):
+        guide(config(out, "person=ros", "guess.camchain=null"))
     # A policy trained for another state layout and workspace (the paper's coverage state): refused before it runs.
     with pytest.raises(ConfigError) as refused:
         guide(config(out, f"policy.run_dir={PAPER_POLICY_DIR}"))
