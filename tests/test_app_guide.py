@@ -53,6 +53,8 @@ def test_bad_settings_are_refused_by_key(tmp_path):
         guide(config(out, "person=realsense", "guess.camchain=null"))
     with pytest.raises(ConfigError, match=r"^person: .*roslibpy package: pip install 'vical\[ros\]'"):
         guide(config(out, "person=ros", "guess.camchain=null"))
+    with pytest.raises(ConfigError, match=r"^person: faults: a held sensor's faults are \['imu_gap', 'camera_gap'\]"):
+        guide(config(out, "+person.faults.latency=0.1"))
     # A policy trained for another state layout and workspace (the paper's coverage state): refused before it runs.
     with pytest.raises(ConfigError) as refused:
         guide(config(out, f"policy.run_dir={PAPER_POLICY_DIR}"))
@@ -160,5 +162,23 @@ def test_a_disk_that_takes_no_more_stops_the_guide_with_one_line_and_a_calibrata
     assert line.startswith(f"vical-guide: error: stopped: {out / 'recording'}: the disk took no more (")
     assert "File too large; is it full?)" in line and "the recording so far is in" in line
     assert "stopped: " in (out / "collect.yaml").read_text()
+    assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 80
+    assert calibrate_joint(out, tmp_path / "cal") == 0
+
+
+@pytest.mark.integration
+def test_a_sensor_lost_during_the_guidance_stops_it_with_one_line_and_a_calibratable_recording(tmp_path, capsys):
+    """The simulated sensor's IMU stops 20 s after it started (a pulled cable): the guide stops once it has heard
+    nothing for ``limits.wait_timeout`` (1 s here), with status 1 and one line naming the silent stream, and the
+    recording so far calibrates."""
+    out = tmp_path / "out"
+    status = guide(config(f"out={out}", "page.enabled=false", "report=false", "seed=3", "limits.wait_timeout=1",
+                          "person.faults.imu_gap=[20.0,1000.0]"))  # fmt: skip
+    err = capsys.readouterr().err
+    assert status == 1
+    (line,) = [line for line in err.splitlines() if line.startswith("vical-guide")]
+    assert line.startswith("vical-guide: error: stopped: no IMU samples for 1 s while the camera streams")
+    assert f"the recording so far is in {out / 'recording'}" in line
+    assert "stopped: no IMU samples" in (out / "collect.yaml").read_text()
     assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 80
     assert calibrate_joint(out, tmp_path / "cal") == 0

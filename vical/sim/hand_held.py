@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import replace
+from types import MappingProxyType
 from typing import Any
 
 import mujoco
@@ -133,7 +134,7 @@ class HandHeldRig(Person):
         )
         self.datasheet: SensorTruth = product.datasheet  # what the person's datasheet says of the sensor
         self.recorder.start(self.truth, np.random.default_rng(noise_seed))
-        self.faults = RigFaults()  # a hand-held sensor streams without an arm's faults
+        self.faults = RigFaults()  # no arm; the sensor's own faults: ``hand_held_rig``'s ``faults``
         self.sensor = SimViSensor(self)  # the sensor as vical-collect's runner reads one (rendered images)
 
     @property
@@ -166,18 +167,34 @@ class HandHeldRig(Person):
         self.recorder.close()
 
 
+SENSOR_FAULTS = ("imu_gap", "camera_gap")
+NO_FAULTS = MappingProxyType(dict.fromkeys(SENSOR_FAULTS))  # the streams never stop
+
+
 def hand_held_rig(
     sim: Mapping[str, Any],
     sensor: Mapping[str, Any],
     seed: int,
     images: bool = True,
     asymmetric_distortion: bool = False,
+    faults: Mapping[str, Any] = NO_FAULTS,
     **hand: Any,
 ) -> HandHeldRig:
     """The ``person=sim`` factory of ``vical-guide`` (``conf/person/sim.yaml``): a simulated person (``HandModel``
     settings in ``hand``) with the simulated sensor drawn with ``seed``; ``images``: render every frame (the page's
-    live image and the EuRoC recording need them; false: the board's analytic corners only)."""
+    live image and the EuRoC recording need them; false: the board's analytic corners only); ``faults``: the
+    sensor's (``RigFaults.imu_gap``, ``camera_gap``: a stream that stops, as a pulled cable's)."""
     if "tremor_band_hz" in hand:
         hand["tremor_band_hz"] = tuple(hand["tremor_band_hz"])
-    return HandHeldRig(SimConfig.from_mapping(sim), SensorSampling.from_config(sensor), int(seed), HandModel(**hand),
-                       keep_images=bool(images), asymmetric_distortion=bool(asymmetric_distortion))  # fmt: skip
+    rig = HandHeldRig(SimConfig.from_mapping(sim), SensorSampling.from_config(sensor), int(seed), HandModel(**hand),
+                      keep_images=bool(images), asymmetric_distortion=bool(asymmetric_distortion))  # fmt: skip
+    rig.faults = sensor_faults(faults)
+    return rig
+
+
+def sensor_faults(faults: Mapping[str, Any]) -> RigFaults:
+    """The ``RigFaults`` of a held sensor's ``faults`` (its streams' gaps; an arm's faults are refused by key)."""
+    unknown = sorted(set(faults) - set(SENSOR_FAULTS))
+    if unknown:
+        raise ValueError(f"faults: a held sensor's faults are {list(SENSOR_FAULTS)}, not {unknown}")
+    return RigFaults(**{k: None if v is None else tuple(float(x) for x in v) for k, v in faults.items()})
