@@ -98,10 +98,10 @@ def test_a_still_hand_frames_the_board_where_the_truth_camera_projects_it(settin
 def test_a_hand_held_recording_calibrates_within_its_sigmas(settings, tremor):
     """A person turning and moving the sensor along each axis (12 suggestions, 30 s): the joint task's extrinsic
     and time offset within 3 reported sigma, with and without the model's tremor (1 mm, 0.3 deg at 8-12 Hz).
-    Measured (seeds 0-3): without tremor 1.1-2.7 mm, 0.03-0.06 deg, at most 2.1 sigma; with it 2.1-3.3 mm, at
-    most 2.6 sigma. Before the calibrator integrated the readings' cubic interpolant (the trapezoid rule of the
-    linear one shrinks a 10 Hz tremor at 200 Hz by 0.8 %) the tremor gave 2.9-6.7 mm and t_z up to 5.1 sigma
-    (3.2 on seed 1)."""
+    Measured (seeds 0-3): without tremor 1.1-2.7 mm, 0.03-0.06 deg, at most 2.1 sigma; with it 1.1-3.1 mm, at
+    most 2.5 sigma. Before the calibrator integrated the motion's cubic interpolant from the readings' interval
+    means (the trapezoid rule of their linear interpolant shrinks a 10 Hz tremor at 200 Hz by 0.8 %, the interval
+    mean by another 0.4 %) the tremor gave 2.9-6.7 mm and t_z up to 5.1 sigma (3.2 on seed 1)."""
     sim_config, sampling, task = settings
     z = []
     for seed in (0, 1):

@@ -19,10 +19,10 @@ import numpy as np
 
 from vical.calib.errors import CalibrationError, CalibrationSettingError
 from vical.calib.solve.imu_integration import (
-    cubic_interpolate,
     interval_knots,
     knot_segments,
     preintegrate,
+    reading_interpolant,
 )
 from vical.data.imu_model import ImuIntrinsics
 
@@ -77,8 +77,8 @@ class IntervalReadings:
 
     def __init__(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, ta: float, tb: float) -> None:
         self.knots = interval_knots(t, ta, tb)
-        self.gyro = cubic_interpolate(t, gyro, self.knots)
-        self.accel = cubic_interpolate(t, accel, self.knots)
+        self.gyro = reading_interpolant(t, gyro, self.knots)
+        self.accel = reading_interpolant(t, accel, self.knots)
 
     def preintegrated(self, params, bias: gtsam.imuBias.ConstantBias, theta: np.ndarray):
         gyro, accel = ImuIntrinsics.from_vector(theta).correct(self.gyro, self.accel)
