@@ -213,8 +213,7 @@ def test_a_sensor_that_delivers_no_images_or_no_imu_stops_the_reading_naming_the
     """The person holds a sensor one of whose streams delivers nothing: reading it (as the guide does while the
     person reaches) stops after ``limits.wait_timeout`` with one line naming that stream."""
     sim_config, sampling, _ = settings
-    rig = HandHeldRig(sim_config, sampling, 7)
-    rig.faults = RigFaults(**faults)
+    rig = HandHeldRig(sim_config, sampling, 7, faults=RigFaults(**faults))
     stream = SensorStream(rig.sensor, rig.target, None, Limits(wait_timeout=1.0))
     rig.sensor.start()
     try:

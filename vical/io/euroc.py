@@ -160,10 +160,6 @@ def _imu_sensor_yaml(rec: Recording) -> dict[str, Any]:
     return _imu_noise_yaml(rec.truth.imu_noise, rec.truth.imu_noise.rate_hz, "written by vical")
 
 
-def _no_progress() -> int:
-    raise OSError(errno.EIO, "a write that wrote nothing")
-
-
 class EurocStreamWriter:
     """Writes an EuRoC folder while the data arrives, so that a kill at any moment leaves a readable one.
 
@@ -247,7 +243,10 @@ class EurocStreamWriter:
         written = 0
         try:
             while written < len(data):  # a short write goes on; the next says why the disk stopped
-                written += os.write(fd, data[written:]) or _no_progress()
+                count = os.write(fd, data[written:])
+                if count == 0:
+                    raise OSError(errno.EIO, "a write that wrote nothing")
+                written += count
         except OSError as err:  # cut back what part of the lines went in: a reader sees whole lines only
             os.ftruncate(fd, end)
             raise self._stopped(f"{len(data)} bytes of {name}", err.strerror) from err

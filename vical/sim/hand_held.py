@@ -112,6 +112,7 @@ class HandHeldRig(Person):
         keep_images: also render every frame (for a page that shows them; corners stay analytic with the
             ``project`` backend).
         asymmetric_distortion: draw the distortion-centre offset and tangential terms (the joint task's sensor).
+        faults: the sensor's (no arm here: its streams' gaps), or None: none.
     """
 
     def __init__(
@@ -122,6 +123,7 @@ class HandHeldRig(Person):
         hand: HandModel | None = None,
         keep_images: bool = False,
         asymmetric_distortion: bool = False,
+        faults: RigFaults | None = None,
     ) -> None:
         person_seed, sensor_seed, noise_seed = np.random.default_rng(seed).integers(2**63 - 1, size=3)
         product = draw_product(sampling, int(sensor_seed))
@@ -134,7 +136,7 @@ class HandHeldRig(Person):
         )
         self.datasheet: SensorTruth = product.datasheet  # what the person's datasheet says of the sensor
         self.recorder.start(self.truth, np.random.default_rng(noise_seed))
-        self.faults = RigFaults()  # no arm; the sensor's own faults: ``hand_held_rig``'s ``faults``
+        self.faults = faults or RigFaults()
         self.sensor = SimViSensor(self)  # the sensor as vical-collect's runner reads one (rendered images)
 
     @property
@@ -186,10 +188,9 @@ def hand_held_rig(
     sensor's (``RigFaults.imu_gap``, ``camera_gap``: a stream that stops, as a pulled cable's)."""
     if "tremor_band_hz" in hand:
         hand["tremor_band_hz"] = tuple(hand["tremor_band_hz"])
-    rig = HandHeldRig(SimConfig.from_mapping(sim), SensorSampling.from_config(sensor), int(seed), HandModel(**hand),
-                      keep_images=bool(images), asymmetric_distortion=bool(asymmetric_distortion))  # fmt: skip
-    rig.faults = sensor_faults(faults)
-    return rig
+    return HandHeldRig(SimConfig.from_mapping(sim), SensorSampling.from_config(sensor), int(seed), HandModel(**hand),
+                       keep_images=bool(images), asymmetric_distortion=bool(asymmetric_distortion),
+                       faults=sensor_faults(faults))  # fmt: skip
 
 
 def sensor_faults(faults: Mapping[str, Any]) -> RigFaults:

@@ -46,23 +46,26 @@ def cubic_interpolate(t: np.ndarray, x: np.ndarray, tq: np.ndarray) -> np.ndarra
 
 def reading_interpolant(t: np.ndarray, x: np.ndarray, tq: np.ndarray) -> np.ndarray:
     """The motion (Q, D) at query times ``tq`` (Q,) [s] that IMU readings ``x`` (N, D) at times ``t`` (N,) [s]
-    sampled: the cubic through the point values of the four readings around each query's sample interval.
+    sampled: the ``cubic_interpolate`` of their ``point_values``.
 
-    A reading is taken as the motion's mean over its sample interval, centred on its stamp (an IMU's decimation
-    filter: EuRoC's ADIS16448 averages its internal 819.2 Hz samples), whose point value is
-    ``x_k - (x_{k+1} - 2 x_k + x_{k-1}) / 24`` to fourth order. Why a cubic and why the correction: integrating the
-    linear interpolant of the readings (the trapezoid rule) shrinks a motion of frequency f sampled every h by
-    (2 pi f h)^2 / 12 and the interval mean by another (2 pi f h)^2 / 24 (0.8 % and 0.4 % for a hand's 10 Hz tremor
-    at 200 Hz), errors the motion's amplitude scales and the extrinsic's translation absorbs; these are of fourth
-    order. The correction sums to the readings' own integral over whole intervals, so it adds no noise to it.
+    Why a cubic and why the point values: integrating the linear interpolant of the readings (the trapezoid rule)
+    shrinks a motion of frequency f sampled every h by (2 pi f h)^2 / 12 and taking interval means for point values
+    by another (2 pi f h)^2 / 24 (0.8 % and 0.4 % for a hand's 10 Hz tremor at 200 Hz), errors the motion's
+    amplitude scales and the extrinsic's translation absorbs; these are of fourth order.
     """
     if len(t) < 4:
         return interpolate(t, x, tq)
-    j = _stencils(t, tq)
-    before, after = np.clip(j - 1, 0, len(t) - 1), np.clip(j + 1, 0, len(t) - 1)
-    inner = ((j > 0) & (j < len(t) - 1))[:, :, None]  # the first and last readings keep their value
-    points = x[j] - inner * (x[after] - 2.0 * x[j] + x[before]) / 24.0
-    return np.einsum("qi,qid->qd", _lagrange_weights(t[j], tq), points)
+    return cubic_interpolate(t, point_values(x), tq)
+
+
+def point_values(x: np.ndarray) -> np.ndarray:
+    """The motion (N, D) at the stamps of readings ``x`` (N, D), each the motion's mean over its sample interval
+    centred on its stamp (an IMU's decimation filter: EuRoC's ADIS16448 averages its internal 819.2 Hz samples):
+    ``x_k - (x_{k+1} - 2 x_k + x_{k-1}) / 24`` to fourth order; the first and last reading keep their value. The
+    correction sums to the readings' own integral over whole intervals, so it adds no noise to it."""
+    points = x.copy()
+    points[1:-1] -= (x[2:] - 2.0 * x[1:-1] + x[:-2]) / 24.0
+    return points
 
 
 def _stencils(t: np.ndarray, tq: np.ndarray) -> np.ndarray:
@@ -84,8 +87,18 @@ def _lagrange_weights(nodes: np.ndarray, tq: np.ndarray) -> np.ndarray:
 def interval_knots(t: np.ndarray, ta: float, tb: float) -> np.ndarray:
     """Knots (4 S + 1,) [s] integrating ``[ta, tb]``: its ends and the samples inside cut it into S pieces,
     each cut into quarters (two Simpson steps per piece)."""
-    inside = t[(t > ta) & (t < tb)]
-    return _quarters(np.concatenate([[ta], inside, [tb]]))
+    return _quarters(_piece_ends(t, np.array([ta, tb])))
+
+
+def readings_around(t: np.ndarray, ta: float, tb: float) -> slice:
+    """The readings ``reading_interpolant`` needs for queries in ``[ta, tb]`` [s]: the cubics' four and their
+    neighbours (a recording's IMU grows with it; the information state integrates one frame's interval at a time)."""
+    return slice(max(int(np.searchsorted(t, ta)) - 3, 0), min(int(np.searchsorted(t, tb)) + 3, len(t)))
+
+
+def _piece_ends(t: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """The increasing ``times`` [s] and the sample times ``t`` between the first and the last, sorted, once each."""
+    return np.union1d(t[(t > times[0]) & (t < times[-1])], times)
 
 
 def _quarters(ends: np.ndarray) -> np.ndarray:
@@ -106,8 +119,9 @@ def segments_between(
 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """``interval_segments`` of every interval between consecutive increasing ``times`` (S,) [s] (S - 1 of
     them), computed in one pass."""
-    inside = t[(t > times[0]) & (t < times[-1])]
-    ends = np.union1d(inside, times)
+    w = readings_around(t, times[0], times[-1])
+    t, gyro, accel = t[w], gyro[w], accel[w]
+    ends = _piece_ends(t, times)
     knots = _quarters(ends)
     dt, omega, acc = knot_segments(knots, reading_interpolant(t, gyro, knots), reading_interpolant(t, accel, knots))
     cuts = 2 * np.searchsorted(ends, times[1:-1])  # two segments per piece between ends

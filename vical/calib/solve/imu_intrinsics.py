@@ -23,6 +23,7 @@ from vical.calib.solve.imu_integration import (
     knot_segments,
     preintegrate,
     reading_interpolant,
+    readings_around,
 )
 from vical.data.imu_model import ImuIntrinsics
 
@@ -76,9 +77,10 @@ class IntervalReadings:
     """The raw readings of one IMU interval at its knots, corrected on demand."""
 
     def __init__(self, t: np.ndarray, gyro: np.ndarray, accel: np.ndarray, ta: float, tb: float) -> None:
-        self.knots = interval_knots(t, ta, tb)
-        self.gyro = reading_interpolant(t, gyro, self.knots)
-        self.accel = reading_interpolant(t, accel, self.knots)
+        w = readings_around(t, ta, tb)
+        self.knots = interval_knots(t[w], ta, tb)
+        self.gyro = reading_interpolant(t[w], gyro[w], self.knots)
+        self.accel = reading_interpolant(t[w], accel[w], self.knots)
 
     def preintegrated(self, params, bias: gtsam.imuBias.ConstantBias, theta: np.ndarray):
         gyro, accel = ImuIntrinsics.from_vector(theta).correct(self.gyro, self.accel)
