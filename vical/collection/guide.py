@@ -98,11 +98,12 @@ class Start:
 
 def upright_board_frame(T_board_cam: np.ndarray, up_board: np.ndarray) -> np.ndarray:
     """``T_world_board`` (4, 4) of the upright world at the board: origin the board's, z up (``up_board`` (3,), in the
-    board's frame), x along the board's normal toward the camera ``T_board_cam`` (4, 4) made horizontal (the board's
-    x where the board lies flat)."""
+    board's frame), x along the board's normal away from the camera ``T_board_cam`` (4, 4) made horizontal (the board's
+    x where the board lies flat). The policies' world: the env's camera starts looking along +x at a board that faces
+    it, so a position offset or action means here what it means in training (a +x step goes toward the board)."""
     z = np.asarray(up_board, dtype=float) / np.linalg.norm(up_board)
-    normal = np.array([0.0, 0.0, np.sign(T_board_cam[2, 3]) or 1.0])  # the board's z, to the camera's side
-    x = normal - np.dot(normal, z) * z
+    into_board = np.array([0.0, 0.0, -np.sign(T_board_cam[2, 3]) or -1.0])  # the board's z, from the camera's side
+    x = into_board - np.dot(into_board, z) * z
     if np.linalg.norm(x) < 0.1:  # a board lying flat: any horizontal x
         x = np.array([1.0, 0.0, 0.0]) - z[0] * z
     x /= np.linalg.norm(x)
