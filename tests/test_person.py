@@ -110,3 +110,69 @@ def test_one_seed_gives_one_person():
 def test_bad_hand_settings_are_refused_by_key(setting, value, message):
     with pytest.raises(ConfigError, match=message):
         HandModel(**{setting: value})
+
+
+def _sim_config():
+    from vical.sim import SimConfig
+
+    return SimConfig()
+
+
+def test_the_hand_held_sim_moves_as_the_arm_does_for_the_env_the_person_reaching_each_goal():
+    """``HandHeldSim.move_to`` (the env's person): a still, exact hand ends where it is sent, its path the straight
+    distance and its rotation the geodesic angle (the minimum-jerk reach), the reach's duration plus the rest
+    recorded; with the model's errors the goals are reached within 4 cm per axis."""
+    from vical.sim.hand_held import HandHeldSim
+
+    exact = HandModel(placement_sigma_m=0.0, placement_sigma_deg=0.0, tremor_m=0.0, tremor_deg=0.0)
+    sim = HandHeldSim(_sim_config(), np.random.default_rng(0), exact)
+    start = sim.ee_pose()
+    turn = Rotation.from_euler("xyz", [0.2, -0.1, 0.3]).as_matrix()
+    goal = make_transform(start[:3, :3] @ turn, start[:3, 3] + [0.1, -0.05, 0.02])
+    motion = sim.move_to(goal, settle_time=0.3)
+    np.testing.assert_allclose(motion.T_final, goal, atol=1e-9)
+    assert motion.path_length == pytest.approx(np.linalg.norm([0.1, -0.05, 0.02]), rel=1e-6)
+    assert motion.rotation_length == pytest.approx(_angles(turn), rel=1e-4)
+    assert motion.duration == pytest.approx(1.5, abs=1e-3) and motion.settle_time == 0.3
+    assert motion.t_end_ns - motion.t_start_ns == pytest.approx(1.8e9, abs=1e6)
+
+    sim = HandHeldSim(_sim_config(), np.random.default_rng(1), HandModel(tremor_m=0.0, tremor_deg=0.0))
+    errors = []
+    for _ in range(300):
+        T_before = sim.ee_pose()
+        errors.append(np.linalg.inv(T_before) @ sim.move_to(T_before).T_final)
+    errors = np.array(errors)
+    np.testing.assert_allclose(errors[:, :3, 3].std(axis=0), 0.04, rtol=0.15)
+    sim.reset(seed=5)
+    assert sim.time_ns == 0
+    np.testing.assert_allclose(sim.ee_pose(), start, atol=1e-9)
+
+
+def test_the_env_with_a_hand_steps_through_the_person():
+    """``CalibrationEnv(hand={})``: each step is the person's reach (at least 1.5 s, then ``settle_time``), the
+    sensor lands near the goal (the hand's error, not the arm's precision), and a seed gives one episode."""
+    from hydra import compose, initialize_config_dir
+    from hydra.utils import instantiate
+    from omegaconf import OmegaConf
+
+    from vical.apps.train import CONF_DIR
+    from vical.env.calibration import CalibrationEnv
+
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        cfg = compose(config_name="train", overrides=["+experiment=train_person_policy"])
+    env = instantiate(cfg.env, _convert_="all")
+    try:
+        episodes = []
+        for _ in range(2):
+            env.reset(seed=7)
+            actions = np.random.default_rng(3).uniform(env.action_space.low, env.action_space.high, (3, 6))
+            steps = [env.step(a)[1] for a in actions]
+            episodes.append((steps, env.recording().duration, env.pose_offset))
+        assert episodes[0][0] == episodes[1][0] and episodes[0][1] == episodes[1][1]
+        np.testing.assert_array_equal(episodes[0][2], episodes[1][2])
+        assert 3 * (1.5 + 0.3) <= episodes[0][1] - cfg.env.reset_hold < 3 * 4.0
+    finally:
+        env.close()
+    settings = {k: v for k, v in OmegaConf.to_container(cfg.env, resolve=True).items() if k != "_target_"}
+    with pytest.raises(ConfigError, match=r"env\.hand: unknown setting\(s\) \['steadiness'\]"):
+        CalibrationEnv(**{**settings, "hand": {"steadiness": 1.0}})

@@ -31,7 +31,7 @@ from vical.calib.detection.aprilgrid import detect_aprilgrid
 from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask, run_task
-from vical.config_checks import ConfigError
+from vical.config_checks import ConfigError, from_mapping
 from vical.data import Recording, SensorTruth
 from vical.env.actions import goal_offset
 from vical.env.information import GROUPS, TASK_GROUPS, Guess, LensSpread
@@ -42,7 +42,9 @@ from vical.env.state import EpisodeState
 from vical.env.workspace import board_in_sight, check_workspace, pose_frame, sight_range
 from vical.geometry import CameraModel
 from vical.sim import PandaSim, SimConfig
+from vical.sim.hand_held import HandHeldSim
 from vical.sim.motion import MotionResult
+from vical.sim.person import HandModel
 from vical.sim.products import replace_board
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import CameraSampling, Product, SensorSampling, draw_product, sample_sensor
@@ -94,6 +96,9 @@ class CalibrationEnv(gym.Env):
         task: the ``task`` config group (``vical.calib.tasks.CalibrationTask``).
         task_mix: more tasks by name (each a ``task`` config group): every episode draws its task
             from ``task`` and these with equal probability, so that one policy learns them all.
+        hand: None: the Panda moves the sensor; else a simulated person holds it (``vical.sim.person.HandModel``
+            settings; ``{}`` its defaults, ``vical-guide``'s person): each step's goal is shown to the person,
+            who reaches it with the hand's placement error, lag and tremor (``vical.sim.hand_held.HandHeldSim``).
         **mdp: the MDP constants (``vical.env.settings.MdpConfig``).
     """
 
@@ -105,9 +110,11 @@ class CalibrationEnv(gym.Env):
         sensor: Mapping[str, Any],
         task: Mapping[str, Any],
         task_mix: Mapping[str, Mapping[str, Any]] | None = None,
+        hand: Mapping[str, Any] | None = None,
         **mdp: Any,
     ) -> None:
         self.config = MdpConfig.from_config(mdp)
+        self.hand = None if hand is None else from_mapping(HandModel, hand, "env.hand")
         self.tasks = [CalibrationTask.from_config(task), *mixed_tasks(task_mix)]
         self.task = self.tasks[0]
         self.sampling = SensorSampling.from_config(sensor)
@@ -134,7 +141,11 @@ class CalibrationEnv(gym.Env):
         product prints another board: ``sensor.products.boards``)."""
         if self.recorder is not None:
             self.recorder.close()
-        self.sim = PandaSim(replace(self._sim_config, board=board))
+        sim_config = replace(self._sim_config, board=board)
+        if self.hand is None:
+            self.sim = PandaSim(sim_config)
+        else:  # drawn again at every reset, from the episode's seed
+            self.sim = HandHeldSim(sim_config, np.random.default_rng(0), self.hand)
         self.target = board.target
         detector = detect_aprilgrid if self.target.kind == "aprilgrid" else detect_checkerboard
         self.recorder = SensorRecorder(
@@ -143,7 +154,8 @@ class CalibrationEnv(gym.Env):
         camera = self.sampling.camera
         self.state = EpisodeState(self.config, self.target, (camera.width, camera.height))
         self.frame = pose_frame(self.sim, self.config.workspace)
-        check_workspace(self.sim, self.frame, self.config.workspace)
+        if self.hand is None:  # a person's reach is not the arm's: the workspace is where they are sent
+            check_workspace(self.sim, self.frame, self.config.workspace)
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[np.ndarray, dict]:

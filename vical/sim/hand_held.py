@@ -7,7 +7,9 @@ the simulated person's (``vical.sim.person.SimulatedPerson``): each physics step
 hand holds it at that instant, tremor included, so the recorder makes the IMU samples (its model: averaging,
 noise, bias walk, intrinsics), the camera frames (exposure instants, time offset, analytic corners or rendered
 images) and the ground truth exactly as it does for the arm. Nothing collides and nothing is simulated
-dynamically: a hand's motion is prescribed, not actuated.
+dynamically: a hand's motion is prescribed, not actuated. It also moves as ``PandaSim`` moves for the calibration
+env (``move_to``, ``hold``, ``reset``, ``ee_pose``): each step's goal is shown to the person, who reaches it with the
+hand model's error, lag and tremor (``env.hand``: a policy trained with the person's following error).
 
 ``HandHeldRig`` is one person holding one sensor drawn from the sensor distribution, as ``SimRig`` is one Panda
 holding one: ``suggest`` a pose, ``advance`` the clock, read the ``recording`` (truth in it, for tests that compare
@@ -26,15 +28,16 @@ import mujoco
 import numpy as np
 
 from vical.data import NS_PER_S, Recording, SensorTruth
-from vical.geometry import matrix_to_quat
+from vical.geometry import invert_transform, make_transform, matrix_to_quat, quat_to_matrix
 from vical.robot import Guidance, Person
 from vical.sim.adapters import RigFaults, SimViSensor
+from vical.sim.motion import MotionResult
 from vical.sim.panda import StepObserver, StepPoses
 from vical.sim.person import HandModel, Reach, SimulatedPerson
 from vical.sim.products import replace_board
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import SensorSampling, draw_product, sample_sensor
-from vical.sim.scene import build_hand_held_model, imu_pose_in_body
+from vical.sim.scene import build_hand_held_model, imu_pose_in_body, site_pose
 from vical.sim.settings import SimConfig
 
 MAX_ADVANCE_S = 60.0  # [s] the longest stretch one ``advance`` simulates (its step poses are held in memory)
@@ -55,9 +58,20 @@ class HandHeldSim:
 
     def __init__(self, cfg: SimConfig, rng: np.random.Generator, hand: HandModel | None = None) -> None:
         self.cfg = cfg
+        self.hand = hand or HandModel()
         self.model, self.T_world_board, self.T_world_start = build_hand_held_model(cfg)
         self.data = mujoco.MjData(self.model)
-        self.person = SimulatedPerson(self.T_world_start, rng, hand or HandModel())
+        self.reset(rng=rng)
+        # The env moves the "ee" site (as the Panda's): the person is shown where cam_body goes for it.
+        ee = self.model.site("ee")
+        self._T_ee_body = invert_transform(make_transform(quat_to_matrix(ee.quat), ee.pos))
+
+    def reset(self, seed: int | None = None, rng: np.random.Generator | None = None) -> None:
+        """A new person (drawn from ``rng``, or a generator of ``seed``; neither: the next draw of the last one)
+        holding the sensor at the start pose at time 0."""
+        if rng is None:
+            rng = self.person.rng if seed is None else np.random.default_rng(seed)
+        self.person = SimulatedPerson(self.T_world_start, rng, self.hand)
         self._step = 0
         self._place(self.person.poses(np.zeros(1))[0])
 
@@ -76,15 +90,50 @@ class HandHeldSim:
         self.data.mocap_quat[0] = matrix_to_quat(T[:3, :3])
         mujoco.mj_forward(self.model, self.data)
 
+    def ee_pose(self) -> np.ndarray:
+        """``T_world_ee`` (4, 4) of the rig's "ee" site, where the Panda's flange would hold it."""
+        return site_pose(self.model, self.data, "ee")
+
+    def move_to(self, T_world_ee: np.ndarray, observer: StepObserver | None = None,
+                settle_time: float = 0.0) -> MotionResult:  # fmt: skip
+        """Show the person ``T_world_ee`` (4, 4) and simulate their reach to it (its error, lag and tremor), then
+        ``settle_time`` [s] held there: ``PandaSim.move_to`` with a hand (nothing is clamped or refused)."""
+        t_start_ns = self.time_ns
+        reach = self.person.follow(np.asarray(T_world_ee, float) @ self._T_ee_body, t_start_ns / NS_PER_S)
+        duration = min(max(0.0, reach.t_end - t_start_ns / NS_PER_S), MAX_ADVANCE_S)
+        path, turn = self._advance(duration, observer)
+        rest_path, rest_turn = self._advance(settle_time, observer)
+        return self._motion(T_world_ee, t_start_ns, duration, settle_time, path + rest_path, turn + rest_turn)
+
+    def hold(self, duration: float, observer: StepObserver | None = None) -> MotionResult:
+        """Hold the sensor (the tremor goes on) for ``duration`` [s]."""
+        t_start_ns, T_now = self.time_ns, self.ee_pose()
+        path, turn = self._advance(duration, observer)
+        return self._motion(T_now, t_start_ns, duration, 0.0, path, turn)
+
+    def _motion(self, T_requested: np.ndarray, t_start_ns: int, duration: float, settle_time: float, path: float,
+                turn: float) -> MotionResult:  # fmt: skip
+        T_requested = np.asarray(T_requested, float)
+        return MotionResult(
+            reached=True, clamped=False, message="", T_requested=T_requested, T_goal=T_requested,
+            T_final=self.ee_pose(), q_goal=np.zeros(0), duration=duration, settle_time=settle_time, path_length=path,
+            rotation_length=turn, max_tracking_error=0.0, position_margin=np.inf, velocity_margin=np.inf,
+            num_steps=(self.time_ns - t_start_ns) // self.timestep_ns, t_start_ns=t_start_ns, t_end_ns=self.time_ns,
+        )  # fmt: skip
+
     def advance(self, seconds: float, observer: StepObserver | None = None) -> float:
         """Simulate ``seconds`` [s] of the person's motion (whole physics steps); the observer sees every step's
         poses and ``data`` at the steps it asks for, as in ``PandaSim``'s motions. Returns the path [m] of
         ``cam_body``'s origin over the steps."""
+        return self._advance(seconds, observer)[0]
+
+    def _advance(self, seconds: float, observer: StepObserver | None) -> tuple[float, float]:
+        """``advance``: the path [m] and the sum of rotation angles [rad] of ``cam_body`` over the steps."""
         if not 0.0 <= seconds <= MAX_ADVANCE_S:
             raise ValueError(f"advance takes 0 to {MAX_ADVANCE_S:g} s at a time, got {seconds}")
         n, t0_ns, step_ns = round(seconds * NS_PER_S / self.timestep_ns), self.time_ns, self.timestep_ns
         if n == 0:
-            return 0.0
+            return 0.0, 0.0
         T = self.person.poses((t0_ns + step_ns * np.arange(n + 1)) / NS_PER_S)  # the steps, then the end state
         live = [] if observer is None else observer.live_steps(t0_ns, n, step_ns)
         first = self._step
@@ -98,7 +147,10 @@ class HandHeldSim:
             imu = T[:n] @ imu_pose_in_body(self.model)
             observer.on_steps(StepPoses(t0_ns, step_ns, imu[:, :3, 3].copy(), imu[:, :3, :3].reshape(n, 9).copy(),
                                         T[:n, :3, 3].copy()))  # fmt: skip
-        return float(np.sum(np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1)))
+        path = float(np.sum(np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1)))
+        turns = np.einsum("nji,njk->nik", T[:-1, :3, :3], T[1:, :3, :3])  # each step's relative rotation
+        cosines = np.clip((np.trace(turns, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+        return path, float(np.sum(np.arccos(cosines)))
 
 
 class HandHeldRig(Person):
