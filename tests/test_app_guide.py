@@ -8,6 +8,7 @@ import subprocess
 import sys
 import urllib.error
 import urllib.request
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -20,6 +21,7 @@ from vical.collection.page import GuidePage, PageSettings
 from vical.config_checks import ConfigError
 from vical.data import Target
 from vical.geometry import T_CAM_BODY, CameraModel, make_transform
+from vical.io.bag import write_bag
 from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.learned import PAPER_POLICY_DIR
@@ -31,7 +33,7 @@ def config(*overrides: str):
         return compose(config_name="guide", overrides=list(overrides))
 
 
-def test_bad_settings_are_refused_by_key(tmp_path):
+def test_bad_settings_are_refused_by_key(tmp_path, monkeypatch):
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "x").write_text("x")
     out = f"out={tmp_path / 'o'}"
@@ -51,8 +53,17 @@ def test_bad_settings_are_refused_by_key(tmp_path):
         guide(config(out, "person.placement_sigma_m=-1"))
     with pytest.raises(ConfigError, match=r"^person: RealSenseSensor needs the pyrealsense2 package"):
         guide(config(out, "person=realsense", "guess.camchain=null"))
-    with pytest.raises(ConfigError, match=r"^person: .*roslibpy package: pip install 'vical\[ros\]'"):
-        guide(config(out, "person=ros", "guess.camchain=null"))
+    with monkeypatch.context() as without_roslibpy:
+        without_roslibpy.setitem(sys.modules, "roslibpy", None)  # as where it is not installed
+        with pytest.raises(ConfigError, match=r"^person: .*roslibpy package: pip install 'vical\[ros\]'"):
+            guide(config(out, "person=ros", "guess.camchain=null"))
+    with socket.socket() as unserved:  # a port nothing listens on: no rosbridge there
+        unserved.bind(("127.0.0.1", 0))
+        port = unserved.getsockname()[1]
+    with pytest.raises(
+        ConfigError, match=rf"^person: no rosbridge at ws://localhost:{port} within 1 s: is rosbridge_server running\?$"
+    ):
+        guide(config(out, "person=ros", f"person.port={port}", "person.timeout=1", "guess.camchain=null"))
     with pytest.raises(ConfigError, match=r"^person: faults: a held sensor's faults are \['imu_gap', 'camera_gap'\]"):
         guide(config(out, "+person.faults.latency=0.1"))
     # A policy trained for another state layout and workspace (the paper's coverage state): refused before it runs.
@@ -132,7 +143,7 @@ def test_the_page_serves_the_guidance_the_live_image_with_the_outline_and_the_re
 
 
 def test_the_guide_runs_headless_records_and_calibrates(tmp_path, capsys):
-    """A simulated person guided by the shipped policy for 6 poses, without the page: the instructions as lines, the
+    """A simulated person guided by the default policy for 6 poses, without the page: the instructions as lines, the
     recording as EuRoC (images and IMU), the summary, and the calibration of the recording."""
     out = tmp_path / "out"
     status = guide(config(f"out={out}", "page.enabled=false", "limits.max_steps=6", "report=false", "seed=3"))
@@ -182,3 +193,62 @@ def test_a_sensor_lost_during_the_guidance_stops_it_with_one_line_and_a_calibrat
     assert "stopped: no IMU samples" in (out / "collect.yaml").read_text()
     assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 80
     assert calibrate_joint(out, tmp_path / "cal") == 0
+
+
+@pytest.fixture
+def rosbridge_replay():
+    """``tests/rosbridge_replay.py`` serving a bag: a function of the bag's path that returns the port it listens on."""
+    servers = []
+
+    def serve(bag):
+        script = Path(__file__).with_name("rosbridge_replay.py")
+        server = subprocess.Popen([sys.executable, str(script), str(bag)], stdout=subprocess.PIPE, text=True)
+        servers.append(server)
+        first = server.stdout.readline()
+        assert first.startswith("port "), first
+        return int(first.split()[1])
+
+    yield serve
+    for server in servers:
+        server.terminate()
+        server.wait(timeout=10)
+
+
+@pytest.mark.integration
+def test_the_guide_reads_a_recorded_sensor_stream_over_ros(tmp_path, capsys, rosbridge_replay):
+    """``person=ros`` against a recorded stream: a simulated person's guided recording (rendered images, IMU) as a
+    ROS1 bag, played in real time by a rosbridge server, read by the ROS adapter through roslibpy. The guide starts
+    on it, gives its instructions (the recording does not follow them: each pose is taken where the sensor rests),
+    records what it reads (every image and IMU sample as the bag holds them) and calibrates, with the first
+    recording's calibration as the nominal values a user would pass."""
+    first = tmp_path / "first"
+    assert guide(config(f"out={first}", "page.enabled=false", "limits.max_steps=10", "report=false", "seed=3")) == 0
+    recorded = read_euroc(first / "recording", read_target_yaml(first / "target.yaml"))
+    bag = write_bag(recorded, tmp_path / "sensor.bag")
+    port = rosbridge_replay(bag)
+    capsys.readouterr()
+
+    out = tmp_path / "ros"
+    status = guide(config(
+        f"out={out}", "person=ros", f"person.port={port}", "person.sensor.image_topic=/cam0/image_raw",
+        "person.sensor.imu_topic=/imu0", "person.sensor.camera_rate_hz=10", "limits.max_steps=3", "report=false",
+        f"guess.camchain={first / 'calibration' / 'camchain-imucam.yaml'}", f"guess.imu_yaml={first / 'imu.yaml'}",
+        "page.enabled=false"))  # fmt: skip
+    lines = capsys.readouterr().out
+    assert status == 0, lines
+    assert "started 0." in lines and lines.count("next: ") == 4  # the start pose and three steps
+    assert "steps: 3" in (out / "collect.yaml").read_text()
+    read = read_euroc(out / "recording", read_target_yaml(out / "target.yaml"))
+    assert len(read.frames) >= 30 and len(read.imu) >= 600
+    # What the guide recorded is the bag's stream, unchanged: the same stamps, images and IMU readings.
+    frame_at = {int(t): k for k, t in enumerate(recorded.frames.t)}
+    for k in range(0, len(read.frames), 7):
+        np.testing.assert_array_equal(read.frames.images[k], recorded.frames.images[frame_at[int(read.frames.t[k])]])
+    imu_at = np.searchsorted(recorded.imu.t, read.imu.t)
+    np.testing.assert_array_equal(recorded.imu.t[imu_at], read.imu.t)
+    np.testing.assert_allclose(read.imu.gyro, recorded.imu.gyro[imu_at], atol=1e-12)
+    np.testing.assert_allclose(read.imu.accel, recorded.imu.accel[imu_at], atol=1e-12)
+    # Its calibration of the part it read agrees with the whole recording's within a few of its sigma.
+    _, T_first, _ = read_camchain(first / "calibration" / "camchain-imucam.yaml")
+    _, T_ros, _ = read_camchain(out / "calibration" / "camchain-imucam.yaml")
+    assert np.linalg.norm(T_ros[:3, 3] - T_first[:3, 3]) < 0.01

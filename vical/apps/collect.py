@@ -162,12 +162,12 @@ def nominal_sensor(s: CollectionOutput, rig: Any) -> SensorTruth:
 
 def build_robot(robot: DictConfig, group: str = "robot") -> Any:
     """The ``group`` config group's rig (``robot``; vical-guide's ``person``); what its adapter refuses (a bad
-    setting, a missing extra) is a ``ConfigError``."""
+    setting, a missing extra, a robot or sensor it cannot reach) is a ``ConfigError``."""
     try:
         return hydra.utils.instantiate(robot, _convert_="all")
     except InstantiationException as err:
         cause = err.__cause__
-        if isinstance(cause, ValueError | ImportError):
+        if isinstance(cause, ValueError | ImportError | ConnectionError):
             raise ConfigError(f"{group}: {cause}") from None
         raise
 
