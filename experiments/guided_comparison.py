@@ -4,20 +4,22 @@ The same simulated person (``person=sim``: 7 cm / 10 deg placement error per pos
 1 mm / 0.3 deg tremor at 8-12 Hz; docs/simulation.md) holds each sensor and follows, pose by pose, in
 ``vical-guide``'s loop (``vical.collection.guide.Guide``, at corner level: nothing rendered, nothing written):
 
-- **guided, learned**: the shipped collection policy (``policy=learned``), "done" by its own stopping rule;
+- **guided, learned (person)**: ``vical-guide``'s default (``policy=learned_person``), the policy trained with the
+  simulated person in the arm's place (``vical-train +experiment=train_person_policy``), "done" by its own rule;
 - **guided, greedy planner**: the information-greedy planner (``policy=greedy_information``);
+- **guided, learned (arm)**: the collection policy shipped for an arm (``policy=learned``);
 - **written routine**: Kalibr's recommended routine as written instructions (``policy=expert_long``: views close
   and far, tilted, rolled, then swings along and about every axis), followed to its end without feedback;
 - **written routine + done**: the same, with a live "done" from the shared stopping rule (``stop=information``).
 
 Per sensor: the recording time and path at the stop, whether "done" came (within the step limit), the joint
 calibration's true errors, and whether a "done" was right (every scored group within its tolerance); the
-table is ``vical-evaluate``'s time-to-tolerance table (paired 95 % intervals against the learned policy).
+table is ``vical-evaluate``'s time-to-tolerance table (paired 95 % intervals against the guide's default).
 
 Sensors: reset seeds from 60000 (no training, fitting or test uses them; ``experiments/collect_gap.py`` evaluates
 60000-60019 too); ``--sensors`` of them.
 
-    python experiments/guided_comparison.py --sensors 30            # ~35 min on 2 cores (2 workers)
+    python experiments/guided_comparison.py --sensors 30            # ~36 min on 2 cores (2 workers)
 """
 
 from __future__ import annotations
@@ -45,25 +47,26 @@ FIRST_SEED = 60000
 # A person who loses the board from view goes on with the routine (a live vical-guide stops after 60 frames so that
 # someone notices; here every condition goes on alike, and the frames without the board are no data).
 NEVER_LOST = 1_000_000
-REFERENCE = "guided, learned"
-CONDITIONS = {  # name: (policy, stop)
-    REFERENCE: ("learned", "policy"),
-    "guided, greedy planner": ("greedy_information", "policy"),
-    "written routine": ("expert_long", "policy"),
-    "written routine + done": ("expert_long", "information"),
+REFERENCE = "guided, learned (person)"  # vical-guide's default policy
+CONDITIONS = {  # name: the guide's settings
+    REFERENCE: ["policy=learned_person"],
+    "guided, greedy planner": ["policy=greedy_information"],
+    "guided, learned (arm)": ["policy=learned"],
+    "written routine": ["policy=expert_long"],
+    "written routine + done": ["policy=expert_long", "stop=information"],
 }
 
 
-def config(policy: str, stop: str, task: str, seed: int):
+def config(settings: list[str], task: str, seed: int):
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         return compose(config_name="guide", overrides=[
-            f"policy={policy}", f"stop={stop}", f"task={task}", f"seed={seed}", "person.images=false",
-            "page.enabled=false", "progress=false", "out=unused", f"limits.lost_frames={NEVER_LOST}"])  # fmt: skip
+            *settings, f"task={task}", f"seed={seed}", "person.images=false", "page.enabled=false", "progress=false",
+            "out=unused", f"limits.lost_frames={NEVER_LOST}"])  # fmt: skip
 
 
-def guided_row(name: str, policy_name: str, stop: str, task: str, seed: int) -> EpisodeRow:
+def guided_row(name: str, settings: list[str], task: str, seed: int) -> EpisodeRow:
     """One sensor (``seed``) held by the simulated person in condition ``name``: the stop and the true errors."""
-    cfg = config(policy_name, stop, task, seed)
+    cfg = config(settings, task, seed)
     s = check_settings(cfg)
     policy = with_stop(instantiate_policy(plain(cfg.policy)[task], name), StopRule.from_config(plain(cfg.stop)))
     mdp = mdp_config(cfg, policy)
@@ -79,15 +82,14 @@ def guided_row(name: str, policy_name: str, stop: str, task: str, seed: int) -> 
     return calibrate_row(row, from_mapping(CalibrationTask, plain(cfg.task), "task"), recording)
 
 
-def _row(run: tuple[str, str, str, str, int]) -> EpisodeRow:
+def _row(run: tuple[str, list[str], str, int]) -> EpisodeRow:
     return guided_row(*run)
 
 
 def tolerances(task: str) -> dict[str, float]:
     """The shared stopping rule's tolerances (the shipped learned run's information state)."""
-    return information_settings(StopRule.from_config(plain(config("learned", "information", task, 0).stop)))[
-        "information"
-    ]["tolerances"]
+    stop = config(["policy=learned", "stop=information"], task, 0).stop
+    return information_settings(StopRule.from_config(plain(stop)))["information"]["tolerances"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -97,8 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--workers", type=int, default=2, help="processes (one run each at a time)")
     args = p.parse_args(argv)
     rows: dict[str, list[EpisodeRow]] = {name: [] for name in CONDITIONS}
-    runs = [(name, policy, stop, args.task, seed) for seed in range(FIRST_SEED, FIRST_SEED + args.sensors)
-            for name, (policy, stop) in CONDITIONS.items()]  # fmt: skip
+    runs = [(name, settings, args.task, seed) for seed in range(FIRST_SEED, FIRST_SEED + args.sensors)
+            for name, settings in CONDITIONS.items()]  # fmt: skip
     start = time.perf_counter()
     with ProcessPoolExecutor(args.workers, mp_context=get_context("spawn")) as pool:
         for n, row in enumerate(pool.map(_row, runs), start=1):

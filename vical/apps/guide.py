@@ -3,8 +3,9 @@ record, calibrate.
 
 Configured by ``conf/guide.yaml``. The ``person`` group builds who holds which sensor (``person=sim``: a simulated
 person with the simulated sensor, ``vical.sim.hand_held``; ``person=realsense`` / ``person=ros``: you, with a
-RealSense or a sensor on ROS topics); the ``policy`` group the policy that decides where to go next (the shipped
-learned policy by default; ``policy=greedy_information`` the information-greedy planner). The guide
+RealSense or a sensor on ROS topics); the ``policy`` group the policy that decides where to go next (by default
+the learned policy trained with a simulated person, ``policy=learned_person``; ``policy=greedy_information`` the
+information-greedy planner). The guide
 (``vical.collection.guide.Guide``) shows each next pose on a local web page (``vical.collection.page``: the live
 image with the board's outline where it should appear, the instruction in words, a bar per parameter group, the
 time, "done") and as progress lines; it writes ``<out>/recording`` (EuRoC, with the detections) as the data arrive,

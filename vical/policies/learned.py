@@ -28,10 +28,12 @@ CALIBRATION_ENV = "vical.env.calibration.CalibrationEnv"
 ACT_SIZE = 6
 # The shipped agents (agent.pt and config.yaml, package data, so that evaluation runs without training
 # first): `+experiment=train_paper_policy` for the paper's tables in the authors' workspace, and the best
-# seed of `+experiment=train_information_policy` for the practitioner's workspace (docs/results.md).
+# seed of `+experiment=train_information_policy` for the practitioner's workspace (docs/results.md); and for a
+# person who holds the sensor (vical-guide), seed 0 of `+experiment=train_person_policy`, the one trained.
 PARAMS_DIR = Path(__file__).resolve().parent / "params"
 PAPER_POLICY_DIR = PARAMS_DIR / "paper_policy"
 INFORMATION_POLICY_DIR = PARAMS_DIR / "information_policy"
+PERSON_POLICY_DIR = PARAMS_DIR / "person_policy"
 SHIPPED_POLICIES = {"paper": PAPER_POLICY_DIR, "practitioner": INFORMATION_POLICY_DIR}
 DEFAULT_WORKSPACE = "practitioner"
 TRAIN_HINT = "train one with `vical-train env=information task=<task>` and pass its run directory"
@@ -193,3 +195,11 @@ def learned_policy(
     """The factory ``conf/policy/learned.yaml`` names: the agent of ``run_dir`` (``policy.run_dir=<run>``),
     or, when ``run_dir`` is None, the policy shipped for the workspace named ``workspace``."""
     return LearnedPolicy.from_run(run_dir or shipped_policy_dir(workspace), name=name, max_steps=max_steps)
+
+
+def person_policy(
+    run_dir: str | None = None, name: str = "learned policy (person)", max_steps: int | None = None
+) -> LearnedPolicy:
+    """The factory ``conf/policy/learned_person.yaml`` names: the agent of ``run_dir``, or, when it is None, the
+    policy vical ships for a person who holds the sensor (trained with vical-guide's simulated person)."""
+    return LearnedPolicy.from_run(run_dir or PERSON_POLICY_DIR, name=name, max_steps=max_steps)
