@@ -1,11 +1,19 @@
-"""The simulated person: placement error, reaches within the speed bounds, tremor in its band, lag, bad settings."""
+"""The simulated person: placement error, reaches within the speed bounds, tremor in its band, lag, bad settings; the
+sensor in its hand moved as the arm moves it for the calibration env."""
 
 import numpy as np
 import pytest
+from hydra import compose, initialize_config_dir
+from hydra.utils import instantiate
+from omegaconf import OmegaConf
 from scipy.spatial.transform import Rotation
 
+from vical.apps.train import CONF_DIR
 from vical.config_checks import ConfigError
+from vical.env.calibration import CalibrationEnv
 from vical.geometry import make_transform
+from vical.sim import SimConfig
+from vical.sim.hand_held import HandHeldSim
 from vical.sim.motion import QUINTIC_PEAK_VELOCITY
 from vical.sim.person import HandModel, SimulatedPerson
 
@@ -112,20 +120,12 @@ def test_bad_hand_settings_are_refused_by_key(setting, value, message):
         HandModel(**{setting: value})
 
 
-def _sim_config():
-    from vical.sim import SimConfig
-
-    return SimConfig()
-
-
 def test_the_hand_held_sim_moves_as_the_arm_does_for_the_env_the_person_reaching_each_goal():
     """``HandHeldSim.move_to`` (the env's person): a still, exact hand ends where it is sent, its path the straight
     distance and its rotation the geodesic angle (the minimum-jerk reach), the reach's duration plus the rest
     recorded; with the model's errors the goals are reached within 4 cm per axis."""
-    from vical.sim.hand_held import HandHeldSim
-
     exact = HandModel(placement_sigma_m=0.0, placement_sigma_deg=0.0, tremor_m=0.0, tremor_deg=0.0)
-    sim = HandHeldSim(_sim_config(), np.random.default_rng(0), exact)
+    sim = HandHeldSim(SimConfig(), np.random.default_rng(0), exact)
     start = sim.ee_pose()
     turn = Rotation.from_euler("xyz", [0.2, -0.1, 0.3]).as_matrix()
     goal = make_transform(start[:3, :3] @ turn, start[:3, 3] + [0.1, -0.05, 0.02])
@@ -136,7 +136,7 @@ def test_the_hand_held_sim_moves_as_the_arm_does_for_the_env_the_person_reaching
     assert motion.duration == pytest.approx(1.5, abs=1e-3) and motion.settle_time == 0.3
     assert motion.t_end_ns - motion.t_start_ns == pytest.approx(1.8e9, abs=1e6)
 
-    sim = HandHeldSim(_sim_config(), np.random.default_rng(1), HandModel(tremor_m=0.0, tremor_deg=0.0))
+    sim = HandHeldSim(SimConfig(), np.random.default_rng(1), HandModel(tremor_m=0.0, tremor_deg=0.0))
     errors = []
     for _ in range(300):
         T_before = sim.ee_pose()
@@ -151,13 +151,6 @@ def test_the_hand_held_sim_moves_as_the_arm_does_for_the_env_the_person_reaching
 def test_the_env_with_a_hand_steps_through_the_person():
     """``CalibrationEnv(hand={})``: each step is the person's reach (at least 1.5 s, then ``settle_time``), the
     sensor lands near the goal (the hand's error, not the arm's precision), and a seed gives one episode."""
-    from hydra import compose, initialize_config_dir
-    from hydra.utils import instantiate
-    from omegaconf import OmegaConf
-
-    from vical.apps.train import CONF_DIR
-    from vical.env.calibration import CalibrationEnv
-
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose(config_name="train", overrides=["+experiment=train_person_policy"])
     env = instantiate(cfg.env, _convert_="all")

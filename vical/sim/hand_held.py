@@ -32,7 +32,7 @@ from vical.geometry import invert_transform, make_transform, matrix_to_quat, qua
 from vical.robot import Guidance, Person
 from vical.sim.adapters import RigFaults, SimViSensor
 from vical.sim.motion import MotionResult
-from vical.sim.panda import StepObserver, StepPoses
+from vical.sim.panda import StepObserver, StepPoses, rotation_path_length
 from vical.sim.person import HandModel, Reach, SimulatedPerson
 from vical.sim.products import replace_board
 from vical.sim.recorder import SensorRecorder
@@ -148,9 +148,7 @@ class HandHeldSim:
             observer.on_steps(StepPoses(t0_ns, step_ns, imu[:, :3, 3].copy(), imu[:, :3, :3].reshape(n, 9).copy(),
                                         T[:n, :3, 3].copy()))  # fmt: skip
         path = float(np.sum(np.linalg.norm(np.diff(T[:, :3, 3], axis=0), axis=1)))
-        turns = np.einsum("nji,njk->nik", T[:-1, :3, :3], T[1:, :3, :3])  # each step's relative rotation
-        cosines = np.clip((np.trace(turns, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-        return path, float(np.sum(np.arccos(cosines)))
+        return path, rotation_path_length(T[:, :3, :3])
 
 
 class HandHeldRig(Person):

@@ -103,7 +103,7 @@ def _geom_label(model: mujoco.MjModel, geom: int) -> str:
     return model.geom(geom).name or model.body(model.geom_bodyid[geom]).name
 
 
-def _rotation_path_length(R: np.ndarray) -> float:
+def rotation_path_length(R: np.ndarray) -> float:
     """Sum of rotation angles [rad] between consecutive rotations ``R`` (K, 3, 3)."""
     dR = np.einsum("kji,kjl->kil", R[:-1], R[1:])
     vee = np.stack([dR[:, 2, 1] - dR[:, 1, 2], dR[:, 0, 2] - dR[:, 2, 0], dR[:, 1, 0] - dR[:, 0, 1]], axis=1)
@@ -441,7 +441,7 @@ class PandaSim:
             duration=plan.move_steps * plan.timestep,
             settle_time=(plan.num_steps - plan.move_steps) * plan.timestep,
             path_length=float(np.sum(np.linalg.norm(np.diff(trace["p"], axis=0), axis=1))),
-            rotation_length=_rotation_path_length(trace["R"]),
+            rotation_length=rotation_path_length(trace["R"]),
             max_tracking_error=float(np.max(np.abs(trace["q"] - plan.q))),
             position_margin=float(min(lo_margin, hi_margin)),
             velocity_margin=float(np.min(self.limits.v_max - np.abs(trace["qd"]))),
