@@ -14,7 +14,7 @@ from vical.config_checks import ConfigError
 from vical.env.actions import goal_offset
 from vical.env.lookahead import GRAVITY_WORLD, IMU_RATE, Lookahead, Prediction, imu_readings
 from vical.evaluation.harness import build_env, instantiate_policy, run_trajectory
-from vical.policies.greedy import DEFAULT_SAMPLES, candidate_actions, greedy_information_policy
+from vical.policies.greedy import DEFAULT_SAMPLES, candidate_actions, greedy_demonstrator, greedy_information_policy
 from vical.policies.learned import load_run, shipped_policy_dir
 from vical.policies.stopping import StopRule, with_stop
 from vical.sim.motion import quintic
@@ -157,3 +157,20 @@ def test_the_planners_price_is_its_learned_runs_not_the_envs():
     assert env.config.reward.path_weight == 20.0
     trained = load_run(shipped_policy_dir())[1]["config"]["env"]["reward"]
     assert cost == pytest.approx(trained["path_weight"]) and cost == pytest.approx(5.0)
+
+
+def test_as_vical_trains_demonstrator_the_planner_pays_the_trained_envs_own_prices():
+    """`greedy_demonstrator` plans in the env being trained at that env's prices (20 per metre here), no run's."""
+    planner = greedy_demonstrator()
+    env = build_env(env_config("joint", "practitioner"), greedy_information_policy())  # an information state env
+    try:
+        env.reset(seed=1)
+        planner.reset(env, np.random.default_rng(1))
+        excess = env.state.excess
+        stay = Prediction(np.zeros(6), 1.0, 0.0, 0, {}, excess, False)
+        cost = planner.score(stay, excess, env) - planner.score(dataclasses.replace(stay, path_length=1.0), excess, env)
+        first = planner.act(None, env)
+    finally:
+        env.close()
+    assert cost == pytest.approx(env.config.reward.path_weight) and cost == pytest.approx(20.0)
+    assert np.all(np.abs(first) <= env.action_space.high + 1e-9)

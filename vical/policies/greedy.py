@@ -20,6 +20,9 @@ Before any frame has posed the board it searches along the line of sight to the 
 it): to the workspace's nearest point first (tags too small to detect from the start), then to its farthest (a
 board too large for the image), back and forth, looking at the board centre. ``decision_times`` keeps each
 step's planning time [s] (``experiments/bench_greedy.py``).
+
+``greedy_demonstrator`` is the planner as ``vical-train``'s demonstrator (``train.demonstrator``): in the env being
+trained, on that env's own information state and at its own prices (its ``env.reward``), with no learned run.
 """
 
 from __future__ import annotations
@@ -65,7 +68,7 @@ class GreedyInformationPolicy(Policy):
 
     Args:
         settings: the learned run's ``state``, ``information`` and ``max_steps`` (its MDP).
-        reward: the learned run's reward weights (the prices of path and the goal's bonus).
+        reward: the learned run's reward weights (the prices of path and the goal's bonus); None: the env's own.
         samples: random candidates per step beside the 12 axis moves.
         name: shown in evaluation tables.
     """
@@ -75,7 +78,7 @@ class GreedyInformationPolicy(Policy):
     def __init__(
         self,
         settings: dict,
-        reward: RewardWeights,
+        reward: RewardWeights | None,
         samples: int = DEFAULT_SAMPLES,
         name: str = "greedy information planner",
     ) -> None:
@@ -131,9 +134,10 @@ class GreedyInformationPolicy(Policy):
     def score(self, prediction: Prediction, excess: float, env: CalibrationEnv) -> float:
         """The information MDP's reward of the predicted step from the current ``excess``, at the learned run's
         prices (the env carries its information settings)."""
+        reward = env.config.reward if self.reward is None else self.reward
         terms = information_reward_terms(
             excess, prediction.excess, prediction.path_length, prediction.motion_time, prediction.goal_reached,
-            env.config.information, self.reward,
+            env.config.information, reward,
         )  # fmt: skip
         return float(sum(terms.values()))
 
@@ -175,6 +179,12 @@ def greedy_information_policy(
     (``max_steps``; None: the learned run's)."""
     settings, reward = planner_settings(run_dir, workspace, max_steps)
     return GreedyInformationPolicy(settings, reward, samples, name)
+
+
+def greedy_demonstrator(samples: int = DEFAULT_SAMPLES) -> GreedyInformationPolicy:
+    """The factory a run's ``train.demonstrator`` names: the planner on the trained env's own information state,
+    at its own prices (``conf/experiment/train_practitioner_from_planner.yaml``)."""
+    return GreedyInformationPolicy({}, None, samples, name="greedy information planner (the env's prices)")
 
 
 def planner_settings(run_dir: str | None, workspace: str, max_steps: int | None) -> tuple[dict, RewardWeights]:

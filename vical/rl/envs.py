@@ -31,6 +31,11 @@ class BoxActions:
     def to_env(self, action: np.ndarray) -> np.ndarray:
         return (self.low + (action + 1.0) * self.half_range).astype(self.dtype)
 
+    def to_policy(self, action: np.ndarray) -> np.ndarray:
+        """The inverse of ``to_env``: an env action (a demonstrator's) in ``[-1, 1]^d``, float32, clipped into it."""
+        policy = (np.asarray(action, np.float64) - self.low) / self.half_range - 1.0
+        return np.clip(policy, -1.0, 1.0).astype(np.float32)
+
 
 def make_env(env_cfg: Mapping[str, Any]) -> gym.Env:
     """Instantiate the env config (``_target_`` + kwargs) and check its observation space."""

@@ -239,6 +239,17 @@ class TanhGaussianPolicy(nn.Module):
         """The mean action ``tanh(mu(s))`` ``(B, act_dim)`` used for evaluation."""
         return torch.tanh(self.distribution(obs)[0])
 
+    def log_prob(self, obs: Tensor, actions: Tensor) -> Tensor:
+        """``log pi(a|s)`` ``(B,)`` of given actions ``(B, act_dim)`` (a demonstrator's), each component clipped to
+        ``+-ACTION_LIMIT``: an action on the box's edge (a move at full scale) has no finite pre-squash value."""
+        mean, log_std = self.distribution(obs)
+        pre_tanh = torch.atanh(actions.clamp(-ACTION_LIMIT, ACTION_LIMIT))
+        return squashed_gaussian_log_prob((pre_tanh - mean) / log_std.exp(), log_std, pre_tanh)
+
+
+# |a| <= tanh(3.8): the pre-squash value of an action on the box's edge as a cloned policy's mean can reach it
+ACTION_LIMIT = 0.999
+
 
 def squashed_gaussian_log_prob(noise: Tensor, log_std: Tensor, pre_tanh: Tensor) -> Tensor:
     """``log pi(tanh(u))`` for ``u = mu + sigma * noise``, summed over the last axis: ``(B, D) -> (B,)``.

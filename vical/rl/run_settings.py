@@ -25,7 +25,7 @@ class TrainConfig:
     """Loop settings (steps count env transitions)."""
 
     total_steps: int = 10_000
-    warmup_steps: int = 1_000  # uniform random actions and no updates before this many steps
+    warmup_steps: int = 1_000  # no updates before this many steps: uniform random actions (or the demonstrator's)
     updates_per_step: int = 1  # gradient updates per collected transition (num_envs of them per round of steps)
     num_envs: int = 1  # environments, each in a worker process when > 1 (vical.rl.vector)
     policy_lag: int = 4  # with num_envs > 1: rounds between the network that samples an action and the newest
@@ -38,6 +38,10 @@ class TrainConfig:
     checkpoint_every: int = 1_000
     progress: bool = True
     info_prefixes: list[str] = field(default_factory=lambda: ["calib/", "coverage/", "reward/", "information/"])
+    # ``_target_`` + arguments of a demonstrator (``reset(env, rng)``, ``act(obs, env)`` -> an env action, as a
+    # collection policy): the warm-up's actions are its instead of uniform random ones (``vical.rl.demonstrations``)
+    demonstrator: dict | None = None
+    clone_updates: int = 0  # updates after the warm-up that clone the demonstrations before SAC's own updates
 
     def __post_init__(self) -> None:
         for name in ("total_steps", "updates_per_step", "buffer_size", "eval_episodes", "eval_max_episode_steps"):
@@ -52,6 +56,20 @@ class TrainConfig:
         for name in ("warmup_steps", "eval_every", "log_every", "plot_every_episodes", "checkpoint_every"):
             _require_int(f"train.{name}", getattr(self, name), 0)
         self.info_prefixes = list(self.info_prefixes)
+        self._check_demonstrations()
+
+    def _check_demonstrations(self) -> None:
+        d = self.demonstrator
+        ok = d is None or (isinstance(d, Mapping) and "_target_" in d)
+        require(ok, "train.demonstrator", "null or a mapping with a _target_ (a demonstrator's factory)", d)
+        self.demonstrator = None if d is None else dict(d)
+        _require_int("train.clone_updates", self.clone_updates, 0)
+        if self.clone_updates:
+            require(self.demonstrator is not None, "train.clone_updates",
+                    "0 without train.demonstrator (there is nothing to clone)", self.clone_updates)  # fmt: skip
+            require(self.warmup_steps >= 1, "train.warmup_steps",
+                    "at least 1 with train.clone_updates (the demonstrations are the warm-up's steps)",
+                    self.warmup_steps)  # fmt: skip
 
 
 def _require_int(key: str, value: Any, low: int) -> None:

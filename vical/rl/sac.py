@@ -149,8 +149,13 @@ class SAC(nn.Module):
             action = self.policy.sample(obs_t, self.generator)[0]
         return action[0].numpy()
 
-    def losses(self, batch: Batch) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
+    def losses(self, batch: Batch, clone: bool = False) -> tuple[dict[str, Tensor], dict[str, Tensor]]:
         """The losses of one update at the current parameters, with their autograd graphs, and diagnostics.
+
+        ``clone``: the batch's actions are a demonstrator's, and the policy's loss clones them: their negative
+        log-likelihood under the policy, with the same entropy term (``alpha log pi`` of the policy's own sample,
+        alpha tuned as always), so the policy's mean follows the demonstrations while its spread stays at the
+        target entropy. The value and Q losses are SAC's: they learn the value of the policy being cloned.
 
         Returns ``(losses, diagnostics)``: ``losses`` maps ``losses/v_loss``, ``losses/q_loss``,
         ``losses/policy_loss`` (and ``losses/alpha_loss`` with ``alpha: auto``) to scalar tensors, each of
@@ -176,8 +181,11 @@ class SAC(nn.Module):
         q = self.q(batch.obs, batch.actions)
         q_loss = 0.5 * (q - q_target).square().mean(1).sum()
 
-        # Policy (eq. 12): minimise E[alpha log pi(a|s) - min Q(s, a)].
-        policy_loss = (alpha * log_prob - q_new).mean()
+        # Policy (eq. 12): minimise E[alpha log pi(a|s) - min Q(s, a)]; cloning: E[alpha log pi(a|s)] - log pi(a_d|s).
+        if clone:
+            policy_loss = (alpha * log_prob).mean() - self.policy.log_prob(batch.obs, batch.actions).mean()
+        else:
+            policy_loss = (alpha * log_prob - q_new).mean()
 
         losses = {"losses/v_loss": v_loss, "losses/q_loss": q_loss, "losses/policy_loss": policy_loss}
         if cfg.auto_alpha:
@@ -190,12 +198,13 @@ class SAC(nn.Module):
         }
         return losses, diagnostics
 
-    def update(self, batch: Batch) -> dict[str, Tensor]:
-        """One gradient step on a minibatch; returns the detached losses and diagnostics (tensors, no sync).
+    def update(self, batch: Batch, clone: bool = False) -> dict[str, Tensor]:
+        """One gradient step on a minibatch (``clone``: cloning its actions, ``losses``); returns the detached losses
+        and diagnostics (tensors, no sync).
 
         Raises :class:`NonFiniteLossError` before any parameter changes if a loss is NaN or infinite.
         """
-        losses, diagnostics = self.losses(batch)
+        losses, diagnostics = self.losses(batch, clone)
         total = sum(losses.values())
         _require_finite(total, losses)
 

@@ -35,6 +35,7 @@ from vical.rl.checkpoint import (
     require_reachable,
     save_checkpoint,
 )
+from vical.rl.demonstrations import demonstrated_action, make_demonstrator, start_demonstration
 from vical.rl.envs import BoxActions, make_env
 from vical.rl.logger import TrainLogger
 from vical.rl.run_settings import parse_settings
@@ -80,6 +81,7 @@ class Trainer:
         self.env = make_env(s.env)
         self._eval_env: gym.Env | None = None  # built at the first evaluation
         self.actions = BoxActions(self.env.action_space)
+        self.demonstrator = make_demonstrator(s.train.demonstrator)  # built here too: a bad one fails at the start
         obs_dim = int(np.prod(self.env.observation_space.shape))
         act_dim = self.act_dim = self.env.action_space.shape[0]
         # Seeding happens here and only here: the trainer's numpy Generator (warm-up actions, replay
@@ -141,17 +143,26 @@ class Trainer:
         )
 
     def _start_episode(self) -> Episode:
-        obs, _ = self.env.reset(seed=int(self.rng.integers(2**31 - 1)))
+        seed = int(self.rng.integers(2**31 - 1))
+        obs, _ = self.env.reset(seed=seed)
+        if self.demonstrator is not None:
+            start_demonstration(self.demonstrator, self.env, seed)
         return Episode([self._checked_obs(obs, "reset observation")])
 
     def _env_step(self, episode: Episode) -> bool:
         """Act, step the env, store the transition; True when the episode ended (terminated or truncated)."""
         obs = episode.observations[-1]
-        if self.step < self.settings.train.warmup_steps:
+        env_action = None
+        if self.step < self.settings.train.warmup_steps and self.demonstrator is not None:
+            env_action = demonstrated_action(self.demonstrator, self.env, obs)
+            action = self.actions.to_policy(env_action)
+        elif self.step < self.settings.train.warmup_steps:
             action = self.rng.uniform(-1.0, 1.0, self.act_dim).astype(np.float32)
         else:
             action = self.agent.act(obs)
-        next_obs, reward, terminated, truncated, info = self.env.step(self.actions.to_env(action))
+        if env_action is None:
+            env_action = self.actions.to_env(action)
+        next_obs, reward, terminated, truncated, info = self.env.step(env_action)
         next_obs = self._checked_obs(next_obs, "observation")
         if not np.isfinite(reward):
             self._diverged("reward", float(reward), self.step + 1)
@@ -166,6 +177,7 @@ class Trainer:
     def _train_and_evaluate(self) -> None:
         t = self.settings.train
         if self.step > t.warmup_steps:  # as stable-baselines3: the first update follows warm-up step + 1
+            self._clone_demonstrations()
             for _ in range(t.updates_per_step):
                 self._update()
         if t.log_every and self.step % t.log_every == 0:
@@ -173,10 +185,21 @@ class Trainer:
         if t.eval_every and self.step % t.eval_every == 0:
             self._evaluate()
 
-    def _update(self) -> None:
-        """One gradient update of every network on a batch sampled with the trainer's generator."""
+    def _clone_demonstrations(self) -> None:
+        """Before the run's first update: ``train.clone_updates`` updates cloning the demonstrations (the buffer
+        holds only the warm-up's steps then: the demonstrator's)."""
+        clone_updates = self.settings.train.clone_updates
+        if self.updates or not clone_updates:
+            return
+        log.info("step %d: cloning the demonstrator's %d steps (%d updates)", self.step, self.step, clone_updates)
+        for _ in range(clone_updates):
+            self._update(clone=True)
+
+    def _update(self, clone: bool = False) -> None:
+        """One gradient update of every network on a batch sampled with the trainer's generator (``clone``: the
+        policy clones the batch's actions, ``SAC.losses``)."""
         try:
-            self._stats = self.agent.update(self.buffer.sample(self.agent.config.batch_size, self.rng))
+            self._stats = self.agent.update(self.buffer.sample(self.agent.config.batch_size, self.rng), clone)
         except NonFiniteLossError as err:
             self._diverged(err.term, err.value, self.step)
         self.updates += 1

@@ -9,9 +9,11 @@ one command at a time and answers when it is done, so a fast env never waits for
 - an exception in ``step`` ends the episode (truncated, reward 0) and is reported in the info
   (``worker/error`` with the episode's reset seed) instead of ending the run;
 - ``replay`` resets to a seed and repeats a list of actions: a checkpoint stores each running
-  episode's seed and actions, and a resumed run replays them to the exact mid-episode state.
+  episode's seed and actions, and a resumed run replays them to the exact mid-episode state;
+- with a demonstrator (``vical.rl.demonstrations``), ``demonstrate`` steps the env with the demonstrator's
+  action and answers it beside the step's results; a replay lets the demonstrator take its steps again.
 
-Both kinds of workers offer ``send(i, command, *args)`` (``reset``, ``step`` or ``replay``),
+Both kinds of workers offer ``send(i, command, *args)`` (``reset``, ``step``, ``demonstrate`` or ``replay``),
 ``receive()`` (the answers ready, waiting for at least one), the env's spaces and ``close``. A worker
 that dies raises ``WorkerDied``; an exception outside ``step`` (building the env, a reset, a replay)
 comes back as a ``Failure`` and raises ``WorkerError`` naming the env, the command and the episode's seed.
@@ -33,6 +35,7 @@ import numpy as np
 
 from vical.config_checks import ConfigError
 from vical.parallel import ParallelConfig, connect_ray, single_threaded_children
+from vical.rl.demonstrations import Demonstrator, demonstrated_action, make_demonstrator, start_demonstration
 
 ERROR_KEY = "worker/error"  # info key of an exception caught in an env's step
 SEED_KEY = "worker/episode_seed"  # ... and the reset seed of the episode it ended
@@ -79,16 +82,19 @@ class WorkerError(RuntimeError):
 
 
 class GuardedEnv(gym.Wrapper):
-    """An env that reports a failing step instead of raising, and can replay an episode."""
+    """An env that reports a failing step instead of raising, and can replay an episode (and be demonstrated)."""
 
-    def __init__(self, env: gym.Env) -> None:
+    def __init__(self, env: gym.Env, demonstrator: Demonstrator | None = None) -> None:
         super().__init__(env)
+        self.demonstrator = demonstrator
         self.episode_seed: int | None = None
         self.last_obs: Any = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         self.episode_seed = seed
         obs, info = self.env.reset(seed=seed, options=options)
+        if self.demonstrator is not None:
+            start_demonstration(self.demonstrator, self.env, seed)
         self.last_obs = obs
         return obs, info
 
@@ -101,10 +107,19 @@ class GuardedEnv(gym.Wrapper):
         self.last_obs = obs
         return obs, reward, terminated, truncated, info
 
-    def replay(self, seed: int, actions: list[np.ndarray]) -> Any:
-        """Reset to ``seed`` and take ``actions``; the observation reached."""
+    def demonstrate(self) -> tuple:
+        """The demonstrator's action on the last observation, then ``step``'s answer to it."""
+        action = demonstrated_action(self.demonstrator, self.env, self.last_obs)
+        return (action, *self.step(action))
+
+    def replay(self, seed: int, actions: list[np.ndarray], demonstrated: int = 0) -> Any:
+        """Reset to ``seed`` and take ``actions``, the first ``demonstrated`` of them the demonstrator's (it takes
+        them again, so that it is where it was); the observation reached."""
         obs, _ = self.reset(seed=seed)
-        for action in actions:
+        for k, action in enumerate(actions):
+            if k < demonstrated and not np.array_equal(demonstrated_action(self.demonstrator, self.env, obs), action):
+                raise ValueError(f"the demonstrator did not repeat its action {k} of the episode: it is not a "
+                                 "function of the episode's seed")  # fmt: skip
             obs, *_ = self.env.step(action)
         self.last_obs = obs
         return obs
@@ -119,8 +134,10 @@ class GuardedEnv(gym.Wrapper):
             return Failure.of(command, self.episode_seed, err)
 
 
-def _guarded(make_env: Callable[[Mapping[str, Any]], gym.Env], env_cfg: Mapping[str, Any]) -> GuardedEnv:
-    return GuardedEnv(make_env(env_cfg))
+def _guarded(
+    make_env: Callable[[Mapping[str, Any]], gym.Env], env_cfg: Mapping[str, Any], demonstrator: Mapping | None
+) -> GuardedEnv:
+    return GuardedEnv(make_env(env_cfg), make_demonstrator(demonstrator))
 
 
 def make_workers(
@@ -128,12 +145,14 @@ def make_workers(
     env_cfg: Mapping[str, Any],
     num_envs: int,
     parallel: ParallelConfig,
+    demonstrator: Mapping[str, Any] | None = None,
 ):
-    """``num_envs`` guarded copies of the env, each in its own worker (local processes or Ray actors).
+    """``num_envs`` guarded copies of the env, each in its own worker (local processes or Ray actors), each with
+    its own demonstrator built from the ``demonstrator`` config (None: none).
 
     ``make_env`` must be a module-level function (it is sent to the workers).
     """
-    factory = functools.partial(_guarded, make_env, dict(env_cfg))
+    factory = functools.partial(_guarded, make_env, dict(env_cfg), demonstrator)
     if parallel.backend == "ray":
         return RayWorkers(factory, num_envs, parallel)
     return ProcessWorkers(factory, num_envs)

@@ -6,7 +6,8 @@ numbered by *round*: round ``r`` holds every env's ``r``-th step. The learner ta
 it stores round ``r``'s transitions in env order, then does ``num_envs * updates_per_step`` gradient
 updates (once more than ``warmup_steps`` transitions are stored; so ``updates_per_step`` keeps its
 meaning per collected transition), and the network after them is *version* ``r``. An env's action of
-round ``r`` is sampled from version ``r - policy_lag`` (uniform during warm-up), with noise drawn from a
+round ``r`` is sampled from version ``r - policy_lag`` (uniform during warm-up, or the demonstrator's, which acts
+in the worker: ``vical.rl.demonstrations``), with noise drawn from a
 generator keyed by (seed, env, round), and an env's episode ``e`` is reset with a seed keyed by (seed,
 env, e): which env answers first never changes a number. An env may thus run up to ``policy_lag - 1``
 rounds ahead of the slowest one. Logging, evaluation and checkpoints happen after a round's updates,
@@ -88,7 +89,8 @@ class Worker:
     round: int
     obs: np.ndarray | None  # None while a step or a reset is in flight
     episodes_started: int
-    action: tuple[np.ndarray, np.ndarray] | None = None  # (policy units, env units) of the step in flight
+    # (policy units, env units) of the step in flight; None while the demonstrator's step is (it answers its action)
+    action: tuple[np.ndarray, np.ndarray] | None = None
     reset: tuple[int, int] | None = None  # (seed, episode index) of the reset in flight
 
 
@@ -143,7 +145,7 @@ class VectorTrainer(Trainer):
         """The env workers, each with its env built; a worker that dies or raises meanwhile is one line."""
         s = self.settings
         try:
-            return make_workers(make_env, s.env, s.train.num_envs, s.parallel)
+            return make_workers(make_env, s.env, s.train.num_envs, s.parallel, s.train.demonstrator)
         except WorkerDied as err:
             message = f"an environment worker process died while it started ({err}): run the command again"
             raise WorkerDiedError(message) from err
@@ -208,9 +210,17 @@ class VectorTrainer(Trainer):
         for i, w in enumerate(self.live):
             if w.obs is None or w.round >= self.total_rounds or w.round - self.lag >= self.next_round:
                 continue
+            if self._demonstrated(w.round):
+                w.action, w.reset, w.obs = None, None, None
+                self.workers.send(i, "demonstrate")
+                continue
             action = self._action(i, w.round, w.obs)
             w.action, w.reset, w.obs = (action, self.actions.to_env(action)), None, None
             self.workers.send(i, "step", w.action[1])
+
+    def _demonstrated(self, round_: int) -> bool:
+        """The round's actions are the demonstrator's (it has one, and the round is in the warm-up)."""
+        return self.demonstrator is not None and round_ * self.num_envs < self.settings.train.warmup_steps
 
     def _action(self, i: int, round_: int, obs: np.ndarray) -> np.ndarray:
         seed = self.settings.seed
@@ -241,6 +251,9 @@ class VectorTrainer(Trainer):
                     self.results[w.round - 1][i].reset = episode
                 w.obs = obs
                 continue
+            if w.action is None:  # the demonstrator's step: its action first
+                env_action, *answer = answer
+                w.action = (self.actions.to_policy(env_action), np.asarray(env_action))
             obs, reward, terminated, truncated, info = answer
             step = Step(*w.action, self._checked_obs(obs, "observation"), float(reward), bool(terminated),
                         bool(truncated), dict(info))  # fmt: skip
@@ -279,6 +292,8 @@ class VectorTrainer(Trainer):
             self.logger.env_info(step.info, self.step)
         self._stored = round_
         t = self.settings.train
+        if self.step > t.warmup_steps:
+            self._clone_demonstrations()
         self.pending_updates = t.updates_per_step * self.num_envs if self.step > t.warmup_steps else 0
         if not self.pending_updates:
             self._finish_round()
@@ -365,7 +380,9 @@ class VectorTrainer(Trainer):
         ]
         self.episodes, self.live = [], []
         for i, s in enumerate(saved):
-            self.workers.send(i, "replay", int(s["seed"]), list(s["env_actions"]))
+            taken = len(s["env_actions"])  # in the rounds next_round - taken .. next_round - 1
+            demonstrated = sum(self._demonstrated(r) for r in range(self.next_round - taken, self.next_round))
+            self.workers.send(i, "replay", int(s["seed"]), list(s["env_actions"]), demonstrated)
             self.episodes.append(RunningEpisode(
                 list(s["observations"]), list(s["actions"]), s["total_reward"], seed=int(s["seed"]),
                 index=int(s["index"]), env_actions=list(s["env_actions"]),
