@@ -13,6 +13,7 @@ import pytest
 import yaml
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
+from scipy.spatial.transform import Rotation
 from stopped_collections import calibrate_joint, file_size_limit
 
 from vical.apps.collect import CONF_DIR, build_collector, check_settings, collect, mdp_config, nominal_sensor
@@ -22,13 +23,14 @@ from vical.collection.runner import CollectionStopped, Collector
 from vical.config_checks import ConfigError
 from vical.env.actions import step_to_action
 from vical.evaluation.harness import build_env, run_trajectory
+from vical.geometry import invert_transform, make_transform
 from vical.io.bag import read_bag
 from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.base import Policy
 from vical.policies.expert import expert_policy
 from vical.policies.learned import PAPER_POLICY_DIR, learned_policy
-from vical.robot import MotionRefused, SensorStreamError
+from vical.robot import Arm, MotionRefused, SensorStreamError, StampedPose
 
 
 def config(*overrides: str):
@@ -48,11 +50,38 @@ class Scripted(Policy):
         return self.action
 
 
-def collector(tmp_path: Path, policy: Policy, *overrides: str) -> tuple[Collector, object]:
-    """A Collector on the simulated rig of ``overrides`` (as vical-collect builds it), and the rig."""
+class TurnedBase(Arm):
+    """The rig's arm as seen from a base turned by ``angle`` [rad] about its vertical axis (its poses in that
+    base's coordinates): the same physical arm, board and motions."""
+
+    def __init__(self, arm: Arm, angle: float) -> None:
+        self.arm, self.limits = arm, arm.limits
+        self.T_sim_base = make_transform(Rotation.from_euler("z", angle).as_matrix(), np.zeros(3))
+
+    def pose(self) -> StampedPose:
+        return self._seen(self.arm.pose())
+
+    def move_to(self, T_base_tool: np.ndarray) -> StampedPose:
+        return self._seen(self.arm.move_to(self.T_sim_base @ T_base_tool))
+
+    def _seen(self, pose: StampedPose) -> StampedPose:
+        return StampedPose(pose.t_ns, invert_transform(self.T_sim_base) @ pose.T_base_tool)
+
+    def stop(self) -> None:
+        self.arm.stop()
+
+    def close(self) -> None:
+        self.arm.close()
+
+
+def collector(tmp_path: Path, policy: Policy, *overrides: str, turn: float = 0.0) -> tuple[Collector, object]:
+    """A Collector on the simulated rig of ``overrides`` (as vical-collect builds it; its base turned by ``turn``
+    [rad], ``TurnedBase``), and the rig."""
     cfg = config(f"out={tmp_path / 'out'}", *overrides)
     s = check_settings(cfg)
     rig = hydra.utils.instantiate(cfg.robot, _convert_="all")
+    if turn:
+        rig.arm = TurnedBase(rig.arm, turn)
     lines = []
     c = build_collector(cfg, s, rig, policy, mdp_config(cfg, policy), nominal_sensor(s, rig), tmp_path / "rec",
                         lines.append)  # fmt: skip
@@ -86,6 +115,24 @@ def test_alignment_brings_the_board_centre_ahead_at_the_start_distance(tmp_path)
         assert any("aligned after" in line for line in c.lines)
     finally:
         rig.close()
+
+
+def test_a_base_turned_against_the_board_moves_the_camera_as_a_base_that_faces_it(tmp_path):
+    """The policy's offsets are the training world's (+x from the start toward the board) however the base stands:
+    an arm whose base is turned by 1.2 rad (its poses in those coordinates) makes the same physical motions, reaches
+    the same offsets and records the same data as the base of the simulator's world (which faces the board)."""
+    policy = Scripted(translation=(0.05, 0.03, -0.02), euler=(0.05, -0.04, 0.08))
+    ended, offsets, frames = {}, {}, {}
+    for turn in (0.0, 1.2):
+        c, rig = collector(tmp_path / str(turn), policy, "limits.max_steps=3", turn=turn)
+        try:
+            result = c.run()
+            ended[turn], offsets[turn], frames[turn] = rig.sim.ee_pose(), c.episode.pose_offset, result.frames
+        finally:
+            rig.close()
+    np.testing.assert_allclose(ended[1.2], ended[0.0], atol=1e-6)
+    np.testing.assert_allclose(offsets[1.2], offsets[0.0], atol=1e-6)
+    assert frames[1.2] == frames[0.0] and offsets[0.0][0] > 0.1  # three steps toward the board
 
 
 def test_a_policy_whose_state_considers_a_decentred_lens_gets_it_on_the_arm_as_in_its_env(tmp_path):

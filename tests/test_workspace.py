@@ -55,6 +55,21 @@ def test_offsets_and_poses_are_inverse(frame):
         np.testing.assert_allclose(pf.offset(pf.pose(offset)), offset, atol=1e-9)
 
 
+@pytest.mark.parametrize("frame", ["start", "board"])
+def test_a_heading_gives_a_turned_base_the_offsets_the_world_gives(frame):
+    """Poses in a base turned by 1.1 rad about z, with the heading the world's +x has there: every offset is the
+    same physical pose, both ways; a vertical heading is refused."""
+    turn = make_transform(euler_to_matrix([0.0, 0.0, 1.1]), np.zeros(3))
+    T_start, look_at = make_transform(euler_to_matrix([0.1, -0.2, 0.3]), [0.4, 0.1, 0.5]), np.array([1.2, 0.0, 0.4])
+    world = PoseFrame(T_start, frame, look_at)
+    turned = PoseFrame(turn.T @ T_start, frame, turn[:3, :3].T @ look_at, heading=turn[:3, :3].T @ [2.0, 0.0, 0.7])
+    for offset in np.random.default_rng(2).uniform(-1, 1, (30, 6)) * [0.3, 0.3, 0.3, 1.5, 0.5, 0.5]:
+        np.testing.assert_allclose(turn @ turned.pose(offset), world.pose(offset), atol=1e-12)
+        np.testing.assert_allclose(turned.offset(turn.T @ world.pose(offset)), offset, atol=1e-9)
+    with pytest.raises(ValueError, match="vertical"):
+        PoseFrame(T_start, frame, look_at, heading=np.array([0.0, 0.0, 1.0]))
+
+
 def test_zero_angles_in_the_board_frame_look_at_the_board_centre_from_anywhere(sim_and_frame):
     sim, frame, workspace = sim_and_frame
     centre = board_centre(sim)

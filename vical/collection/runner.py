@@ -5,7 +5,9 @@
 1. **Alignment** (as in the paper): from live detections (PnP with the sensor's nominal camera) it
    finds the board, then moves the tool to look at the board centre, upright, from ``distance``
    along the board's normal, until it sits there within tolerance. That pose is the episode's
-   start pose; the board centre it saw is the workspace's ``look_at``.
+   start pose; the board centre it saw is the workspace's ``look_at``, and the horizontal direction
+   toward it the workspace's +x (``PoseFrame``'s ``heading``): the policy's offsets mean what they meant
+   in training (+x toward the board, as the simulator's start looks) however the arm's base is turned.
 2. **Rest** ``reset_hold`` seconds (still IMU data, first views), then the **policy loop**: the
    policy's action becomes a goal inside the workspace bounds around the start pose (exactly as
    the env clips it), the arm moves there and rests ``settle_time``; the frames and IMU samples
@@ -592,7 +594,8 @@ class Collector(LiveEpisode):
             off_deg = float(np.degrees(rotation_angle(goal[:3, :3].T @ now[:3, :3])))
             if off_m <= s.tolerance_m and off_deg <= s.tolerance_deg:
                 self.progress(f"aligned after {move} moves: board centre {s.distance:.2f} m ahead")
-                return PoseFrame(now, self.mdp.workspace.frame, centre)
+                # The workspace's x runs from the start toward the board, whichever way the base stands.
+                return PoseFrame(now, self.mdp.workspace.frame, centre, heading=centre - now[:3, 3])
             if off_m > s.max_move:
                 raise CollectionStopped(
                     f"the aligned start pose is {off_m:.2f} m from the arm (more than collect.align.max_move = "

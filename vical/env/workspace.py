@@ -12,6 +12,12 @@ that reference, so the zero offset is the start pose. With ``frame=board`` the z
 offset keeps the board centred wherever the camera goes; yaw and pitch move the board across
 the image and roll turns it about the optical axis.
 
+The world is the simulator's: z up, the start pose looking along +x at the board. A robot's base may stand
+turned about its vertical axis against the board; ``PoseFrame``'s ``heading`` (the horizontal direction from
+the start toward the board, in the base's coordinates) turns the offsets into that world, so that a +x offset
+still goes toward the board and the angles' reference is the same (``p = p_start + H [x, y, z]``, ``R_ref = H``
+for ``frame=start``, with ``H`` the turn about z that takes +x to the heading).
+
 A pose is *reachable* when the damped-least-squares IK finds joint positions within the joint
 ranges (less the planning margin) and MuJoCo reports no contact there: neither between the arm's
 links nor with the board, its stand or the floor.
@@ -63,34 +69,51 @@ class PoseFrame:
     """Maps workspace offsets to camera body poses in the world and back (module doc).
 
     Args:
-        T_start: (4, 4) camera body pose at the episode start (``T_world_ee``).
+        T_start: (4, 4) camera body pose at the episode start (``T_world_ee``; a robot's ``T_base_tool``).
         frame: ``start`` or ``board``.
-        look_at: (3,) [m] the board centre in the world (read for ``frame=board``).
+        look_at: (3,) [m] the board centre in the poses' coordinates (read for ``frame=board``).
+        heading: (3,) the direction the workspace's +x points along in the poses' coordinates, made horizontal
+            (a robot's: from the start toward the board); None: their own +x (the simulator's world).
     """
 
-    def __init__(self, T_start: np.ndarray, frame: str, look_at: np.ndarray) -> None:
+    def __init__(self, T_start: np.ndarray, frame: str, look_at: np.ndarray, heading: np.ndarray | None = None) -> None:
         if frame not in ("start", "board"):
             raise ValueError(f"frame must be 'start' or 'board', got {frame!r}")
         self.frame = frame
         self.look_at = np.asarray(look_at, dtype=float)
+        self.axes = None if heading is None else heading_axes(heading)
         self.p_start = np.asarray(T_start, dtype=float)[:3, 3].copy()
         self.euler_start = matrix_to_euler(self.reference(self.p_start).T @ T_start[:3, :3])
 
     def reference(self, position: np.ndarray) -> np.ndarray:
         """(3, 3) the orientation that zero angle offsets mean at ``position`` (3,) [m]."""
-        return np.eye(3) if self.frame == "start" else look_at_rotation(position, self.look_at)
+        if self.frame == "board":
+            return look_at_rotation(position, self.look_at)
+        return np.eye(3) if self.axes is None else self.axes
 
     def pose(self, offset: np.ndarray) -> np.ndarray:
         """(4, 4) ``T_world_ee`` of the workspace ``offset`` (6,)."""
         offset = np.asarray(offset, dtype=float)
-        p = self.p_start + offset[:3]
+        step = offset[:3] if self.axes is None else self.axes @ offset[:3]
+        p = self.p_start + step
         return make_transform(self.reference(p) @ euler_to_matrix(self.euler_start + offset[3:]), p)
 
     def offset(self, T_world_ee: np.ndarray) -> np.ndarray:
         """(6,) the workspace offset of the pose ``T_world_ee`` (4, 4) (inverse of ``pose``)."""
         p = T_world_ee[:3, 3]
         euler = matrix_to_euler(self.reference(p).T @ T_world_ee[:3, :3])
-        return np.r_[p - self.p_start, wrap_angle(euler - self.euler_start)]
+        step = p - self.p_start
+        return np.r_[step if self.axes is None else self.axes.T @ step, wrap_angle(euler - self.euler_start)]
+
+
+def heading_axes(heading: np.ndarray) -> np.ndarray:
+    """(3, 3) the workspace's axes in a turned base's coordinates: x along ``heading`` (3,) made horizontal, z up."""
+    x = np.asarray(heading, dtype=float) * [1.0, 1.0, 0.0]
+    norm = np.linalg.norm(x)
+    if norm < 1e-9:
+        raise ValueError("heading: the direction toward the board is vertical, the workspace's x is undefined")
+    x /= norm
+    return np.c_[x, np.cross(_UP, x), _UP]
 
 
 def board_centre(sim: PandaSim) -> np.ndarray:
