@@ -279,6 +279,12 @@ CASES = [
     # vical-train: checked before Hydra creates a run directory
     Case("vical-train", "train.total_steps=0", "train.total_steps must be a number in [1, inf), got 0"),
     Case("vical-train", "agent.gamma=2", "agent.gamma"),
+    Case("vical-train", "train.clone_updates=100", "train.clone_updates must be 0 without train.demonstrator"),
+    Case(
+        "vical-train",
+        "+experiment=train_practitioner_from_planner train.demonstrator._target_=vical.nope",
+        "train.demonstrator: vical.nope could not be built",
+    ),
     Case("vical-train", "agent=nope", "Could not find 'agent/nope'; the available options in 'agent' are: sac"),
     Case("vical-train", "agent.nope=1", "Could not override 'agent.nope'"),
     Case("vical-train", "run_dir={inputs}/a_file", "run_dir={inputs}/a_file is a file"),

@@ -55,6 +55,7 @@ from vical.rl.checkpoint import (
     checkpoint_step,
     resume_status,
 )
+from vical.rl.demonstrations import make_demonstrator
 from vical.rl.run_settings import RunSettings, parse_settings
 from vical.rl.single_env_trainer import TrainingDivergedError
 from vical.rl.trainer import train
@@ -172,10 +173,10 @@ def check_command_line(argv: list[str]) -> str | None:
         resumed = resumed_config(resume, argv)
         complete = resume_status(resume, resumed.train.total_steps)
         if complete is None:
-            _check_cluster(parse_settings(OmegaConf.to_container(resumed, resolve=True)))
+            _check_run(parse_settings(OmegaConf.to_container(resumed, resolve=True)))
         return complete
     settings = OmegaConf.to_container(cfg, resolve=True)
-    _check_cluster(parse_settings({**settings, "run_dir": settings["run_dir"] or "runs/<time>"}))  # Hydra names it
+    _check_run(parse_settings({**settings, "run_dir": settings["run_dir"] or "runs/<time>"}))  # Hydra names it
     return None
 
 
@@ -201,11 +202,12 @@ def train_aside(argv: list[str], key: str, run_dir: Path) -> tuple[list[str], Pa
     return [f"{key}={aside}" if a.lstrip("+").startswith(f"{key}=") else a for a in argv], aside
 
 
-def _check_cluster(settings: RunSettings) -> None:
-    """A Ray cluster where nothing answers is refused within seconds, before the run directory exists (only env
-    workers use it: train.num_envs > 1)."""
+def _check_run(settings: RunSettings) -> None:
+    """What the run needs from outside its config, before the run directory exists: a Ray cluster that answers
+    (only env workers use it: train.num_envs > 1; refused within seconds) and a demonstrator that builds."""
     if settings.train.num_envs > 1:
         check_ray_address(settings.parallel)
+    make_demonstrator(settings.train.demonstrator)
 
 
 def _remove_unused(run_dir: Path) -> None:
