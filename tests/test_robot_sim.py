@@ -49,8 +49,14 @@ def test_the_arm_reports_the_tool_pose_and_reaches_its_goal(rig):
 def test_the_sensor_streams_rendered_frames_and_imu_samples_of_the_motion(rig):
     sensor = rig.sensor
     sensor.start()
+    before_ns, period = rig.sim.time_ns, round(NS_PER_S / sensor.imu_rate_hz)
     resting = sensor.read()  # nothing new: the simulation rests one camera period
-    assert len(resting.frames) == 1 and len(resting.imu) == round(sensor.imu_rate_hz / sensor.camera_rate_hz)
+    assert rig.sim.time_ns - before_ns == pytest.approx(NS_PER_S / sensor.camera_rate_hz, abs=1e6)
+    # The rest's samples in order, one an IMU period, to its end. The last may come with the next read (its reading
+    # integrates past it), and one at the rest's start with this one (the end of a motion another test made).
+    t = resting.imu.t
+    assert len(resting.frames) == 1 and np.all(np.diff(t) == period)
+    assert before_ns <= t[0] <= before_ns + period and rig.sim.time_ns - period <= t[-1] <= rig.sim.time_ns
     assert np.abs(resting.imu.gyro - rig.truth.gyro_bias).max() < 0.05
     rig.arm.move_to(shifted(rig.arm.pose(), 0.06))
     data = sensor.read()
