@@ -152,15 +152,12 @@ class Trainer:
     def _env_step(self, episode: Episode) -> bool:
         """Act, step the env, store the transition; True when the episode ended (terminated or truncated)."""
         obs = episode.observations[-1]
-        env_action = None
-        if self.step < self.settings.train.warmup_steps and self.demonstrator is not None:
+        warm_up = self.step < self.settings.train.warmup_steps
+        if warm_up and self.demonstrator is not None:
             env_action = demonstrated_action(self.demonstrator, self.env, obs)
             action = self.actions.to_policy(env_action)
-        elif self.step < self.settings.train.warmup_steps:
-            action = self.rng.uniform(-1.0, 1.0, self.act_dim).astype(np.float32)
         else:
-            action = self.agent.act(obs)
-        if env_action is None:
+            action = self.rng.uniform(-1.0, 1.0, self.act_dim).astype(np.float32) if warm_up else self.agent.act(obs)
             env_action = self.actions.to_env(action)
         next_obs, reward, terminated, truncated, info = self.env.step(env_action)
         next_obs = self._checked_obs(next_obs, "observation")
