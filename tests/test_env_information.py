@@ -18,7 +18,7 @@ from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint
 from vical.calib.synthetic import make_recording, scattered_views, wide_angle_camera
 from vical.config_checks import ConfigError
 from vical.data import ImuNoise, ImuSamples, Target
-from vical.env.calibration import INFO_OBS_SIZE, CalibrationEnv
+from vical.env.calibration import CalibrationEnv
 from vical.env.information import (
     GROUPS,
     OFFSET_NODES,
@@ -31,6 +31,7 @@ from vical.env.information import (
     lens_misfits,
     quantile_factor,
 )
+from vical.env.state import INFORMATION_SIZE, SENSOR_SIZE, sensor_features
 from vical.geometry import CameraModel
 from vical.rl.envs import make_env
 
@@ -136,7 +137,7 @@ def test_information_mdp_rewards_shrinking_uncertainty_and_stops_when_good_enoug
     env = information_env("joint", "env.max_steps=40")
     try:
         obs, info = env.reset(seed=5)
-        assert obs.shape == (INFO_OBS_SIZE,) and env.observation_space.contains(obs)
+        assert obs.shape == (INFORMATION_SIZE,) and env.observation_space.contains(obs)
         start = info["information/excess"]
         assert start > 5  # the priors are far from the tolerances
         rng = np.random.default_rng(0)
@@ -160,6 +161,51 @@ def test_information_mdp_rewards_shrinking_uncertainty_and_stops_when_good_enoug
         assert len(figure.axes) == 2 and len(figure.axes[0].lines) == len(GROUPS) + 1  # groups and tolerance
     finally:
         env.close()
+
+
+def test_sensor_features_are_the_declared_board_lens_and_imu():
+    paper_imu, wide = ImuNoise(), CameraModel.from_hfov(1.6, distortion="ds", dist=np.array([-0.2, 0.6]))
+    guess = Guess(CameraModel.from_hfov(1.0), np.eye(4), 0.0, paper_imu)
+    # Kalibr's 6 x 6 aprilgrid of 88 mm tags: 6 tags and 5 gaps of 0.3 tags, 0.66 m a side; a pinhole of 1 rad
+    np.testing.assert_allclose(
+        sensor_features(Target.aprilgrid(), guess),
+        [0.0, 6 * 0.088 + 5 * 0.3 * 0.088, 1.0 / np.pi, 0.0, 0.5, 0.5],
+        atol=1e-6,
+    )
+    # a checkerboard of 6 x 7 inner corners 5 cm apart (its larger side 6 gaps: 0.3 m), the wide-angle lens's rays of
+    # its image edges 1.6 rad apart, an IMU 10x noisier in acceleration and 100x in rotation rate
+    noisy = dataclasses.replace(
+        paper_imu, accel_noise_density=10 * paper_imu.accel_noise_density,
+        gyro_noise_density=100 * paper_imu.gyro_noise_density,
+    )  # fmt: skip
+    features = sensor_features(Target.checkerboard(6, 7, 0.05), Guess(wide, np.eye(4), 0.0, noisy))
+    np.testing.assert_allclose(features, [1.0, 0.3, 1.6 / np.pi, 1.0, 0.5 + 1 / 4, 0.5 + 2 / 4], atol=1e-6)
+
+
+def test_the_sensor_context_extends_the_state_with_each_episodes_declared_sensor():
+    practitioner = ("joint", "sensor=practitioner", "task.camera_model=sensor", "env.max_steps=3")
+    plain = information_env(*practitioner)
+    context = information_env(*practitioner, "env.information.sensor_context=true")
+    try:
+        assert context.observation_space.shape == (INFORMATION_SIZE + SENSOR_SIZE,)
+        kinds = set()
+        for seed in (40000, 40003):  # an aprilgrid with a pinhole, a checkerboard with a wide-angle lens
+            obs, _ = context.reset(seed=seed)
+            plain_obs, _ = plain.reset(seed=seed)
+            datasheet = context.product.datasheet
+            expected = sensor_features(context.target, Guess(datasheet.camera, np.eye(4), 0.0, datasheet.imu_noise))
+            np.testing.assert_array_equal(obs[INFORMATION_SIZE:], expected.astype(np.float32))
+            np.testing.assert_array_equal(obs[:INFORMATION_SIZE], plain_obs)  # the same state, the context after it
+            action = np.full(6, 0.02, dtype=np.float32)
+            obs, *_ = context.step(action)
+            plain_obs, *_ = plain.step(action)
+            np.testing.assert_array_equal(obs[INFORMATION_SIZE:], expected.astype(np.float32))  # fixed per episode
+            np.testing.assert_array_equal(obs[:INFORMATION_SIZE], plain_obs)
+            kinds.add((context.target.kind, datasheet.camera.distortion))
+        assert kinds == {("aprilgrid", "radtan"), ("checkerboard", "ds")}
+    finally:
+        plain.close()
+        context.close()
 
 
 def test_a_floor_pays_groups_below_tolerance_and_a_path_discount_is_reported_per_step():
@@ -320,6 +366,7 @@ def test_a_final_step_limit_reports_a_zero_discount_on_its_step_only():
         ("env.information.outside_weight=0.5", "env.information.outside_weight"),
         ("env.information.center_offset_std=-0.01", "env.information.center_offset_std"),
         ("env.information.goal_groups=some", "env.information.goal_groups"),
+        ("env.information.sensor_context=maybe", "env.information.sensor_context"),
         ("env.reward.path_discount=0", "env.reward.path_discount"),
         ("env.reward.path_discount=1.2", "env.reward.path_discount"),
         ("env.state=coverage_and_more", "env.state"),

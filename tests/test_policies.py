@@ -23,7 +23,7 @@ from vical.policies.learned import (
     shipped_policy_dir,
 )
 from vical.policies.random_policy import RandomMovingPolicy
-from vical.rl.checkpoint import flatten
+from vical.rl.checkpoint import AGENT, flatten, load_checkpoint, save_checkpoint
 from vical.rl.trainer import train
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -178,6 +178,32 @@ def test_learned_policy_refuses_a_pendulum_run_and_a_missing_run(tmp_path):
         LearnedPolicy.from_run(tmp_path / "pendulum")
     with pytest.raises(ConfigError, match=r"no trained agent at .*missing/agent\.pt"):
         LearnedPolicy.from_run(tmp_path / "missing")
+
+
+def test_a_policy_of_the_sensor_context_reads_it_and_is_refused_by_a_state_without_it(tmp_path):
+    cfg = composed("train", ["env=information", "task=intrinsic", "env.information.sensor_context=true"])["env"]
+    train(tiny_run(tmp_path / "context", {**cfg, "max_steps": 10}))
+    policy = LearnedPolicy.from_run(tmp_path / "context")
+    assert policy.env_settings["information"]["sensor_context"] is True  # carried to the env it is evaluated in
+    with_context = hydra.utils.instantiate({**cfg, **policy.env_settings})
+    without = hydra.utils.instantiate({**cfg, "information": {**cfg["information"], "sensor_context": False}})
+    try:
+        obs, _ = with_context.reset(seed=1)
+        policy.reset(with_context, np.random.default_rng(0))
+        assert obs.shape == (19,) and with_context.action_space.contains(policy.act(obs, with_context))
+        refused = r"reads a 19-D state, but the env's has env\.information\.sensor_context=false"
+        with pytest.raises(ConfigError, match=refused):
+            policy.reset(without, np.random.default_rng(0))
+    finally:
+        with_context.close()
+        without.close()
+    # An agent whose config says the plain information state while its network reads 19 numbers is no run of it.
+    state = load_checkpoint(tmp_path / "context" / AGENT)
+    state["config"]["env"]["information"]["sensor_context"] = False
+    save_checkpoint(state, tmp_path / "context" / AGENT)
+    described = r"has a 19-D observation / 6-D action policy; .*\(information state\) needs 13"
+    with pytest.raises(ConfigError, match=described):
+        LearnedPolicy.from_run(tmp_path / "context")
 
 
 def test_without_a_run_the_paper_workspace_gets_the_shipped_paper_policy(env):

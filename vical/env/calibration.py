@@ -38,7 +38,7 @@ from vical.env.information import GROUPS, TASK_GROUPS, Guess, LensSpread
 from vical.env.plots import episode_figure, information_figure
 from vical.env.rewards import information_reward_terms, step_reward_terms, terminal_reward_terms
 from vical.env.settings import InformationSettings, MdpConfig
-from vical.env.state import EpisodeState
+from vical.env.state import EpisodeState, observation_size
 from vical.env.workspace import board_in_sight, check_workspace, pose_frame, sight_range
 from vical.geometry import CameraModel
 from vical.sim import PandaSim, SimConfig
@@ -49,9 +49,6 @@ from vical.sim.products import replace_board
 from vical.sim.recorder import SensorRecorder
 from vical.sim.sampling import CameraSampling, Product, SensorSampling, draw_product, sample_sensor
 from vical.sim.settings import BoardConfig
-
-OBS_SIZE = 24  # the coverage state: 18 coverage terms and the pose offset
-INFO_OBS_SIZE = len(GROUPS) + 7  # the information state: a value per group, the pose offset, the step fraction
 
 
 def mixed_tasks(task_mix: Mapping[str, Mapping[str, Any]] | None) -> list[CalibrationTask]:
@@ -123,7 +120,7 @@ class CalibrationEnv(gym.Env):
         self._build_scene(self._sim_config.board)
         scale = np.asarray(self.config.action_scale, dtype=np.float32)
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
-        size = INFO_OBS_SIZE if self.config.state == "information" else OBS_SIZE
+        size = observation_size(self.config.state, self.config.information.sensor_context)
         self.observation_space = gym.spaces.Box(0.0, 1.0, (size,), dtype=np.float32)
         self._bound = self.config.workspace.bound
         self.truth: SensorTruth | None = None

@@ -204,6 +204,10 @@ class InformationSettings:
             reward pays: ``all`` the task's, or ``scored`` those its evaluation scores (the joint task:
             rotation, translation, time offset; its intrinsics stay in the state). With a decentred
             lens declared, the joint task's intrinsics cannot reach their tolerances.
+        sensor_context: the observation also carries what the user declares of the sensor
+            (``vical.env.state.sensor_features``: the board's kind and size, the lens's field of view and
+            family, the IMU's noise densities), for a policy trained on many sensors' episodes; false
+            keeps the information state's 13 numbers (the shipped policies' layout).
     """
 
     tolerances: Tolerances = field(default_factory=Tolerances)
@@ -216,6 +220,7 @@ class InformationSettings:
     time_weight: float = 2.0
     center_offset_std: float | None = 0.0
     goal_groups: str = "all"
+    sensor_context: bool = False
 
     def __post_init__(self) -> None:
         require_range("env.information.confidence", self.confidence, 0.5, 1.0, high_open=True)
@@ -230,6 +235,8 @@ class InformationSettings:
             require_range("env.information.center_offset_std", self.center_offset_std, 0.0)
         key = "env.information.goal_groups"
         require(self.goal_groups in GOAL_GROUPS, key, f"one of {GOAL_GROUPS}", self.goal_groups)
+        key = "env.information.sensor_context"
+        require(isinstance(self.sensor_context, bool), key, "true or false", self.sensor_context)
 
 
 @dataclass(frozen=True)

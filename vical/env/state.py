@@ -12,12 +12,53 @@ from __future__ import annotations
 import numpy as np
 
 from vical.calib.solve.observations import FrameObservation
-from vical.data import ImuSamples, Target
+from vical.data import ImuNoise, ImuSamples, Target
 from vical.env.coverage import Coverage, view_features
-from vical.env.information import SCORED_GROUPS, Guess, InformationTracker, excess, features, tolerance_ratios
+from vical.env.information import (
+    FEATURE_DECADES,
+    GROUPS,
+    SCORED_GROUPS,
+    Guess,
+    InformationTracker,
+    excess,
+    features,
+    tolerance_ratios,
+)
 from vical.env.settings import MdpConfig
 
 RATE_FRAMES = 20  # latest frames whose stamps give the camera's frame rate
+COVERAGE_SIZE = 24  # the coverage state: 18 coverage terms and the pose offset
+INFORMATION_SIZE = len(GROUPS) + 7  # the information state: a value per group, the pose offset, the step fraction
+SENSOR_SIZE = 6  # sensor_features' terms
+BOARD_SCALE = 1.0  # [m] a board's larger side maps to [0, 1] over 0 .. 1 m (printed boards are A4 to A0)
+PAPER_IMU = ImuNoise()  # noise densities at 0.5 of the sensor features (the paper's IMU)
+
+
+def observation_size(state: str, sensor_context: bool) -> int:
+    """The length of the observation of an env with ``env.state`` and ``env.information.sensor_context``."""
+    if state != "information":
+        return COVERAGE_SIZE
+    return INFORMATION_SIZE + SENSOR_SIZE * int(sensor_context)
+
+
+def sensor_features(target: Target, guess: Guess) -> np.ndarray:
+    """(6,) what a user declares of the sensor, each in [0, 1]: the board a checkerboard (1) or an aprilgrid (0),
+    the board's larger side over 1 m, the guessed lens's horizontal field of view over pi (measured between the
+    rays of the image's left and right edges, so a wide-angle model reads as a pinhole of the same view), a
+    wide-angle model (1) or a pinhole (0), and the accelerometer's and gyroscope's noise densities (0.5 at the
+    paper's IMU, a decade per 1 / FEATURE_DECADES)."""
+    side = float(np.max(np.ptp(target.points[:, :2], axis=0)))
+    camera = guess.camera
+    edges = camera.unproject(np.array([[0.0, camera.cy], [float(camera.width), camera.cy]]))
+    hfov = float(np.arctan(-edges[0, 0]) + np.arctan(edges[1, 0]))
+    if not np.isfinite(hfov):  # an edge behind the lens: a view of 180 deg or more
+        hfov = np.pi
+    noise = guess.imu_noise
+    accel = 0.5 + np.log10(noise.accel_noise_density / PAPER_IMU.accel_noise_density) / FEATURE_DECADES
+    gyro = 0.5 + np.log10(noise.gyro_noise_density / PAPER_IMU.gyro_noise_density) / FEATURE_DECADES
+    board = float(target.kind == "checkerboard")
+    values = [board, side / BOARD_SCALE, hfov / np.pi, float(camera.is_wide_angle), accel, gyro]
+    return np.clip(np.array(values), 0.0, 1.0)
 
 
 def workspace_pose(offset: np.ndarray, bound: np.ndarray) -> np.ndarray:
@@ -44,6 +85,7 @@ class EpisodeState:
         self.path_length = 0.0
         self.frames = 0
         self._stamps: list[int] = []
+        self._sensor = np.zeros(0)  # the sensor features the observation carries (none without sensor_context)
 
     def reset(self, task: str, guess: Guess | None) -> None:
         """Start an episode of ``task`` (``intrinsic``, ``extrinsic``, ``joint``); ``guess`` linearises the
@@ -59,6 +101,8 @@ class EpisodeState:
                 raise ValueError("the information state needs a guess of the sensor to linearise at")
             self.information = InformationTracker(task, self.target, guess)
             self._update_ratios()
+            if self.config.information.sensor_context:
+                self._sensor = sensor_features(self.target, guess)
 
     def add_frames(
         self, stamps: list[int], corners: list[np.ndarray], ids: list[np.ndarray], imu: ImuSamples | None
@@ -138,9 +182,10 @@ class EpisodeState:
 
     def information_observation(self, ratios: dict[str, float], offset: np.ndarray, fraction: float) -> np.ndarray:
         """The information state's observation of ``ratios`` (a prediction's or the state's own) at the pose
-        ``offset`` (6,), ``fraction`` of the step limit gone."""
+        ``offset`` (6,), ``fraction`` of the step limit gone; then the episode's sensor features
+        (``env.information.sensor_context``)."""
         pose = workspace_pose(offset, self.config.workspace.bound)
-        return np.r_[features(ratios), pose, fraction].astype(np.float32)
+        return np.r_[features(ratios), pose, fraction, self._sensor].astype(np.float32)
 
     def info(self) -> dict[str, float]:
         """``coverage/*`` and ``information/*`` terms (TensorBoard, progress lines)."""

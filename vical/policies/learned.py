@@ -2,10 +2,10 @@
 
 Evaluation uses the deterministic action (the mean ``tanh(mu(s))`` in ``[-1, 1]^6``), mapped onto the
 env's action box exactly as training did (``vical.rl.envs.BoxActions``). The run must have trained
-on the calibration env (the 24-D coverage state or the 13-D information state, 6-D action) with the
-action scale of the env it drives. A policy of the information state brings its state and stopping
-rule to the env it is evaluated in (``Policy.env_settings``): it stops when it predicts every
-parameter group within its tolerances.
+on the calibration env (the 24-D coverage state or the 13-D information state, 19-D with its sensor
+context; 6-D action) with the action scale of the env it drives. A policy of the information state
+brings its state and stopping rule to the env it is evaluated in (``Policy.env_settings``): it stops
+when it predicts every parameter group within its tolerances.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ import numpy as np
 import torch
 
 from vical.config_checks import ConfigError, from_mapping
-from vical.env.calibration import INFO_OBS_SIZE, OBS_SIZE, CalibrationEnv
-from vical.env.settings import RewardWeights, Workspace
+from vical.env.calibration import CalibrationEnv
+from vical.env.settings import STATES, RewardWeights, Workspace
+from vical.env.state import observation_size
 from vical.policies.base import Policy
 from vical.rl.checkpoint import AGENT, load_checkpoint
 from vical.rl.envs import BoxActions
@@ -37,7 +38,6 @@ PERSON_POLICY_DIR = PARAMS_DIR / "person_policy"
 SHIPPED_POLICIES = {"paper": PAPER_POLICY_DIR, "practitioner": INFORMATION_POLICY_DIR}
 DEFAULT_WORKSPACE = "practitioner"
 TRAIN_HINT = "train one with `vical-train env=information task=<task>` and pass its run directory"
-STATE_SIZES = {"coverage": OBS_SIZE, "information": INFO_OBS_SIZE}
 # The MDP settings an information-state policy carries to the env it is evaluated in.
 CARRIED_SETTINGS = ("state", "information", "max_steps")
 
@@ -62,13 +62,20 @@ def _check_run(state: dict[str, Any], path: Path) -> None:
         raise ConfigError(f"{path} was trained on {what}, not the calibration env; {TRAIN_HINT}")
     obs_dim, act_dim = _policy_dims(state["model"], path)
     kind = env.get("state", "coverage")
-    if kind not in STATE_SIZES:
+    if kind not in STATES:
         raise ConfigError(f"{path} was trained on an env state {kind!r} that vical does not know; {TRAIN_HINT}")
-    if (obs_dim, act_dim) != (STATE_SIZES[kind], ACT_SIZE):
+    size = trained_observation_size(env)
+    if (obs_dim, act_dim) != (size, ACT_SIZE):
         raise ConfigError(
-            f"{path} has a {obs_dim}-D observation / {act_dim}-D action policy; the calibration env's {kind} "
-            f"state needs {STATE_SIZES[kind]}-D / {ACT_SIZE}-D; {TRAIN_HINT}"
+            f"{path} has a {obs_dim}-D observation / {act_dim}-D action policy; the calibration env its config "
+            f"describes ({kind} state) needs {size}-D / {ACT_SIZE}-D; {TRAIN_HINT}"
         )
+
+
+def trained_observation_size(env: dict[str, Any]) -> int:
+    """The observation length of the env a run's ``env`` config describes (runs from before the sensor context
+    have none)."""
+    return observation_size(env.get("state", "coverage"), bool(env.get("information", {}).get("sensor_context")))
 
 
 def load_run(run_dir: str | Path) -> tuple[Path, dict[str, Any]]:
@@ -133,7 +140,7 @@ class LearnedPolicy(Policy):
         path, state = load_run(run_dir)
         env = state["config"]["env"]
         kind = env.get("state", "coverage")
-        agent = SAC(STATE_SIZES[kind], ACT_SIZE, SACConfig(**state["agent_config"]), seed=0)
+        agent = SAC(trained_observation_size(env), ACT_SIZE, SACConfig(**state["agent_config"]), seed=0)
         agent.load_state_dict(state["model"])
         scale = env.get("action_scale", [np.nan] * ACT_SIZE)
         # Runs from before workspaces were named trained in the authors' box (Workspace's defaults).
@@ -150,6 +157,13 @@ class LearnedPolicy(Policy):
             raise ConfigError(
                 f"{self.source} was trained on the env's {kind} state, but the env has env.state={env.config.state}; "
                 f"evaluate it with env.state={kind} (vical-evaluate brings the training's state by itself)"
+            )
+        trained_size = _policy_dims(self.agent.state_dict(), self.source)[0]
+        context = env.config.information.sensor_context
+        if observation_size(env.config.state, context) != trained_size:
+            raise ConfigError(
+                f"{self.source} reads a {trained_size}-D state, but the env's has env.information.sensor_context="
+                f"{str(context).lower()}; evaluate it with the training's (vical-evaluate brings it by itself)"
             )
         trained, here = self.workspace, env.config.workspace
         if trained != here:
