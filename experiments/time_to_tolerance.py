@@ -4,7 +4,8 @@ Every policy stops by the same information state (``stop=information``) on the p
 (``+experiment=time_to_tolerance_<task>``, held-out seeds 50000..). Runs ``vical-evaluate`` once per task with the
 baselines (the greedy planner, the long and short expert, random motion), once per learned run (the reference
 and each further one, each its own table row, on the same sensors), once per critic-scored planner (the planner's
-candidates scored by a learned run's value, ``policy=critic_planner``), pools the results and prints, per
+candidates scored by a learned run's value, ``policy=critic_planner``), once per hybrid that hands a learned run's
+episode over to the planner at its step limit (``policy=handover``), pools the results and prints, per
 task, the time-to-tolerance table: stops, right stops, time and path at the stop, decision time per step, and the
 paired difference to the reference with its 95 % interval; then each learned run's training time (its train.log).
 
@@ -12,6 +13,7 @@ Usage:
     python experiments/time_to_tolerance.py --runs runs/a runs/b runs/c           # reference: the shipped policy
     python experiments/time_to_tolerance.py --reference runs/a --runs runs/b runs/c --tasks joint
     python experiments/time_to_tolerance.py --runs runs/a --critics runs/a shipped     # and planners scored by them
+    python experiments/time_to_tolerance.py --handovers shipped                   # the shipped policy, then the planner
     python experiments/time_to_tolerance.py --episodes 20 --seed 40000 ...        # the tuning sensors
     python experiments/time_to_tolerance.py --sensor paper --baselines ...        # the paper's sensors, no baselines
     python experiments/time_to_tolerance.py --reuse ...                          # keep the results already written
@@ -39,16 +41,17 @@ _STAMP = re.compile(r"^\[(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),\d+\]")
 
 def label(run: str, policy: str = "learned") -> str:
     """The table row of a learned run's ``policy`` (``learned``: its agent; ``critic_planner``: the planner scored by
-    its value)."""
-    kind = {"learned": "learned", "critic_planner": "critic-scored planner"}[policy]
+    its value; ``handover``: its agent for its step limit, then the planner)."""
+    kinds = {"learned": "learned", "critic_planner": "critic-scored planner", "handover": "learned, then planner"}
+    kind = kinds[policy]
     return f"{kind} (shipped)" if run == SHIPPED else f"{kind} ({Path(run).name})"
 
 
 def evaluate(
     task: str, out: Path, policies: list[str], run: str | None, args: argparse.Namespace, policy: str = "learned"
 ) -> Path:
-    """``vical-evaluate`` of ``policies`` on the yardstick's sensors (``policy``, ``learned`` or ``critic_planner``:
-    of the run ``run``); its results file (an existing one is kept with ``--reuse``)."""
+    """``vical-evaluate`` of ``policies`` on the yardstick's sensors (``policy``, ``learned``, ``critic_planner`` or
+    ``handover``: of the run ``run``); its results file (an existing one is kept with ``--reuse``)."""
     if args.reuse and (out / "results.csv").is_file():
         return out / "results.csv"
     overrides = [
@@ -92,6 +95,13 @@ def main() -> None:
         help="learned runs whose value scores the planner's "
         "candidates (policy=critic_planner; shipped: the shipped policy's), each its own row",
     )
+    parser.add_argument(
+        "--handovers",
+        nargs="*",
+        default=[],
+        help="learned runs that act for their step limit and then hand over to the planner (policy=handover; "
+        "shipped: the shipped policy), each its own row",
+    )
     parser.add_argument("--baselines", nargs="*", default=list(BASELINES), help="baselines beside the reference")
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--seed", type=int, default=50000, help="first sensor seed (50000..: held out)")
@@ -108,6 +118,8 @@ def main() -> None:
         for run in args.critics:
             out = where / f"critic_{Path(run).name}"
             files.append(evaluate(task, out, ["critic_planner"], run, args, "critic_planner"))
+        for run in args.handovers:
+            files.append(evaluate(task, where / f"handover_{Path(run).name}", ["handover"], run, args, "handover"))
         rows = by_policy([row for path in files for row in read_results(path)])
         tolerances = rule["information"]["tolerances"]
         stops = summarize_stops(rows, task, tolerances, label(args.reference), rule["horizon_s"])
