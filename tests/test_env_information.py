@@ -26,12 +26,14 @@ from vical.env.information import (
     Guess,
     InformationTracker,
     LensSpread,
+    axis_ratios,
     excess,
     features,
     lens_misfits,
     quantile_factor,
 )
-from vical.env.state import INFORMATION_SIZE, SENSOR_SIZE, sensor_features
+from vical.env.lookahead import Lookahead
+from vical.env.state import AXIS_SIZE, INFORMATION_SIZE, SENSOR_SIZE, sensor_features
 from vical.geometry import CameraModel
 from vical.rl.envs import make_env
 
@@ -77,6 +79,29 @@ def test_predicted_sigmas_are_the_calibrators_when_linearised_at_its_solution(re
     for group, sigma in reported.items():
         assert predicted[group] == pytest.approx(sigma, rel=0.15), group
     assert set(predicted) == {"intrinsic": set(GROUPS[:3]), "extrinsic": set(GROUPS[3:]), "joint": set(GROUPS)}[task]
+
+
+@pytest.mark.parametrize("task", ["extrinsic", "joint"])
+def test_predicted_axis_sigmas_are_the_calibrators_per_axis(recording, task):
+    """The extrinsic's 1-sigma along each camera axis (the state's axis_uncertainty) against the calibrator's rot_x ..
+    trans_z (within 15 %); the largest of each is at most the group's (its worst direction)."""
+    rec, truth = recording, recording.truth
+    tracker = InformationTracker(task, rec.target, Guess(truth.camera, truth.T_cam_imu, truth.time_offset,
+                                                         truth.imu_noise, pixel_sigma=0.3))  # fmt: skip
+    observations = collect_observations(rec.frames, rec.target)
+    for k in range(0, len(observations), 10):
+        tracker.add_frames(observations[k : k + 10], rec.imu)
+    if task == "extrinsic":
+        sig = calibrate_extrinsics(rec.frames, rec.imu, rec.target, truth.camera, truth.imu_noise).sigmas
+    else:
+        sig = calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", (640, 480), truth.imu_noise).sigmas
+    reported = [np.degrees(sig[f"rot_{a}"]) for a in "xyz"] + [1e3 * sig[f"t_{a}"] for a in "xyz"]
+    np.testing.assert_allclose(tracker.axis_sigmas(), reported, rtol=0.15)
+    groups = tracker.sigmas()
+    assert tracker.axis_sigmas()[:3].max() <= groups["rotation"] * (1 + 1e-9)
+    assert tracker.axis_sigmas()[3:].max() <= groups["translation"] * (1 + 1e-9)
+    assert InformationTracker("intrinsic", rec.target, Guess(truth.camera, truth.T_cam_imu, 0.0, truth.imu_noise)
+                              ).axis_sigmas() is None  # fmt: skip
 
 
 def test_more_data_never_increases_the_predicted_sigma(recording):
@@ -206,6 +231,33 @@ def test_the_sensor_context_extends_the_state_with_each_episodes_declared_sensor
     finally:
         plain.close()
         context.close()
+
+
+def test_the_axis_uncertainty_extends_the_state_with_the_extrinsics_axes_and_their_prediction():
+    env = information_env("joint", "env.information.axis_uncertainty=true", "env.max_steps=3")
+    try:
+        assert env.observation_space.shape == (INFORMATION_SIZE + AXIS_SIZE,)
+        obs, _ = env.reset(seed=3)
+        for _ in range(2):
+            obs, *_ = env.step(np.full(6, 0.05, dtype=np.float32))
+            tracker = env.state.information
+            s = env.config.information
+            ratios = axis_ratios(tracker.axis_sigmas(), "joint", s.tolerances, s.confidence)
+            np.testing.assert_allclose(obs[INFORMATION_SIZE:], 0.5 + np.log10(ratios) / 4, atol=1e-6)
+            rotation, translation = (GROUPS.index(g) for g in ("rotation", "translation"))
+            assert obs[INFORMATION_SIZE : INFORMATION_SIZE + 3].max() <= obs[rotation] + 1e-6  # the worst axis at most
+            assert obs[INFORMATION_SIZE + 3 :].max() <= obs[translation] + 1e-6
+        # a prediction carries the axes its step would leave, in the same units
+        prediction = Lookahead(env.state, env.frame, env.pose_offset, env.config).predict(np.zeros(6))
+        assert prediction.axes.shape == (AXIS_SIZE,) and np.all((prediction.axes > 0) & (prediction.axes < 1))
+    finally:
+        env.close()
+    intrinsic = information_env("intrinsic", "env.information.axis_uncertainty=true")
+    try:
+        obs, _ = intrinsic.reset(seed=3)
+        np.testing.assert_array_equal(obs[INFORMATION_SIZE:], np.zeros(AXIS_SIZE))  # no extrinsic: 0, as its groups
+    finally:
+        intrinsic.close()
 
 
 def test_a_floor_pays_groups_below_tolerance_and_a_path_discount_is_reported_per_step():
@@ -367,6 +419,7 @@ def test_a_final_step_limit_reports_a_zero_discount_on_its_step_only():
         ("env.information.center_offset_std=-0.01", "env.information.center_offset_std"),
         ("env.information.goal_groups=some", "env.information.goal_groups"),
         ("env.information.sensor_context=maybe", "env.information.sensor_context"),
+        ("env.information.axis_uncertainty=1.5", "env.information.axis_uncertainty"),
         ("env.reward.path_discount=0", "env.reward.path_discount"),
         ("env.reward.path_discount=1.2", "env.reward.path_discount"),
         ("env.state=coverage_and_more", "env.state"),

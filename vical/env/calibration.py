@@ -120,7 +120,8 @@ class CalibrationEnv(gym.Env):
         self._build_scene(self._sim_config.board)
         scale = np.asarray(self.config.action_scale, dtype=np.float32)
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
-        size = observation_size(self.config.state, self.config.information.sensor_context)
+        information = self.config.information
+        size = observation_size(self.config.state, information.sensor_context, information.axis_uncertainty)
         self.observation_space = gym.spaces.Box(0.0, 1.0, (size,), dtype=np.float32)
         self._bound = self.config.workspace.bound
         self.truth: SensorTruth | None = None

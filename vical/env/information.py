@@ -412,6 +412,17 @@ class InformationTracker:
             out["time_offset"] = float(1e3 * np.sqrt(cov[idx["D"][0], idx["D"][0]]))
         return out
 
+    def axis_sigmas(self) -> np.ndarray | None:
+        """(6,) predicted 1-sigma of the extrinsic along each camera axis (GTSAM's tangent of ``T_imu_cam``: the
+        camera's frame): rotation about x, y, z [deg], translation along x, y, z [mm]; None where the task estimates
+        no extrinsic."""
+        names, cov = self.covariance()
+        idx = [i for i, name in enumerate(names) if name == "E"]
+        if not idx:
+            return None
+        sigma = np.sqrt(np.diag(cov)[idx])
+        return np.r_[np.degrees(sigma[:3]), 1e3 * sigma[3:]]
+
     def _distortion_px(self, cov: np.ndarray) -> float:
         """1-sigma [px] of the distortion's displacement at the image corner (RMS over the two axes; a wide-angle
         lens whose image circle leaves the corner dark: at the right edge)."""
@@ -550,12 +561,26 @@ def tolerance_ratios(sigmas: dict[str, float], tolerances, confidence: float) ->
     return {g: quantile_factor(g, per_group) * s / tolerances.of(g) for g, s in sigmas.items()}
 
 
+def axis_ratios(axis_sigmas: np.ndarray, task: str, tolerances, confidence: float) -> np.ndarray:
+    """(6,) each camera axis's predicted error quantile over its group's tolerance (``axis_sigmas``: rotation [deg]
+    then translation [mm], ``InformationTracker.axis_sigmas``), at the quantile ``tolerance_ratios`` takes for the
+    group: so the largest axis's ratio is the group's where the covariance's worst direction is an axis."""
+    per_group = 1.0 - (1.0 - confidence) / len(TASK_GROUPS[task])
+    scale = [quantile_factor(g, per_group) / tolerances.of(g) for g in ("rotation", "translation")]
+    return np.asarray(axis_sigmas, dtype=float) * np.repeat(scale, 3)
+
+
+def feature(ratios: np.ndarray) -> np.ndarray:
+    """Ratios on the state's scale: 0.5 at the tolerance, ``1 / FEATURE_DECADES`` per decade, clipped to [0, 1]."""
+    return np.clip(0.5 + np.log10(np.maximum(ratios, 1e-12)) / FEATURE_DECADES, 0.0, 1.0)
+
+
 def features(ratios: dict[str, float]) -> np.ndarray:
     """(6,) a value in [0, 1] per group of ``GROUPS``: 0.5 at the tolerance, 0 for a group the task leaves out."""
     out = np.zeros(len(GROUPS))
     for k, group in enumerate(GROUPS):
         if group in ratios:
-            out[k] = np.clip(0.5 + np.log10(max(ratios[group], 1e-12)) / FEATURE_DECADES, 0.0, 1.0)
+            out[k] = feature(np.array(ratios[group]))
     return out
 
 

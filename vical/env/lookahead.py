@@ -22,7 +22,7 @@ around the fit (rms 0.53 s over steps of 0.5-2 s); the board's pose is the last 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -58,6 +58,8 @@ class Prediction:
         views: predicted frames that see the board.
         ratios: each group's predicted error over its tolerance after the step.
         excess: the goal's e-folds left after the step; goal_reached: every goal group within tolerance.
+        axes: the extrinsic's axes after the step as the state carries them (``EpisodeState.axes_of``; empty
+            without ``env.information.axis_uncertainty``).
     """
 
     goal: np.ndarray
@@ -67,6 +69,7 @@ class Prediction:
     ratios: dict[str, float]
     excess: float
     goal_reached: bool
+    axes: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def motion_time(delta: np.ndarray) -> float:
@@ -139,7 +142,7 @@ class Lookahead:
         goal_ratios = self.state.goal_of(ratios)
         return Prediction(
             goal, moving, float(np.linalg.norm(delta[:3])), len(frames), ratios,
-            self.state.excess_of(ratios), all(r <= 1.0 for r in goal_ratios.values()),
+            self.state.excess_of(ratios), all(r <= 1.0 for r in goal_ratios.values()), self.state.axes_of(tracker),
         )  # fmt: skip
 
     def _frames(self, times: np.ndarray, offsets: np.ndarray) -> list[tuple[FrameObservation, np.ndarray]]:

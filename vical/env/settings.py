@@ -208,6 +208,9 @@ class InformationSettings:
             (``vical.env.state.sensor_features``: the board's kind and size, the lens's field of view and
             family, the IMU's noise densities), for a policy trained on many sensors' episodes; false
             keeps the information state's 13 numbers (the shipped policies' layout).
+        axis_uncertainty: the observation also carries the extrinsic's predicted error along each camera axis
+            (rotation about x, y, z, translation along x, y, z, on the groups' scale; 0 where the task estimates no
+            extrinsic): which direction the motion has yet to excite, where the groups give the worst axis only.
     """
 
     tolerances: Tolerances = field(default_factory=Tolerances)
@@ -221,6 +224,7 @@ class InformationSettings:
     center_offset_std: float | None = 0.0
     goal_groups: str = "all"
     sensor_context: bool = False
+    axis_uncertainty: bool = False
 
     def __post_init__(self) -> None:
         require_range("env.information.confidence", self.confidence, 0.5, 1.0, high_open=True)
@@ -237,6 +241,8 @@ class InformationSettings:
         require(self.goal_groups in GOAL_GROUPS, key, f"one of {GOAL_GROUPS}", self.goal_groups)
         key = "env.information.sensor_context"
         require(isinstance(self.sensor_context, bool), key, "true or false", self.sensor_context)
+        key = "env.information.axis_uncertainty"
+        require(isinstance(self.axis_uncertainty, bool), key, "true or false", self.axis_uncertainty)
 
 
 @dataclass(frozen=True)

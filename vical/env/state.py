@@ -20,7 +20,9 @@ from vical.env.information import (
     SCORED_GROUPS,
     Guess,
     InformationTracker,
+    axis_ratios,
     excess,
+    feature,
     features,
     tolerance_ratios,
 )
@@ -30,15 +32,17 @@ RATE_FRAMES = 20  # latest frames whose stamps give the camera's frame rate
 COVERAGE_SIZE = 24  # the coverage state: 18 coverage terms and the pose offset
 INFORMATION_SIZE = len(GROUPS) + 7  # the information state: a value per group, the pose offset, the step fraction
 SENSOR_SIZE = 6  # sensor_features' terms
+AXIS_SIZE = 6  # the extrinsic's axes: rotation about x, y, z, translation along x, y, z
 BOARD_SCALE = 1.0  # [m] a board's larger side maps to [0, 1] over 0 .. 1 m (printed boards are A4 to A0)
 PAPER_IMU = ImuNoise()  # noise densities at 0.5 of the sensor features (the paper's IMU)
 
 
-def observation_size(state: str, sensor_context: bool) -> int:
-    """The length of the observation of an env with ``env.state`` and ``env.information.sensor_context``."""
+def observation_size(state: str, sensor_context: bool = False, axis_uncertainty: bool = False) -> int:
+    """The length of the observation of an env with ``env.state`` and ``env.information``'s ``sensor_context`` and
+    ``axis_uncertainty``."""
     if state != "information":
         return COVERAGE_SIZE
-    return INFORMATION_SIZE + SENSOR_SIZE * int(sensor_context)
+    return INFORMATION_SIZE + SENSOR_SIZE * int(sensor_context) + AXIS_SIZE * int(axis_uncertainty)
 
 
 def sensor_features(target: Target, guess: Guess) -> np.ndarray:
@@ -86,6 +90,7 @@ class EpisodeState:
         self.frames = 0
         self._stamps: list[int] = []
         self._sensor = np.zeros(0)  # the sensor features the observation carries (none without sensor_context)
+        self._axes = np.zeros(0)  # the extrinsic's axes the observation carries (none without axis_uncertainty)
 
     def reset(self, task: str, guess: Guess | None) -> None:
         """Start an episode of ``task`` (``intrinsic``, ``extrinsic``, ``joint``); ``guess`` linearises the
@@ -136,6 +141,18 @@ class EpisodeState:
 
     def _update_ratios(self) -> None:
         self.ratios = self.ratios_of(self.information)
+        self._axes = self.axes_of(self.information)
+
+    def axes_of(self, tracker: InformationTracker) -> np.ndarray:
+        """(6,) the extrinsic's predicted error along each camera axis on the state's scale (0 where the task
+        estimates no extrinsic) with ``axis_uncertainty``; else empty."""
+        s = self.config.information
+        if not s.axis_uncertainty:
+            return np.zeros(0)
+        sigmas = tracker.axis_sigmas()
+        if sigmas is None:
+            return np.zeros(AXIS_SIZE)
+        return feature(axis_ratios(sigmas, tracker.task, s.tolerances, s.confidence))
 
     def goal_of(self, ratios: dict[str, float]) -> dict[str, float]:
         """The groups of ``ratios`` (group: predicted error over tolerance) the goal needs
@@ -180,12 +197,16 @@ class EpisodeState:
             return self.information_observation(self.ratios, offset, steps / self.config.max_steps)
         return np.r_[self.coverage.vector(), workspace_pose(offset, self.config.workspace.bound)].astype(np.float32)
 
-    def information_observation(self, ratios: dict[str, float], offset: np.ndarray, fraction: float) -> np.ndarray:
+    def information_observation(
+        self, ratios: dict[str, float], offset: np.ndarray, fraction: float, axes: np.ndarray | None = None
+    ) -> np.ndarray:
         """The information state's observation of ``ratios`` (a prediction's or the state's own) at the pose
         ``offset`` (6,), ``fraction`` of the step limit gone; then the episode's sensor features
-        (``env.information.sensor_context``)."""
+        (``env.information.sensor_context``) and the extrinsic's axes (``axis_uncertainty``: ``axes``, a
+        prediction's, or the state's own when None)."""
         pose = workspace_pose(offset, self.config.workspace.bound)
-        return np.r_[features(ratios), pose, fraction, self._sensor].astype(np.float32)
+        axes = self._axes if axes is None else axes
+        return np.r_[features(ratios), pose, fraction, self._sensor, axes].astype(np.float32)
 
     def info(self) -> dict[str, float]:
         """``coverage/*`` and ``information/*`` terms (TensorBoard, progress lines)."""

@@ -70,7 +70,7 @@ class CriticPlannerPolicy(GreedyInformationPolicy):
         """Each predicted step's reward plus the discounted value of the state it leads to."""
         rewards = super().scores(predictions, env)
         fraction = min((env.steps + 1) / self.trained_steps, 1.0)
-        after = np.stack([env.state.information_observation(p.ratios, p.goal, fraction) for p in predictions])
+        after = np.stack([env.state.information_observation(p.ratios, p.goal, fraction, p.axes) for p in predictions])
         with torch.no_grad():
             values = self.critic.agent.v(torch.as_tensor(after)).numpy().astype(float)
         paths = np.array([p.path_length for p in predictions])

@@ -75,7 +75,10 @@ def _check_run(state: dict[str, Any], path: Path) -> None:
 def trained_observation_size(env: dict[str, Any]) -> int:
     """The observation length of the env a run's ``env`` config describes (runs from before the sensor context
     have none)."""
-    return observation_size(env.get("state", "coverage"), bool(env.get("information", {}).get("sensor_context")))
+    information = env.get("information", {})
+    return observation_size(
+        env.get("state", "coverage"), bool(information.get("sensor_context")), bool(information.get("axis_uncertainty"))
+    )
 
 
 def load_run(run_dir: str | Path) -> tuple[Path, dict[str, Any]]:
@@ -159,11 +162,12 @@ class LearnedPolicy(Policy):
                 f"evaluate it with env.state={kind} (vical-evaluate brings the training's state by itself)"
             )
         trained_size = _policy_dims(self.agent.state_dict(), self.source)[0]
-        context = env.config.information.sensor_context
-        if observation_size(env.config.state, context) != trained_size:
+        s = env.config.information
+        if observation_size(env.config.state, s.sensor_context, s.axis_uncertainty) != trained_size:
             raise ConfigError(
                 f"{self.source} reads a {trained_size}-D state, but the env's has env.information.sensor_context="
-                f"{str(context).lower()}; evaluate it with the training's (vical-evaluate brings it by itself)"
+                f"{str(s.sensor_context).lower()} and axis_uncertainty={str(s.axis_uncertainty).lower()}; evaluate it "
+                "with the training's (vical-evaluate brings it by itself)"
             )
         trained, here = self.workspace, env.config.workspace
         if trained != here:
