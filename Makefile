@@ -25,7 +25,7 @@ lint: venv
 WORKERS ?= 2
 PYTEST := $(VENV)/bin/pytest -n $(WORKERS) --dist loadgroup
 
-# The unit tier: every test but the `integration` marker (pyproject.toml's addopts), ~4.5 min on 2 cores.
+# The unit tier: every test but the `integration` marker (pyproject.toml's addopts), ~5 min on 2 cores.
 test: lint
 	$(PYTEST) --durations=15
 
