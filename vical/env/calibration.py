@@ -38,7 +38,7 @@ from vical.env.information import GROUPS, TASK_GROUPS, Guess, LensSpread
 from vical.env.plots import episode_figure, information_figure
 from vical.env.rewards import information_reward_terms, step_reward_terms, terminal_reward_terms
 from vical.env.settings import InformationSettings, MdpConfig
-from vical.env.state import EpisodeState, observation_size
+from vical.env.state import EpisodeState, env_observation_size
 from vical.env.workspace import board_in_sight, check_workspace, pose_frame, sight_range
 from vical.geometry import CameraModel
 from vical.sim import PandaSim, SimConfig
@@ -120,9 +120,7 @@ class CalibrationEnv(gym.Env):
         self._build_scene(self._sim_config.board)
         scale = np.asarray(self.config.action_scale, dtype=np.float32)
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
-        information = self.config.information
-        size = observation_size(self.config.state, information.sensor_context, information.axis_uncertainty)
-        self.observation_space = gym.spaces.Box(0.0, 1.0, (size,), dtype=np.float32)
+        self.observation_space = gym.spaces.Box(0.0, 1.0, (env_observation_size(self.config),), dtype=np.float32)
         self._bound = self.config.workspace.bound
         self.truth: SensorTruth | None = None
         self.product: Product | None = None  # each reset draws the episode's own

@@ -15,7 +15,6 @@ from vical.calib.solve.observations import FrameObservation
 from vical.data import ImuNoise, ImuSamples, Target
 from vical.env.coverage import Coverage, view_features
 from vical.env.information import (
-    FEATURE_DECADES,
     GROUPS,
     SCORED_GROUPS,
     Guess,
@@ -45,12 +44,18 @@ def observation_size(state: str, sensor_context: bool = False, axis_uncertainty:
     return INFORMATION_SIZE + SENSOR_SIZE * int(sensor_context) + AXIS_SIZE * int(axis_uncertainty)
 
 
+def env_observation_size(config: MdpConfig) -> int:
+    """The length of the observation of the MDP ``config`` (``observation_size`` of its settings)."""
+    information = config.information
+    return observation_size(config.state, information.sensor_context, information.axis_uncertainty)
+
+
 def sensor_features(target: Target, guess: Guess) -> np.ndarray:
     """(6,) what a user declares of the sensor, each in [0, 1]: the board a checkerboard (1) or an aprilgrid (0),
     the board's larger side over 1 m, the guessed lens's horizontal field of view over pi (measured between the
     rays of the image's left and right edges, so a wide-angle model reads as a pinhole of the same view), a
     wide-angle model (1) or a pinhole (0), and the accelerometer's and gyroscope's noise densities (0.5 at the
-    paper's IMU, a decade per 1 / FEATURE_DECADES)."""
+    paper's IMU, on the groups' scale: ``feature``)."""
     side = float(np.max(np.ptp(target.points[:, :2], axis=0)))
     camera = guess.camera
     edges = camera.unproject(np.array([[0.0, camera.cy], [float(camera.width), camera.cy]]))
@@ -58,11 +63,10 @@ def sensor_features(target: Target, guess: Guess) -> np.ndarray:
     if not np.isfinite(hfov):  # an edge behind the lens: a view of 180 deg or more
         hfov = np.pi
     noise = guess.imu_noise
-    accel = 0.5 + np.log10(noise.accel_noise_density / PAPER_IMU.accel_noise_density) / FEATURE_DECADES
-    gyro = 0.5 + np.log10(noise.gyro_noise_density / PAPER_IMU.gyro_noise_density) / FEATURE_DECADES
+    imu = feature(np.array([noise.accel_noise_density / PAPER_IMU.accel_noise_density,
+                            noise.gyro_noise_density / PAPER_IMU.gyro_noise_density]))  # fmt: skip
     board = float(target.kind == "checkerboard")
-    values = [board, side / BOARD_SCALE, hfov / np.pi, float(camera.is_wide_angle), accel, gyro]
-    return np.clip(np.array(values), 0.0, 1.0)
+    return np.r_[np.clip([board, side / BOARD_SCALE, hfov / np.pi, float(camera.is_wide_angle)], 0.0, 1.0), imu]
 
 
 def workspace_pose(offset: np.ndarray, bound: np.ndarray) -> np.ndarray:

@@ -2,10 +2,10 @@
 
 Evaluation uses the deterministic action (the mean ``tanh(mu(s))`` in ``[-1, 1]^6``), mapped onto the
 env's action box exactly as training did (``vical.rl.envs.BoxActions``). The run must have trained
-on the calibration env (the 24-D coverage state or the 13-D information state, 19-D with its sensor
-context; 6-D action) with the action scale of the env it drives. A policy of the information state
-brings its state and stopping rule to the env it is evaluated in (``Policy.env_settings``): it stops
-when it predicts every parameter group within its tolerances.
+on the calibration env (the 24-D coverage state or the 13-D information state, 6 more with each of its
+sensor context and axis uncertainty; 6-D action) with the action scale of the env it drives. A policy
+of the information state brings its state and stopping rule to the env it is evaluated in
+(``Policy.env_settings``): it stops when it predicts every parameter group within its tolerances.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import torch
 from vical.config_checks import ConfigError, from_mapping
 from vical.env.calibration import CalibrationEnv
 from vical.env.settings import STATES, RewardWeights, Workspace
-from vical.env.state import observation_size
+from vical.env.state import env_observation_size, observation_size
 from vical.policies.base import Policy
 from vical.rl.checkpoint import AGENT, load_checkpoint
 from vical.rl.envs import BoxActions
@@ -73,8 +73,8 @@ def _check_run(state: dict[str, Any], path: Path) -> None:
 
 
 def trained_observation_size(env: dict[str, Any]) -> int:
-    """The observation length of the env a run's ``env`` config describes (runs from before the sensor context
-    have none)."""
+    """The observation length of the env a run's ``env`` config describes (runs from before the sensor context and
+    the axis uncertainty have neither)."""
     information = env.get("information", {})
     return observation_size(
         env.get("state", "coverage"), bool(information.get("sensor_context")), bool(information.get("axis_uncertainty"))
@@ -163,7 +163,7 @@ class LearnedPolicy(Policy):
             )
         trained_size = _policy_dims(self.agent.state_dict(), self.source)[0]
         s = env.config.information
-        if observation_size(env.config.state, s.sensor_context, s.axis_uncertainty) != trained_size:
+        if env_observation_size(env.config) != trained_size:
             raise ConfigError(
                 f"{self.source} reads a {trained_size}-D state, but the env's has env.information.sensor_context="
                 f"{str(s.sensor_context).lower()} and axis_uncertainty={str(s.axis_uncertainty).lower()}; evaluate it "
