@@ -56,6 +56,29 @@ def test_offsets_and_poses_are_inverse(frame):
 
 
 @pytest.mark.parametrize("frame", ["start", "board"])
+@pytest.mark.parametrize("heading", [None, np.array([2.0, 0.5, 0.7])])
+def test_a_stack_of_offsets_maps_to_the_stack_of_their_poses(frame, heading):
+    """The planner maps its predictions' offsets in one pass: each pose of the stack is the one offset's pose, each
+    rotation of a stacked look-at or Euler map the single one's; a vertical line of sight anywhere in the stack
+    is refused."""
+    T_start, look_at = make_transform(euler_to_matrix([0.1, -0.2, 0.3]), [0.4, 0.1, 0.5]), np.array([1.2, 0.0, 0.4])
+    pf = PoseFrame(T_start, frame, look_at, heading=heading)
+    offsets = np.random.default_rng(3).uniform(-1, 1, (40, 6)) * [0.3, 0.3, 0.3, 1.5, 0.5, 0.5]
+    stacked = pf.pose(offsets)
+    assert stacked.shape == (40, 4, 4)
+    for offset, T in zip(offsets, stacked, strict=True):
+        np.testing.assert_allclose(T, pf.pose(offset), atol=1e-12)
+    np.testing.assert_allclose(pf.pose(offsets.reshape(4, 10, 6)), stacked.reshape(4, 10, 4, 4), atol=1e-15)
+    for angles, R in zip(offsets[:, 3:], euler_to_matrix(offsets[:, 3:]), strict=True):
+        np.testing.assert_allclose(R, euler_to_matrix(angles), atol=1e-15)
+    positions = offsets[:, :3]
+    for position, R in zip(positions, look_at_rotation(positions, look_at), strict=True):
+        np.testing.assert_allclose(R, look_at_rotation(position, look_at), atol=1e-15)
+    with pytest.raises(ValueError, match="vertical"):
+        look_at_rotation(np.vstack([positions[:3], look_at - [0.0, 0.0, 1.0]]), look_at)
+
+
+@pytest.mark.parametrize("frame", ["start", "board"])
 def test_a_heading_gives_a_turned_base_the_offsets_the_world_gives(frame):
     """Poses in a base turned by 1.1 rad about z, with the heading the world's +x has there: every offset is the
     same physical pose, both ways; a vertical heading is refused."""

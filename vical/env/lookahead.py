@@ -118,7 +118,7 @@ class Lookahead:
         self.rate = state.frame_rate or DEFAULT_FRAME_RATE
 
     def _camera(self, offset: np.ndarray) -> np.ndarray:
-        """(4, 4) ``T_world_cam`` (optical frame) at the workspace ``offset``."""
+        """(4, 4) ``T_world_cam`` (optical frame) at the workspace ``offset`` (6,); (N, 4, 4) at offsets (N, 6)."""
         return self.frame.pose(offset) @ T_BODY_CAM
 
     def predict(self, action: np.ndarray) -> Prediction:
@@ -149,8 +149,7 @@ class Lookahead:
         """The predicted frames that see the board, with their poses ``T_cam_target``."""
         t0, t_last = self.tracker.first_stamp or 0, self.tracker.last_time or 0.0
         frames = []
-        for t, offset in zip(times, offsets, strict=True):
-            T_world_cam = self._camera(offset)
+        for t, T_world_cam in zip(times, self._camera(offsets), strict=True):
             uv, ids = self.board.ideal_observation(self.tracker.guess.camera, T_world_cam)
             if len(ids) < self.tracker.min_corners:
                 continue
@@ -164,7 +163,7 @@ class Lookahead:
         dt = 1.0 / IMU_RATE
         t = np.arange(0.0, total + 2 * dt, dt)
         T_cam_imu = self.tracker.guess.T_cam_imu
-        gyro, specific_force = imu_readings(np.array([self._camera(o) @ T_cam_imu for o in offset_at(t)]), dt)
+        gyro, specific_force = imu_readings(self._camera(offset_at(t)) @ T_cam_imu, dt)
         t0, t_last = self.tracker.first_stamp, self.tracker.last_time
         stamps = t0 + np.round((t_last + t) * 1e9).astype(np.int64)
         return ImuSamples(stamps, gyro, specific_force)

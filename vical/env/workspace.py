@@ -50,19 +50,20 @@ def wrap_angle(a: np.ndarray) -> np.ndarray:
 
 
 def look_at_rotation(position: np.ndarray, point: np.ndarray) -> np.ndarray:
-    """(3, 3) camera-body orientation at ``position`` (3,) [m] looking at ``point`` (3,) [m], upright.
+    """(3, 3) camera-body orientation at ``position`` (3,) [m] looking at ``point`` (3,) [m], upright; a stack of
+    positions (..., 3) gives (..., 3, 3).
 
     Body x points at ``point``, body y is horizontal (to the left of the line of sight), body z up.
     Undefined when the line of sight is vertical.
     """
     x = np.asarray(point, dtype=float) - np.asarray(position, dtype=float)
-    x /= np.linalg.norm(x)
+    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
     y = np.cross(_UP, x)
-    norm = np.linalg.norm(y)
-    if norm < 1e-9:
+    norm = np.linalg.norm(y, axis=-1, keepdims=True)
+    if np.any(norm < 1e-9):
         raise ValueError("look_at_rotation: the line of sight is vertical, the upright orientation is undefined")
-    y /= norm
-    return np.c_[x, y, np.cross(x, y)]
+    y = y / norm
+    return np.stack([x, y, np.cross(x, y)], axis=-1)
 
 
 class PoseFrame:
@@ -86,17 +87,19 @@ class PoseFrame:
         self.euler_start = matrix_to_euler(self.reference(self.p_start).T @ T_start[:3, :3])
 
     def reference(self, position: np.ndarray) -> np.ndarray:
-        """(3, 3) the orientation that zero angle offsets mean at ``position`` (3,) [m]."""
+        """(3, 3) the orientation that zero angle offsets mean at ``position`` (3,) [m] (a stack (..., 3): (..., 3, 3)
+        for ``frame=board``, the one (3, 3) for ``frame=start``)."""
         if self.frame == "board":
             return look_at_rotation(position, self.look_at)
         return np.eye(3) if self.axes is None else self.axes
 
     def pose(self, offset: np.ndarray) -> np.ndarray:
-        """(4, 4) ``T_world_ee`` of the workspace ``offset`` (6,)."""
+        """(4, 4) ``T_world_ee`` of the workspace ``offset`` (6,); a stack of offsets (..., 6) gives (..., 4, 4) in one
+        vectorised pass (the planner's predictions map hundreds of offsets a step)."""
         offset = np.asarray(offset, dtype=float)
-        step = offset[:3] if self.axes is None else self.axes @ offset[:3]
+        step = offset[..., :3] if self.axes is None else offset[..., :3] @ self.axes.T
         p = self.p_start + step
-        return make_transform(self.reference(p) @ euler_to_matrix(self.euler_start + offset[3:]), p)
+        return make_transform(self.reference(p) @ euler_to_matrix(self.euler_start + offset[..., 3:]), p)
 
     def offset(self, T_world_ee: np.ndarray) -> np.ndarray:
         """(6,) the workspace offset of the pose ``T_world_ee`` (4, 4) (inverse of ``pose``)."""

@@ -95,10 +95,13 @@ def rotation_angle(R: np.ndarray) -> float:
 
 
 def make_transform(R: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Homogeneous (4, 4) transform from rotation ``R`` (3, 3) and translation ``t`` (3,) [m]."""
-    T = np.eye(4)
-    T[:3, :3] = R
-    T[:3, 3] = t
+    """Homogeneous (4, 4) transform from rotation ``R`` (3, 3) and translation ``t`` (3,) [m]; stacks of them
+    (..., 3, 3) and (..., 3) give (..., 4, 4)."""
+    R = np.asarray(R, dtype=float)
+    T = np.zeros(R.shape[:-2] + (4, 4))
+    T[..., :3, :3] = R
+    T[..., :3, 3] = t
+    T[..., 3, 3] = 1.0
     return T
 
 
@@ -147,14 +150,19 @@ def matrix_to_quat(R: np.ndarray) -> np.ndarray:
 
 
 def euler_to_matrix(rpy: np.ndarray) -> np.ndarray:
-    """Rotation (3, 3) of Euler angles ``[roll, pitch, yaw]`` [rad]: ``Rz(yaw) Ry(pitch) Rx(roll)``."""
-    roll, pitch, yaw = np.asarray(rpy, dtype=float)
-    cr, sr = np.cos(roll), np.sin(roll)
-    cp, sp = np.cos(pitch), np.sin(pitch)
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    Rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
-    Ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
-    Rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    """Rotation (3, 3) of Euler angles ``[roll, pitch, yaw]`` [rad]: ``Rz(yaw) Ry(pitch) Rx(roll)``; a stack of
+    angles (..., 3) gives (..., 3, 3)."""
+    rpy = np.asarray(rpy, dtype=float)
+    c, s = np.cos(rpy), np.sin(rpy)
+    zero, one = np.zeros(rpy.shape[:-1]), np.ones(rpy.shape[:-1])
+
+    def matrix(rows: list[list[np.ndarray]]) -> np.ndarray:
+        return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
+
+    (cr, cp, cy), (sr, sp, sy) = np.moveaxis(c, -1, 0), np.moveaxis(s, -1, 0)
+    Rx = matrix([[one, zero, zero], [zero, cr, -sr], [zero, sr, cr]])
+    Ry = matrix([[cp, zero, sp], [zero, one, zero], [-sp, zero, cp]])
+    Rz = matrix([[cy, -sy, zero], [sy, cy, zero], [zero, zero, one]])
     return Rz @ Ry @ Rx
 
 
