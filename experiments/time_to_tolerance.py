@@ -14,6 +14,7 @@ Usage:
     python experiments/time_to_tolerance.py --reference runs/a --runs runs/b runs/c --tasks joint
     python experiments/time_to_tolerance.py --runs runs/a --critics runs/a shipped     # and planners scored by them
     python experiments/time_to_tolerance.py --handovers shipped                   # the shipped policy, then the planner
+    python experiments/time_to_tolerance.py --baselines greedy_information rate_planner   # any policy conf as a row
     python experiments/time_to_tolerance.py --episodes 20 --seed 40000 ...        # the tuning sensors
     python experiments/time_to_tolerance.py --sensor paper --baselines ...        # the paper's sensors, no baselines
     python experiments/time_to_tolerance.py --reuse ...                          # keep the results already written

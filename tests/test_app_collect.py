@@ -22,14 +22,14 @@ from vical.calib.tasks import CalibrationTask, run_task, task_score
 from vical.collection.runner import CollectionStopped, Collector
 from vical.config_checks import ConfigError
 from vical.env.actions import step_to_action
-from vical.evaluation.harness import build_env, run_trajectory
+from vical.evaluation.harness import build_env, instantiate_policy, run_trajectory
 from vical.geometry import invert_transform, make_transform
 from vical.io.bag import read_bag
 from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.base import Policy
 from vical.policies.expert import expert_policy
-from vical.policies.learned import PAPER_POLICY_DIR, learned_policy
+from vical.policies.learned import PAPER_POLICY_DIR
 from vical.robot import Arm, MotionRefused, SensorStreamError, StampedPose
 
 
@@ -233,7 +233,7 @@ def test_bad_settings_are_refused_by_key(tmp_path):
         collect(config(f"out={tmp_path / 'o'}", "robot=franka"))
     # The paper's policy in the practitioner's workspace: refused before the rig is built.
     with pytest.raises(ConfigError, match="trained in workspace 'paper'"):
-        collect(config(f"out={tmp_path / 'o'}", f"policy.run_dir={PAPER_POLICY_DIR}"))
+        collect(config(f"out={tmp_path / 'o'}", "policy=learned", f"policy.run_dir={PAPER_POLICY_DIR}"))
     assert not (tmp_path / "o").exists()
 
 
@@ -348,17 +348,21 @@ def test_a_dry_run_reads_the_rig_moves_nothing_and_writes_nothing(tmp_path, caps
     assert not out.exists()
 
 
-def test_collect_with_the_shipped_policy_calibrates_as_well_as_the_env_on_the_same_sensors(tmp_path):
-    """vical-collect (rendered images, the alignment, the runner's state) against the evaluation's env episode of
-    the same policy on the same sensors; the truth is read by the test only (from the env of the same seed)."""
+@pytest.mark.integration
+def test_collect_with_its_default_policy_calibrates_as_well_as_the_env_on_the_same_sensors(tmp_path):
+    """vical-collect with its default policy (the information-rate planner; rendered images, the alignment, the
+    runner's state) against the evaluation's env episode of the same policy on the same sensors; the truth is read
+    by the test only (from the env of the same seed)."""
     evaluate = composed_evaluate("task=joint")
     task = CalibrationTask.from_config(evaluate["task"])
+    default = OmegaConf.to_container(config("out=unused").policy, resolve=True)["joint"]
+    assert default["_target_"] == "vical.policies.rate_planner.rate_planner_policy"
     runner, env_scores = [], []
     for seed in (0, 1, 2):
         out = tmp_path / f"sensor{seed}"
         assert collect(config(f"out={out}", f"seed={seed}", "report=false", "progress=false")) == 0
         camera, T_cam_imu, time_offset = read_camchain(out / "calibration" / "camchain-imucam.yaml")
-        policy = learned_policy()
+        policy = instantiate_policy(default, "policy")
         env = build_env(evaluate["env"], policy)
         try:
             episode = run_trajectory(env, policy, seed)

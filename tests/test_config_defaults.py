@@ -33,6 +33,7 @@ from vical.parallel import ParallelConfig
 from vical.policies.greedy import greedy_information_policy
 from vical.policies.learned import learned_policy
 from vical.policies.stopping import StopRule
+from vical.policies.two_step import two_step_planner_policy
 from vical.rl.run_settings import TrainConfig
 from vical.rl.sac import SACConfig
 from vical.robot.franka import FrankaArm
@@ -91,7 +92,8 @@ def _plain(value: Any) -> Any:
 WORKSPACE = dataclass_defaults(Workspace, action_scale=_plain(MdpConfig.action_scale))
 # A policy file: PolicySpec's name, per-task factory specs and protocol flag, and the parameters the specs
 # interpolate (the learned policy's and the planner's run directory: learned_policy's argument; the workspace's
-# name; the planner's random candidates: greedy_information_policy's argument). The specs
+# name; the planner's random candidates: greedy_information_policy's argument; the two-step planner's branches:
+# two_step_planner_policy's argument). The specs
 # are what each policy is, no settings with a default (PolicySpec's joint=None: a policy without a joint spec).
 POLICY = dataclass_defaults(
     PolicySpec,
@@ -99,6 +101,7 @@ POLICY = dataclass_defaults(
     run_dir=argument_defaults(learned_policy)["run_dir"],
     workspace=NO_DEFAULT,
     samples=argument_defaults(greedy_information_policy)["samples"],
+    branches=argument_defaults(two_step_planner_policy)["branches"],
 )
 IDENTITY = np.eye(4).tolist()  # T_flange_tool=None (the robot adapters' default) is the identity the YAML writes
 PAIRS: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [

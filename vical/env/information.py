@@ -181,6 +181,7 @@ class InformationTracker:
         self._state: tuple[float, np.ndarray] | None = None  # (IMU time [s], T_target_imu) of the last state
         self._residual_norms: list[np.ndarray] = []
         self._sigma_px = self._measured_pixel_sigma()
+        self._frame_weight = 1.0  # the frames each added frame stands for (a fork's)
         self._t0: int | None = None
         self.frames_used = 0
         self.last_pose: np.ndarray | None = None  # T_target_cam (4, 4) of the last frame added (PnP, guessed camera)
@@ -221,11 +222,13 @@ class InformationTracker:
 
     def fork(self, frame_weight: float = 1.0) -> InformationTracker:
         """An independent copy of the current information (what a prediction adds to it leaves this one as it is),
-        in which every frame added stands for ``frame_weight`` frames (its corner noise divided by its root)."""
+        in which every frame added stands for ``frame_weight`` frames (the recorded corner noise divided by its
+        root; a fork of a fork weighs its own frames, not its parent's twice)."""
         other = copy.copy(self)
         other.information = self.information.copy()
         other._residual_norms = list(self._residual_norms)
-        other._sigma_px = self._sigma_px / np.sqrt(frame_weight)
+        other._sigma_px = self._sigma_px * np.sqrt(self._frame_weight) / np.sqrt(frame_weight)
+        other._frame_weight = frame_weight
         return other
 
     @property

@@ -16,12 +16,16 @@ each would leave. For one candidate, from the episode's state as it stands:
   at ``IMU_RATE`` (the information depends on them through the factors' Jacobians, not on their noise);
 - a fork of the tracker takes these frames as it takes recorded ones; its ratios give the excess after the step.
 
+``Lookahead.following`` predicts on from where a prediction leaves the episode (its offset and its fork of the
+information, the board where this lookahead puts it): the two-step planner's second step.
+
 The prediction's errors: the arm's joint-space motion is not the straight offset line, and its duration scatters
 around the fit (rms 0.53 s over steps of 0.5-2 s); the board's pose is the last PnP's, with the guessed camera.
 """
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,6 +34,7 @@ from scipy.spatial.transform import Rotation
 from vical.calib.solve.observations import FrameObservation
 from vical.data import ImuSamples
 from vical.env.actions import goal_offset
+from vical.env.information import InformationTracker
 from vical.env.settings import MdpConfig
 from vical.env.state import EpisodeState
 from vical.env.workspace import PoseFrame
@@ -60,6 +65,7 @@ class Prediction:
         excess: the goal's e-folds left after the step; goal_reached: every goal group within tolerance.
         axes: the extrinsic's axes after the step as the state carries them (``EpisodeState.axes_of``; empty
             without ``env.information.axis_uncertainty``).
+        tracker: the fork of the information with the step's predicted frames (``Lookahead.following``).
     """
 
     goal: np.ndarray
@@ -70,6 +76,7 @@ class Prediction:
     excess: float
     goal_reached: bool
     axes: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    tracker: InformationTracker | None = field(default=None, repr=False, compare=False)
 
 
 def motion_time(delta: np.ndarray) -> float:
@@ -143,7 +150,17 @@ class Lookahead:
         return Prediction(
             goal, moving, float(np.linalg.norm(delta[:3])), len(frames), ratios,
             self.state.excess_of(ratios), all(r <= 1.0 for r in goal_ratios.values()), self.state.axes_of(tracker),
+            tracker,
         )  # fmt: skip
+
+    def following(self, prediction: Prediction) -> Lookahead:
+        """Predictions from where ``prediction`` (one of this lookahead's) leaves the episode: its goal offset and
+        its fork of the information; the board stays where this lookahead puts it (a step that loses the board
+        still knows where it is)."""
+        after = copy.copy(self)
+        after.tracker = prediction.tracker
+        after.offset = prediction.goal
+        return after
 
     def _frames(self, times: np.ndarray, offsets: np.ndarray) -> list[tuple[FrameObservation, np.ndarray]]:
         """The predicted frames that see the board, with their poses ``T_cam_target``."""

@@ -57,13 +57,20 @@ def look_at_rotation(position: np.ndarray, point: np.ndarray) -> np.ndarray:
     Undefined when the line of sight is vertical.
     """
     x = np.asarray(point, dtype=float) - np.asarray(position, dtype=float)
-    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    x = x / _norms(x)
     y = np.cross(_UP, x)
-    norm = np.linalg.norm(y, axis=-1, keepdims=True)
+    norm = _norms(y)
     if np.any(norm < 1e-9):
         raise ValueError("look_at_rotation: the line of sight is vertical, the upright orientation is undefined")
     y = y / norm
     return np.stack([x, y, np.cross(x, y)], axis=-1)
+
+
+def _norms(v: np.ndarray) -> np.ndarray:
+    """The Euclidean norms of ``v``'s vectors along its last axis, that axis kept. One vector's is numpy's dot product
+    and a stack's a sum, which round differently (by 1e-16): the one-vector path keeps the simulated arm's goals, and
+    so every seeded episode, bit for bit as they have been."""
+    return np.linalg.norm(v) if v.ndim == 1 else np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 class PoseFrame:

@@ -63,6 +63,17 @@ def candidate_actions(scale: np.ndarray, samples: int, rng: np.random.Generator)
     return np.clip(np.vstack([axis_actions(scale), rng.uniform(-scale, scale, (samples, 6))]), -scale, scale)
 
 
+def predicted_moves(lookahead: Lookahead, actions: np.ndarray) -> tuple[list[np.ndarray], list[Prediction]]:
+    """The ``actions`` that move (one the workspace's edge clips to no motion is left out) and their predictions."""
+    moving, predictions = [], []
+    for action in actions:
+        prediction = lookahead.predict(action)
+        if not np.allclose(prediction.goal, lookahead.offset, atol=1e-9):
+            moving.append(action)
+            predictions.append(prediction)
+    return moving, predictions
+
+
 class GreedyInformationPolicy(Policy):
     """The information-greedy planner (module doc).
 
@@ -115,13 +126,9 @@ class GreedyInformationPolicy(Policy):
         return action
 
     def _best(self, lookahead: Lookahead, env: CalibrationEnv) -> np.ndarray:
-        actions, predictions = [], []
-        for action in candidate_actions(env.action_space.high, self.samples, self._rng):
-            prediction = lookahead.predict(action)
-            if np.allclose(prediction.goal, lookahead.offset, atol=1e-9):
-                continue  # clipped to no motion at the workspace's edge
-            actions.append(action)
-            predictions.append(prediction)
+        actions, predictions = predicted_moves(
+            lookahead, candidate_actions(env.action_space.high, self.samples, self._rng)
+        )
         if not actions:
             return self._toward_start(env)
         return actions[int(np.argmax(self.scores(predictions, env)))]  # the first of equals, in candidate order
