@@ -131,7 +131,11 @@ class GreedyInformationPolicy(Policy):
         )
         if not actions:
             return self._toward_start(env)
-        return actions[int(np.argmax(self.scores(predictions, env)))]  # the first of equals, in candidate order
+        return actions[self.choice(lookahead, predictions, env)]
+
+    def choice(self, lookahead: Lookahead, predictions: list[Prediction], env: CalibrationEnv) -> int:
+        """The index of the prediction taken: the best score (the first of equals, in candidate order)."""
+        return int(np.argmax(self.scores(predictions, env)))
 
     def scores(self, predictions: list[Prediction], env: CalibrationEnv) -> np.ndarray:
         """Each predicted step's score: the information MDP's reward of the step (``score``)."""

@@ -27,7 +27,6 @@ from vical.policies.greedy import (
     DEFAULT_SAMPLES,
     GreedyInformationPolicy,
     axis_actions,
-    candidate_actions,
     planner_settings,
     predicted_moves,
 )
@@ -60,16 +59,12 @@ class TwoStepPlannerPolicy(GreedyInformationPolicy):
         require(ok, "policy.branches", "an integer >= 1 (first steps valued with a second)", branches)
         self.branches = branches
 
-    def _best(self, lookahead: Lookahead, env: CalibrationEnv) -> np.ndarray:
-        actions, predictions = predicted_moves(
-            lookahead, candidate_actions(env.action_space.high, self.samples, self._rng)
-        )
-        if not actions:
-            return self._toward_start(env)
+    def choice(self, lookahead: Lookahead, predictions: list[Prediction], env: CalibrationEnv) -> int:
+        """The best branch by its two steps' value (the first of equals in the one-step order)."""
         first = self.scores(predictions, env)
-        branches = np.argsort(-first, kind="stable")[: self.branches]  # the first of equals in candidate order
+        branches = np.argsort(-first, kind="stable")[: self.branches]
         values = [first[i] + self.next_step_value(lookahead, predictions[i], env) for i in branches]
-        return actions[int(branches[int(np.argmax(values))])]
+        return int(branches[int(np.argmax(values))])
 
     def next_step_value(self, lookahead: Lookahead, prediction: Prediction, env: CalibrationEnv) -> float:
         """The best predicted reward of an axis move after ``prediction`` (0 after a step that reaches the goal, or
