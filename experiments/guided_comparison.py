@@ -4,9 +4,12 @@ The same simulated person (``person=sim``: 7 cm / 10 deg placement error per pos
 1 mm / 0.3 deg tremor at 8-12 Hz; docs/simulation.md) holds each sensor and follows, pose by pose, in
 ``vical-guide``'s loop (``vical.collection.guide.Guide``, at corner level: nothing rendered, nothing written):
 
-- **guided, learned (person)**: ``vical-guide``'s default (``policy=learned_person``), the policy trained with the
-  simulated person in the arm's place (``vical-train +experiment=train_person_policy``), "done" by its own rule;
-- **guided, greedy planner**: the information-greedy planner (``policy=greedy_information``);
+- **guided, rate planner**: ``vical-guide``'s default, the information-rate planner (``policy=rate_planner``,
+  ``vical-collect``'s default), a step priced at the person's reach (``conf/guide.yaml``'s ``reach``);
+- **guided, greedy planner**: the information-greedy planner (``policy=greedy_information``), predicting the same
+  reaches;
+- **guided, learned (person)**: the policy trained with the simulated person in the arm's place
+  (``policy=learned_person``, ``vical-train +experiment=train_person_policy``), "done" by its own rule;
 - **guided, learned (arm)**: the collection policy shipped for an arm (``policy=learned``);
 - **written routine**: Kalibr's recommended routine as written instructions (``policy=expert_long``: views close
   and far, tilted, rolled, then swings along and about every axis), followed to its end without feedback;
@@ -17,9 +20,11 @@ calibration's true errors, and whether a "done" was right (every scored group wi
 table is ``vical-evaluate``'s time-to-tolerance table (paired 95 % intervals against the guide's default).
 
 Sensors: reset seeds from 60000 (no training, fitting or test uses them; ``experiments/collect_gap.py`` evaluates
-60000-60019 too); ``--sensors`` of them.
+60000-60019 too); ``--sensors`` of them. ``--seed 40000`` measures on the tuning sensors instead (what a change is
+tried on before it meets the held-out ones), ``--conditions`` on some of the conditions.
 
-    python experiments/guided_comparison.py --sensors 30            # ~36 min on 2 cores (2 workers)
+    python experiments/guided_comparison.py --sensors 30            # ~45 min on 2 cores (2 workers)
+    python experiments/guided_comparison.py --sensors 12 --seed 40000 --conditions "guided, greedy planner" "guided, rate planner"
 """
 
 from __future__ import annotations
@@ -47,10 +52,11 @@ FIRST_SEED = 60000
 # A person who loses the board from view goes on with the routine (a live vical-guide stops after 60 frames so that
 # someone notices; here every condition goes on alike, and the frames without the board are no data).
 NEVER_LOST = 1_000_000
-REFERENCE = "guided, learned (person)"  # vical-guide's default policy
+REFERENCE = "guided, rate planner"  # vical-guide's default policy
 CONDITIONS = {  # name: the guide's settings
-    REFERENCE: ["policy=learned_person"],
+    REFERENCE: ["policy=rate_planner"],
     "guided, greedy planner": ["policy=greedy_information"],
+    "guided, learned (person)": ["policy=learned_person"],
     "guided, learned (arm)": ["policy=learned"],
     "written routine": ["policy=expert_long"],
     "written routine + done": ["policy=expert_long", "stop=information"],
@@ -97,10 +103,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sensors", type=int, default=30)
     p.add_argument("--task", default="joint", choices=("intrinsic", "extrinsic", "joint"))
     p.add_argument("--workers", type=int, default=2, help="processes (one run each at a time)")
+    p.add_argument("--seed", type=int, default=FIRST_SEED, help="the first sensor's reset seed")
+    p.add_argument("--conditions", nargs="+", choices=list(CONDITIONS), default=list(CONDITIONS),
+                   help="the conditions run (the reference's is always among them)")  # fmt: skip
     args = p.parse_args(argv)
-    rows: dict[str, list[EpisodeRow]] = {name: [] for name in CONDITIONS}
-    runs = [(name, settings, args.task, seed) for seed in range(FIRST_SEED, FIRST_SEED + args.sensors)
-            for name, settings in CONDITIONS.items()]  # fmt: skip
+    conditions = {name: CONDITIONS[name] for name in CONDITIONS if name == REFERENCE or name in args.conditions}
+    rows: dict[str, list[EpisodeRow]] = {name: [] for name in conditions}
+    seeds = range(args.seed, args.seed + args.sensors)
+    runs = [(name, settings, args.task, seed) for seed in seeds for name, settings in conditions.items()]
     start = time.perf_counter()
     with ProcessPoolExecutor(args.workers, mp_context=get_context("spawn")) as pool:
         for n, row in enumerate(pool.map(_row, runs), start=1):
@@ -110,7 +120,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{row.path_length_m:.2f} m, done {row.coverage_reached}, {errors} "
                   f"[{time.perf_counter() - start:.0f} s]", file=sys.stderr, flush=True)  # fmt: skip
     summaries = summarize_stops(rows, args.task, tolerances(args.task), REFERENCE)
-    print(f"## {args.task} task, {args.sensors} simulated sensors (seeds {FIRST_SEED}-{FIRST_SEED + args.sensors - 1})")
+    print(f"## {args.task} task, {args.sensors} simulated sensors (seeds {seeds[0]}-{seeds[-1]})")
     print(stops_table(summaries))
     print("\n| condition | true rotation median [deg] | true translation median [mm] | time offset median [ms] | "
           "failed calibrations |")  # fmt: skip

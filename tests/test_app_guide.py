@@ -19,6 +19,7 @@ from stopped_collections import calibrate_joint, file_size_limit
 from vical.apps.guide import CONF_DIR, check_settings, guide
 from vical.collection.page import GuidePage, PageSettings
 from vical.config_checks import ConfigError
+from vical.env.lookahead import ReachTiming
 from vical.data import Target
 from vical.geometry import T_CAM_BODY, CameraModel, make_transform
 from vical.io.bag import write_bag
@@ -39,9 +40,13 @@ def test_bad_settings_are_refused_by_key(tmp_path, monkeypatch):
     out = f"out={tmp_path / 'o'}"
     with pytest.raises(FileExistsError, match="already exists"):
         check_settings(config(f"out={tmp_path / 'full'}"))
+    # the planners' model of a step: the person's reach, then the arrival's still window
+    assert check_settings(config(out, "arrival.still_s=0.7")).reach == ReachTiming(rest=0.7)
     for override, message in [
         ("start.distance=0", r"start\.distance must be a number in \(0"),
         ("arrival.patience_s=0", r"arrival\.patience_s must be a number in \(0"),
+        ("reach.max_rate=0", r"reach\.max_rate must be a number in \(0"),
+        ("+reach.pace=1", r"reach: unknown setting\(s\) \['pace'\]"),
         ("limits.max_steps=0", r"limits\.max_steps must be >= 1"),
         ("page.port=70000", r"page\.port must be a port 0-65535"),
         ("page.linger=-1", r"page\.linger must be a number in \[0"),
@@ -66,10 +71,13 @@ def test_bad_settings_are_refused_by_key(tmp_path, monkeypatch):
         guide(config(out, "person=ros", f"person.port={port}", "person.timeout=1", "guess.camchain=null"))
     with pytest.raises(ConfigError, match=r"^person: faults: a held sensor's faults are \['imu_gap', 'camera_gap'\]"):
         guide(config(out, "+person.faults.latency=0.1"))
-    # A policy trained for another state layout and workspace (the paper's coverage state): refused before it runs.
+    # A policy trained for another state layout and workspace (the paper's coverage state): refused before it runs,
+    # as the learned policy and as the state the default planner would plan on.
     with pytest.raises(ConfigError) as refused:
-        guide(config(out, f"policy.run_dir={PAPER_POLICY_DIR}"))
+        guide(config(out, "policy=learned_person", f"policy.run_dir={PAPER_POLICY_DIR}"))
     assert "\n" not in str(refused.value) and "trained in workspace 'paper'" in str(refused.value)
+    with pytest.raises(ConfigError, match=r"trained on the coverage state: name one with policy\.run_dir="):
+        guide(config(out, f"policy.run_dir={PAPER_POLICY_DIR}"))
     assert not (tmp_path / "o").exists()
 
 

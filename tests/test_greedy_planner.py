@@ -12,7 +12,7 @@ from scipy.stats import spearmanr
 
 from vical.config_checks import ConfigError
 from vical.env.actions import goal_offset
-from vical.env.lookahead import GRAVITY_WORLD, IMU_RATE, Lookahead, Prediction, imu_readings
+from vical.env.lookahead import GRAVITY_WORLD, IMU_RATE, ArmTiming, Lookahead, Prediction, imu_readings
 from vical.evaluation.harness import build_env, instantiate_policy, run_trajectory
 from vical.policies.greedy import DEFAULT_SAMPLES, candidate_actions, greedy_demonstrator, greedy_information_policy
 from vical.policies.learned import load_run, shipped_policy_dir
@@ -57,14 +57,16 @@ def test_a_predicted_step_sheds_the_excess_the_recorded_step_then_sheds(task):
 
 
 def test_the_planner_reads_only_the_episodes_state_never_the_simulator_or_the_truth():
-    """It plans from what vical-collect's episode offers (state, frame, offset, config, action box) alone."""
+    """It plans from what vical-collect's episode offers (state, frame, offset, config, action box, step timing)
+    alone."""
     planner = greedy_information_policy()
     env = build_env(env_config("joint", "practitioner"), planner)
     try:
         env.reset(seed=5)
         planner.reset(env, np.random.default_rng(5))
         seen = SimpleNamespace(state=env.state, frame=env.frame, pose_offset=env.pose_offset, config=env.config,
-                               action_space=env.action_space)  # fmt: skip
+                               action_space=env.action_space, step_timing=env.step_timing)  # fmt: skip
+        assert env.step_timing == ArmTiming(env.config.settle_time)  # the arm's motion, then the env's rest
         first = planner.act(None, seen)
         planner.reset(env, np.random.default_rng(5))
         assert np.array_equal(planner.act(None, env), first)

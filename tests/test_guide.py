@@ -8,6 +8,7 @@ from vical.collection.guide import Arrival, Guide, Start, upright_board_frame
 from vical.collection.runner import Limits
 from vical.config_checks import ConfigError
 from vical.env.information import Guess
+from vical.env.lookahead import ReachTiming
 from vical.env.settings import MdpConfig
 from vical.evaluation.harness import policy_mdp
 from vical.geometry import invert_transform, make_transform, rotation_angle
@@ -61,7 +62,8 @@ def test_the_guide_sends_the_person_to_the_start_then_where_the_policy_goes():
     from 0.72 m; the world the guide finds (gravity from the IMU at rest, through the datasheet extrinsic) is level
     but for the datasheet's error (9.6 deg for this sensor: 8.5 deg) and turned as the env's; each step's offset
     is where the person really holds the sensor (within the datasheet camera's PnP); every instruction has words and the
-    goal's ratios."""
+    goal's ratios; a step takes the person's reach and the arrival's still window, as the planners predict it
+    (``ReachTiming``)."""
     guide, rig, person, lines = _guide("joint", 3, max_steps=3)
     try:
         result = guide.run(3)
@@ -94,6 +96,13 @@ def test_the_guide_sends_the_person_to_the_start_then_where_the_policy_goes():
     assert result.frames == guide.state.frames > 0  # every recorded frame reached the state
     assert recording.duration > result.duration > 3 * 1.5  # three reaches of at least 1.5 s after the start
     assert any(line.startswith("next: ") for line in lines) and lines[-1].startswith("stopped at the step limit")
+    timing = guide.episode.step_timing
+    assert timing == ReachTiming(rest=Arrival().still_s)
+    ends = [float(line.rsplit(", ", 1)[1].removesuffix(" s")) for line in lines if line.startswith("step ")]
+    reaches = rig.sim.person.reaches[-2:]  # the second and third steps' (the first follows the reset's rest)
+    waits = np.diff(ends) - [reach.duration for reach in reaches]
+    # the guide takes the pose once the sensor has been still for still_s: the reach's slow end counts toward it
+    assert np.all(np.abs(waits - timing.rest) < 0.25), waits
 
 
 @pytest.mark.parametrize(

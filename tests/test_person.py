@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 from vical.apps.train import CONF_DIR
 from vical.config_checks import ConfigError
 from vical.env.calibration import CalibrationEnv
+from vical.env.lookahead import ReachTiming
 from vical.geometry import make_transform
 from vical.sim import SimConfig
 from vical.sim.hand_held import HandHeldSim
@@ -148,6 +149,33 @@ def test_the_hand_held_sim_moves_as_the_arm_does_for_the_env_the_person_reaching
     np.testing.assert_allclose(sim.ee_pose(), start, atol=1e-9)
 
 
+@pytest.mark.parametrize(
+    ("translation", "rotvec"),
+    [
+        ([0.1, -0.05, 0.02], [0.0, 0.0, 0.0]),  # short: the shortest reach
+        ([0.5, 0.3, 0.0], [0.0, 0.0, 0.0]),  # far: slowed to the peak speed
+        ([0.05, 0.0, 0.0], [0.0, 0.0, 2.0]),  # a large turn: slowed to the peak rate
+        ([0.3, 0.1, -0.1], [0.0, 0.9, 0.0]),  # both
+    ],
+)
+def test_the_planners_timing_of_a_reach_is_the_simulated_persons(translation, rotvec):
+    """``ReachTiming`` (what a planner predicts a guided step to take) gives the duration of the simulated person's
+    reach over the same change of pose (an exact, still hand), for a reach of each of its three limits."""
+    exact = HandModel(placement_sigma_m=0.0, placement_sigma_deg=0.0, tremor_m=0.0, tremor_deg=0.0)
+    person = SimulatedPerson(np.eye(4), np.random.default_rng(0), exact)
+    reach = person.follow(make_transform(Rotation.from_rotvec(rotvec).as_matrix(), translation), 0.0)
+    timing = ReachTiming.of(exact, rest=0.5)
+    assert timing.motion_time(np.r_[translation, rotvec]) == pytest.approx(reach.duration, rel=1e-9)
+    assert timing.rest == 0.5 and timing.motion_time(np.zeros(6)) == 0.0
+    assert ReachTiming() == ReachTiming.of(HandModel(), 0.0)  # its defaults: the simulated person's
+
+
+@pytest.mark.parametrize("setting", ["min_s", "max_speed", "max_rate"])
+def test_a_reach_timing_without_time_or_speed_is_refused_by_key(setting):
+    with pytest.raises(ConfigError, match=rf"reach\.{setting} must be a number in \(0\.0, inf\)"):
+        ReachTiming(**{setting: 0.0})
+
+
 def test_the_env_with_a_hand_steps_through_the_person():
     """``CalibrationEnv(hand={})``: each step is the person's reach (at least 1.5 s, then ``settle_time``), the
     sensor lands near the goal (the hand's error, not the arm's precision), and a seed gives one episode."""
@@ -164,6 +192,8 @@ def test_the_env_with_a_hand_steps_through_the_person():
         assert episodes[0][0] == episodes[1][0] and episodes[0][1] == episodes[1][1]
         np.testing.assert_array_equal(episodes[0][2], episodes[1][2])
         assert 3 * (1.5 + 0.3) <= episodes[0][1] - cfg.env.reset_hold < 3 * 4.0
+        # a planner in this env predicts the person's reaches, then the env's rest
+        assert env.step_timing == ReachTiming.of(env.hand, env.config.settle_time)
     finally:
         env.close()
     settings = {k: v for k, v in OmegaConf.to_container(cfg.env, resolve=True).items() if k != "_target_"}

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from configs import env_config
 
-from vical.env.lookahead import Prediction
+from vical.env.lookahead import ArmTiming, Prediction
 from vical.evaluation.harness import build_env, run_trajectory
 from vical.policies.greedy import greedy_information_policy
 from vical.policies.rate_planner import rate_planner_policy
@@ -24,7 +24,7 @@ def test_the_score_is_the_excess_shed_per_second_of_recording():
     which the greedy planner's reward (40 an e-fold, less 2 a second) prefers; of two that reach the goal, the
     quicker wins."""
     planner = rate_planner_policy()
-    env = SimpleNamespace(state=SimpleNamespace(excess=2.0), config=SimpleNamespace(settle_time=SETTLE))
+    env = SimpleNamespace(state=SimpleNamespace(excess=2.0), step_timing=ArmTiming(SETTLE))
     steps = [_step(0.9, 1.0), _step(1.9, 0.5), _step(2.9, 0.0, goal=True), _step(3.9, 0.0, goal=True)]
     np.testing.assert_allclose(planner.scores(steps, env), [1.0, 0.75, 2.0 / 3.0, 0.5])
 

@@ -4,8 +4,8 @@ record, calibrate.
 Configured by ``conf/guide.yaml``. The ``person`` group builds who holds which sensor (``person=sim``: a simulated
 person with the simulated sensor, ``vical.sim.hand_held``; ``person=realsense`` / ``person=ros``: you, with a
 RealSense or a sensor on ROS topics); the ``policy`` group the policy that decides where to go next (by default
-the learned policy trained with a simulated person, ``policy=learned_person``; ``policy=greedy_information`` the
-information-greedy planner). The guide
+the information-rate planner, ``policy=rate_planner``, pricing a step at the person's reach, ``reach``;
+``policy=learned_person`` the learned policy trained with a simulated person). The guide
 (``vical.collection.guide.Guide``) shows each next pose on a local web page (``vical.collection.page``: the live
 image with the board's outline where it should appear, the instruction in words, a bar per parameter group, the
 time, "done") and as progress lines; it writes ``<out>/recording`` (EuRoC, with the detections) as the data arrive,
@@ -54,6 +54,7 @@ from vical.collection.runner import CollectResult, Limits, RobotEpisode
 from vical.config_checks import ConfigError, from_mapping
 from vical.data import SensorTruth
 from vical.env.information import Guess
+from vical.env.lookahead import ReachTiming
 from vical.env.settings import MdpConfig
 from vical.evaluation.harness import instantiate_policy
 from vical.io.atomic import replace_directory
@@ -73,6 +74,7 @@ class GuideSettings(CollectionOutput):
 
     start: Start
     arrival: Arrival
+    reach: ReachTiming
     limits: Limits
     page: PageSettings
 
@@ -80,9 +82,12 @@ class GuideSettings(CollectionOutput):
 def check_settings(cfg: DictConfig) -> GuideSettings:
     """The settings of ``cfg``, checked before anything starts; ``ConfigError`` naming the key otherwise."""
     try:
+        arrival = from_mapping(Arrival, plain(cfg.arrival), "arrival")
         own = {
             "start": from_mapping(Start, plain(cfg.start), "start"),
-            "arrival": from_mapping(Arrival, plain(cfg.arrival), "arrival"),
+            "arrival": arrival,
+            # a step ends when the guide has seen the sensor still for the arrival's window
+            "reach": from_mapping(ReachTiming, {**plain(cfg.reach), "rest": arrival.still_s}, "reach"),
             "limits": from_mapping(Limits, plain(cfg.limits), "limits"),
             "page": from_mapping(PageSettings, plain(cfg.page), "page"),
         }
@@ -176,7 +181,7 @@ def build_guide(
     if progress is None:
         progress = (lambda line: _say(page, line)) if cfg.get("progress") else (lambda line: None)
     guide = Guide(sensor, Shown(people), policy, mdp, s.task, board(cfg, holder), guess, writer, s.start, s.arrival,
-                  limits=s.limits, progress=progress)  # fmt: skip
+                  limits=s.limits, progress=progress, reach=s.reach)  # fmt: skip
     if page is not None:
         guide.stream.viewer = page.view
     return guide

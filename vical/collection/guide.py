@@ -44,6 +44,7 @@ from vical.config_checks import require_range
 from vical.data import NS_PER_S, Target
 from vical.env.actions import goal_offset
 from vical.env.information import Guess
+from vical.env.lookahead import ReachTiming
 from vical.env.settings import MdpConfig
 from vical.env.workspace import PoseFrame, look_at_rotation
 from vical.geometry import T_CAM_BODY, invert_transform, make_transform, rotation_angle
@@ -125,6 +126,8 @@ class Guide(LiveEpisode):
             extrinsic).
         writer: where the recording goes (None: nowhere).
         start, arrival, wording, limits: the guide's settings.
+        reach: how long the planners predict a person's step to take (None: the simulated person's reach, then
+            the arrival's ``still_s``).
         progress: one line per stage and step (the instructions of a run without a page).
 
     Attributes:
@@ -146,11 +149,13 @@ class Guide(LiveEpisode):
         wording: Wording | None = None,
         limits: Limits | None = None,
         progress: Callable[[str], None] = print,
+        reach: ReachTiming | None = None,
     ) -> None:
         super().__init__(sensor, policy, mdp, task, target, guess, writer, limits, progress)
         self.person = person
         self.start = start
         self.arrival = arrival or Arrival()
+        self.episode.step_timing = reach or ReachTiming(rest=self.arrival.still_s)
         self.wording = wording or Wording()
         self._poses: list[tuple[int, np.ndarray]] = []  # (stamp, T_world_body) of the frames since the last pose shown
         self._T_cam_board: np.ndarray | None = None  # the latest frame's that posed the board

@@ -40,6 +40,7 @@ from vical.calib.solve.observations import FrameObservation
 from vical.data import NS_PER_S, ImuSamples, Target
 from vical.env.actions import goal_offset
 from vical.env.information import Guess
+from vical.env.lookahead import ArmTiming, StepTiming
 from vical.env.settings import MdpConfig
 from vical.env.state import EpisodeState
 from vical.env.workspace import PoseFrame, look_at_rotation
@@ -149,11 +150,13 @@ class CollectResult:
 
 
 class RobotEpisode:
-    """What a policy reads of its episode, off the env: ``config``, ``action_space``, ``pose_offset``, ``steps``, and
-    the episode's ``state`` and workspace ``frame`` (a planner predicts from them; set when the episode starts)."""
+    """What a policy reads of its episode, off the env: ``config``, ``action_space``, ``pose_offset``, ``steps``, the
+    episode's ``state`` and workspace ``frame`` (a planner predicts from them; set when the episode starts) and its
+    ``step_timing`` (an arm's motion, then the MDP's ``settle_time``; ``timing`` replaces it: a person's reach)."""
 
-    def __init__(self, config: MdpConfig) -> None:
+    def __init__(self, config: MdpConfig, timing: StepTiming | None = None) -> None:
         self.config = config
+        self.step_timing = ArmTiming(config.settle_time) if timing is None else timing
         scale = np.asarray(config.action_scale, dtype=np.float32)
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
         self.pose_offset = np.zeros(6)

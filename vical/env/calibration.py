@@ -35,6 +35,7 @@ from vical.config_checks import ConfigError, from_mapping
 from vical.data import Recording, SensorTruth
 from vical.env.actions import goal_offset
 from vical.env.information import GROUPS, TASK_GROUPS, Guess, LensSpread
+from vical.env.lookahead import ArmTiming, ReachTiming, StepTiming
 from vical.env.plots import episode_figure, information_figure
 from vical.env.rewards import information_reward_terms, step_reward_terms, terminal_reward_terms
 from vical.env.settings import InformationSettings, MdpConfig
@@ -260,6 +261,13 @@ class CalibrationEnv(gym.Env):
     def goal_reached(self) -> bool:
         """The MDP's terminal condition holds: the coverage is complete, or (information state) every group is done."""
         return self.state.goal_reached
+
+    @property
+    def step_timing(self) -> StepTiming:
+        """How long a step records, as a planner predicts it: the arm's motion or the person's reach, then the
+        MDP's ``settle_time``."""
+        rest = self.config.settle_time
+        return ArmTiming(rest) if self.hand is None else ReachTiming.of(self.hand, rest)
 
     @property
     def steps(self) -> int:

@@ -5,8 +5,9 @@ each would leave. For one candidate, from the episode's state as it stands:
 
 - **the motion**: the workspace offset goes along the straight line from the current offset to the action's goal
   (clipped to the workspace, as the env and the collection runner execute it) with the minimum-jerk profile of
-  the arm's motions, in ``motion_time`` seconds (a least-squares fit of the simulated Panda's step durations
-  to the step's translation and rotation, ``DURATION_FIT``), then rests ``settle_time``;
+  the arm's motions, in the step timing's ``motion_time`` (the arm's, ``ArmTiming``: a least-squares fit of the
+  simulated Panda's step durations to the step's translation and rotation, ``DURATION_FIT``; a person's,
+  ``ReachTiming``: the hand model's reach), then rests the timing's ``rest``;
 - **the views**: the camera poses along it (``PoseFrame.pose`` and the camera's optical frame in the body frame)
   relative to the board where the last frame's PnP pose (with the guessed camera) puts it; the board's corners
   projected with the guessed camera where the detector reports them (the visibility rules of
@@ -32,6 +33,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from vical.calib.solve.observations import FrameObservation
+from vical.config_checks import require_range
 from vical.data import ImuSamples
 from vical.env.actions import goal_offset
 from vical.env.information import InformationTracker
@@ -40,7 +42,8 @@ from vical.env.state import EpisodeState
 from vical.env.workspace import PoseFrame
 from vical.geometry import T_CAM_BODY, invert_transform
 from vical.sim.camera import ProjectBackend
-from vical.sim.motion import quintic
+from vical.sim.motion import QUINTIC_PEAK_VELOCITY, quintic
+from vical.sim.person import HandModel
 
 # [s], [s/m], [s/rad]: a step's motion time from its translation and rotation (norms of the offset's change):
 # least squares over 60 random steps of the simulated Panda in the practitioner's workspace (sensor seeds
@@ -79,13 +82,59 @@ class Prediction:
     tracker: InformationTracker | None = field(default=None, repr=False, compare=False)
 
 
-def motion_time(delta: np.ndarray) -> float:
-    """[s] the predicted motion time of a step that changes the workspace offset by ``delta`` (6,)."""
-    translation, rotation = float(np.linalg.norm(delta[:3])), float(np.linalg.norm(delta[3:]))
-    if translation == 0.0 and rotation == 0.0:
-        return 0.0
-    base, per_metre, per_radian = DURATION_FIT
-    return base + per_metre * translation + per_radian * rotation
+def _norms(delta: np.ndarray) -> tuple[float, float]:
+    """[m], [rad] the translation and rotation of a change ``delta`` (6,) of the workspace offset."""
+    return float(np.linalg.norm(delta[:3])), float(np.linalg.norm(delta[3:]))
+
+
+@dataclass(frozen=True)
+class ArmTiming:
+    """How long an arm's step records: the simulated Panda's motion (``DURATION_FIT``), then ``rest`` [s] (the
+    MDP's ``settle_time``). The env's and ``vical-collect``'s."""
+
+    rest: float = 0.0
+
+    def motion_time(self, delta: np.ndarray) -> float:
+        """[s] the predicted motion time of a step that changes the workspace offset by ``delta`` (6,)."""
+        translation, rotation = _norms(delta)
+        if translation == 0.0 and rotation == 0.0:
+            return 0.0
+        base, per_metre, per_radian = DURATION_FIT
+        return base + per_metre * translation + per_radian * rotation
+
+
+@dataclass(frozen=True)
+class ReachTiming:
+    """How long a person's step records (``vical-guide``, an env with a hand): a minimum-jerk reach of at least
+    ``min_s`` [s], slowed so that its peak speed and rate stay within ``max_speed`` [m/s] and ``max_rate`` [deg/s]
+    (the simulated person's reach, ``vical.sim.person``; its defaults), then ``rest`` [s] (the guide's wait until
+    it sees the sensor held still, an env's ``settle_time``)."""
+
+    min_s: float = HandModel.settle_s
+    max_speed: float = HandModel.max_speed
+    max_rate: float = HandModel.max_rate
+    rest: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("min_s", "max_speed", "max_rate"):
+            require_range(f"reach.{name}", getattr(self, name), 0.0, low_open=True)
+        require_range("reach.rest", self.rest, 0.0)
+
+    @classmethod
+    def of(cls, hand: HandModel, rest: float) -> ReachTiming:
+        """The reach of the simulated ``hand``, then ``rest`` [s]."""
+        return cls(hand.settle_s, hand.max_speed, hand.max_rate, rest)
+
+    def motion_time(self, delta: np.ndarray) -> float:
+        """[s] the reach that changes the workspace offset by ``delta`` (6,) (placement error aside)."""
+        translation, rotation = _norms(delta)
+        if translation == 0.0 and rotation == 0.0:
+            return 0.0
+        return max(self.min_s, QUINTIC_PEAK_VELOCITY * translation / self.max_speed,
+                   QUINTIC_PEAK_VELOCITY * rotation / np.radians(self.max_rate))  # fmt: skip
+
+
+StepTiming = ArmTiming | ReachTiming
 
 
 def imu_readings(T_world_imu: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -106,17 +155,26 @@ class Lookahead:
         state: the episode's state (``state: information``, with at least one posed frame).
         frame: the workspace frame (offsets to camera body poses).
         offset: (6,) the current workspace offset.
-        config: the MDP (workspace bounds, rest after a step, information settings).
+        config: the MDP (workspace bounds, information settings).
+        timing: how long a step records (None: the arm's, resting the MDP's ``settle_time``).
 
     Raises:
         ValueError: the state has no information tracker, or no frame has posed the board yet.
     """
 
-    def __init__(self, state: EpisodeState, frame: PoseFrame, offset: np.ndarray, config: MdpConfig) -> None:
+    def __init__(
+        self,
+        state: EpisodeState,
+        frame: PoseFrame,
+        offset: np.ndarray,
+        config: MdpConfig,
+        timing: StepTiming | None = None,
+    ) -> None:
         tracker = state.information
         if tracker is None or tracker.last_pose is None or (tracker.uses_imu and tracker.last_time is None):
             raise ValueError("a lookahead needs the information state and a frame that posed the board")
         self.state, self.frame, self.config = state, frame, config
+        self.timing = ArmTiming(config.settle_time) if timing is None else timing
         self.tracker = tracker
         self.offset = np.asarray(offset, dtype=float)
         T_world_cam = self._camera(self.offset)
@@ -132,8 +190,8 @@ class Lookahead:
         """The step of ``action`` (6,) from the current offset, predicted (module doc)."""
         goal = goal_offset(self.offset, action, self.config.workspace.bound)
         delta = goal - self.offset
-        moving = motion_time(delta)
-        total = moving + self.config.settle_time
+        moving = self.timing.motion_time(delta)
+        total = moving + self.timing.rest
         count = max(1, round(total / FRAME_INTERVAL))
         tracker = self.tracker.fork(frame_weight=max(total / count * self.rate, 1.0))
         times = total * np.arange(1, count + 1) / count

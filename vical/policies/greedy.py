@@ -117,7 +117,7 @@ class GreedyInformationPolicy(Policy):
     def act(self, obs: np.ndarray, env: CalibrationEnv) -> np.ndarray:
         start = time.perf_counter()
         try:
-            lookahead = Lookahead(env.state, env.frame, env.pose_offset, env.config)
+            lookahead = Lookahead(env.state, env.frame, env.pose_offset, env.config, env.step_timing)
         except ValueError:  # no frame has posed the board yet
             action = self._search(env)
         else:

@@ -5,9 +5,10 @@ information MDP's reward most: 40 per e-fold of excess shed, less 2 per second o
 shipped runs' prices, so a step twice as long that sheds a little more wins, although the time to the tolerances
 is what a user waits. The rate planner predicts the same candidates (the 12 axis moves and the random draws,
 ``vical.env.lookahead``) and scores each by the e-folds of excess it sheds per second it records (its motion and
-the rest after it):
+the rest after it, as the episode's ``step_timing`` predicts them: the arm's motion and ``settle_time``, a
+person's reach and the guide's wait until it sees the sensor still):
 
-    (excess(s) - excess(s'(a))) / (motion_time(a) + settle_time)
+    (excess(s) - excess(s'(a))) / (motion_time(a) + rest)
 
 the greedy rule for the least time to a threshold; a candidate that reaches the goal sheds the excess left, so of
 those the quickest wins. It plans on the learned run's information state, from the data so far and the sensor's
@@ -28,8 +29,8 @@ class RatePlannerPolicy(GreedyInformationPolicy):
     """The greedy planner's candidates scored by excess shed per second of recording (module doc)."""
 
     def scores(self, predictions: list[Prediction], env: CalibrationEnv) -> np.ndarray:
-        excess, settle = env.state.excess, env.config.settle_time
-        return np.array([(excess - p.excess) / (p.motion_time + settle) for p in predictions])
+        excess, rest = env.state.excess, env.step_timing.rest
+        return np.array([(excess - p.excess) / (p.motion_time + rest) for p in predictions])
 
 
 def rate_planner_policy(
