@@ -27,6 +27,7 @@ from vical.calib.tasks import CalibrationTask
 from vical.collection.guide import Arrival, Start
 from vical.collection.page import PageSettings
 from vical.collection.runner import Alignment, Limits
+from vical.env.lookahead import ReachTiming
 from vical.env.settings import MdpConfig, Workspace
 from vical.evaluation.harness import PolicySpec
 from vical.parallel import ParallelConfig
@@ -92,8 +93,8 @@ def _plain(value: Any) -> Any:
 WORKSPACE = dataclass_defaults(Workspace, action_scale=_plain(MdpConfig.action_scale))
 # A policy file: PolicySpec's name, per-task factory specs and protocol flag, and the parameters the specs
 # interpolate (the learned policy's and the planner's run directory: learned_policy's argument; the workspace's
-# name; the planner's random candidates: greedy_information_policy's argument; the two-step planner's branches:
-# two_step_planner_policy's argument). The specs
+# name; the planner's random candidates: greedy_information_policy's argument, the rate planner's in the intrinsic
+# task only in its file; the two-step planner's branches: two_step_planner_policy's argument). The specs
 # are what each policy is, no settings with a default (PolicySpec's joint=None: a policy without a joint spec).
 POLICY = dataclass_defaults(
     PolicySpec,
@@ -101,6 +102,7 @@ POLICY = dataclass_defaults(
     run_dir=argument_defaults(learned_policy)["run_dir"],
     workspace=NO_DEFAULT,
     samples=argument_defaults(greedy_information_policy)["samples"],
+    intrinsic_samples=NO_DEFAULT,
     branches=argument_defaults(two_step_planner_policy)["branches"],
 )
 IDENTITY = np.eye(4).tolist()  # T_flange_tool=None (the robot adapters' default) is the identity the YAML writes
@@ -139,6 +141,7 @@ PAIRS: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [
     ("robot/ros.yaml", ("sensor",), argument_defaults(RosSensor)),
     ("guide.yaml", ("start",), dataclass_defaults(Start)),
     ("guide.yaml", ("arrival",), dataclass_defaults(Arrival)),
+    ("guide.yaml", ("reach",), dataclass_defaults(ReachTiming)),
     ("guide.yaml", ("limits",), dataclass_defaults(Limits)),
     ("guide.yaml", ("page",), dataclass_defaults(PageSettings)),
     ("person/sim.yaml", (), {**argument_defaults(hand_held_rig), **dataclass_defaults(HandModel)}),
@@ -151,7 +154,7 @@ PAIRS: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [
 NO_COUNTERPART = {
     "collect.yaml": "the app's own settings (read by vical.apps.collect) besides `align` and `limits` (PAIRS)",
     "evaluate.yaml": "the app's own settings, read by vical.apps.evaluate; no dataclass holds defaults of them",
-    "guide.yaml": "the app's own settings (read by vical.apps.guide) besides start, arrival, limits, page (PAIRS)",
+    "guide.yaml": "the app's own settings (read by vical.apps.guide) besides start, arrival, reach, limits, page (PAIRS)",
     "record.yaml": "the app's own settings, checked by vical.apps.record.check_settings (no defaults)",
     "train.yaml": "seed, torch_threads, run_dir, resume: RunSettings has no defaults; `train` is in PAIRS",
     "env/pendulum.yaml": "gymnasium.make's arguments (the env id)",
