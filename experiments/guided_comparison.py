@@ -24,7 +24,7 @@ Sensors: reset seeds from 60000 (no training, fitting or test uses them; ``exper
 tried on before it meets the held-out ones), ``--conditions`` on some of the conditions.
 
     python experiments/guided_comparison.py --sensors 30            # ~45 min on 2 cores (2 workers)
-    python experiments/guided_comparison.py --sensors 12 --seed 40000 --conditions "guided, greedy planner" "guided, rate planner"
+    python experiments/guided_comparison.py --sensors 12 --seed 40000 --conditions "guided, greedy planner"
 """
 
 from __future__ import annotations

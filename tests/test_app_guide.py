@@ -19,8 +19,8 @@ from stopped_collections import calibrate_joint, file_size_limit
 from vical.apps.guide import CONF_DIR, check_settings, guide
 from vical.collection.page import GuidePage, PageSettings
 from vical.config_checks import ConfigError
-from vical.env.lookahead import ReachTiming
 from vical.data import Target
+from vical.env.lookahead import ReachTiming
 from vical.geometry import T_CAM_BODY, CameraModel, make_transform
 from vical.io.bag import write_bag
 from vical.io.euroc import read_euroc

@@ -154,7 +154,7 @@ PAIRS: list[tuple[str, tuple[str, ...], dict[str, Any]]] = [
 NO_COUNTERPART = {
     "collect.yaml": "the app's own settings (read by vical.apps.collect) besides `align` and `limits` (PAIRS)",
     "evaluate.yaml": "the app's own settings, read by vical.apps.evaluate; no dataclass holds defaults of them",
-    "guide.yaml": "the app's own settings (read by vical.apps.guide) besides start, arrival, reach, limits, page (PAIRS)",
+    "guide.yaml": "the app's own settings (vical.apps.guide's) besides start, arrival, reach, limits, page (PAIRS)",
     "record.yaml": "the app's own settings, checked by vical.apps.record.check_settings (no defaults)",
     "train.yaml": "seed, torch_threads, run_dir, resume: RunSettings has no defaults; `train` is in PAIRS",
     "env/pendulum.yaml": "gymnasium.make's arguments (the env id)",
