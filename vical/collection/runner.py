@@ -152,11 +152,11 @@ class CollectResult:
 class RobotEpisode:
     """What a policy reads of its episode, off the env: ``config``, ``action_space``, ``pose_offset``, ``steps``, the
     episode's ``state`` and workspace ``frame`` (a planner predicts from them; set when the episode starts) and its
-    ``step_timing`` (an arm's motion, then the MDP's ``settle_time``; ``timing`` replaces it: a person's reach)."""
+    ``step_timing`` (an arm's motion, then the MDP's ``settle_time``; the guide sets a person's reach)."""
 
-    def __init__(self, config: MdpConfig, timing: StepTiming | None = None) -> None:
+    def __init__(self, config: MdpConfig) -> None:
         self.config = config
-        self.step_timing = ArmTiming(config.settle_time) if timing is None else timing
+        self.step_timing: StepTiming = ArmTiming(config.settle_time)
         scale = np.asarray(config.action_scale, dtype=np.float32)
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
         self.pose_offset = np.zeros(6)

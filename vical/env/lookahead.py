@@ -42,8 +42,8 @@ from vical.env.state import EpisodeState
 from vical.env.workspace import PoseFrame
 from vical.geometry import T_CAM_BODY, invert_transform
 from vical.sim.camera import ProjectBackend
-from vical.sim.motion import QUINTIC_PEAK_VELOCITY, quintic
-from vical.sim.person import HandModel
+from vical.sim.motion import quintic
+from vical.sim.person import HandModel, reach_duration
 
 # [s], [s/m], [s/rad]: a step's motion time from its translation and rotation (norms of the offset's change):
 # least squares over 60 random steps of the simulated Panda in the practitioner's workspace (sensor seeds
@@ -130,8 +130,7 @@ class ReachTiming:
         translation, rotation = _norms(delta)
         if translation == 0.0 and rotation == 0.0:
             return 0.0
-        return max(self.min_s, QUINTIC_PEAK_VELOCITY * translation / self.max_speed,
-                   QUINTIC_PEAK_VELOCITY * rotation / np.radians(self.max_rate))  # fmt: skip
+        return reach_duration(translation, rotation, self.min_s, self.max_speed, self.max_rate)
 
 
 StepTiming = ArmTiming | ReachTiming

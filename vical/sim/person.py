@@ -34,6 +34,14 @@ from vical.sim.motion import QUINTIC_PEAK_VELOCITY, quintic
 TREMOR_COMPONENTS = 8  # sinusoids per axis: a band-limited, non-periodic tremor over minutes
 
 
+def reach_duration(distance: float, angle: float, min_s: float, max_speed: float, max_rate: float) -> float:
+    """[s] a minimum-jerk reach over ``distance`` [m] and ``angle`` [rad]: at least ``min_s``, slowed so that its peak
+    speed stays within ``max_speed`` [m/s] and its peak rate within ``max_rate`` [deg/s]."""
+    return max(
+        min_s, QUINTIC_PEAK_VELOCITY * distance / max_speed, QUINTIC_PEAK_VELOCITY * angle / np.radians(max_rate)
+    )
+
+
 @dataclass(frozen=True)
 class HandModel:
     """How the simulated person follows a suggestion (module doc).
@@ -166,11 +174,7 @@ class SimulatedPerson:
         distance = float(np.linalg.norm(end[:3, 3] - start[:3, 3]))
         angle = float(np.linalg.norm(Rotation.from_matrix(start[:3, :3].T @ end[:3, :3]).as_rotvec()))
         m = self.model
-        return max(
-            m.settle_s,
-            QUINTIC_PEAK_VELOCITY * distance / m.max_speed,
-            QUINTIC_PEAK_VELOCITY * angle / np.radians(m.max_rate),
-        )
+        return reach_duration(distance, angle, m.settle_s, m.max_speed, m.max_rate)
 
     def poses(self, t: np.ndarray) -> np.ndarray:
         """(N, 4, 4) ``T_world_sensor`` at times ``t`` (N,) [s], tremor included: each time on the reach it falls in
