@@ -5,14 +5,17 @@ The same simulated person (``person=sim``: 7 cm / 10 deg placement error per pos
 ``vical-guide``'s loop (``vical.collection.guide.Guide``, at corner level: nothing rendered, nothing written):
 
 - **guided, rate planner**: ``vical-guide``'s default, the information-rate planner (``policy=rate_planner``,
-  ``vical-collect``'s default), a step priced at the person's reach (``conf/guide.yaml``'s ``reach``);
+  ``vical-collect``'s default), a step priced at the person's reach (``conf/guide.yaml``'s ``reach``) and drawn
+  from a person's step (``workspace.action_scale``: what one reach covers, where the learned policies below
+  step in the arm's box they were trained in);
 - **guided, greedy planner**: the information-greedy planner (``policy=greedy_information``), predicting the same
   reaches;
 - **guided, learned (person)**: the policy trained with the simulated person in the arm's place
   (``policy=learned_person``, ``vical-train +experiment=train_person_policy``), "done" by its own rule;
 - **guided, learned (arm)**: the collection policy shipped for an arm (``policy=learned``);
 - **written routine**: Kalibr's recommended routine as written instructions (``policy=expert_long``: views close
-  and far, tilted, rolled, then swings along and about every axis), followed to its end without feedback;
+  and far, tilted, rolled, then swings along and about every axis), followed to its end without feedback, each pose
+  shown at most a person's step from the last;
 - **written routine + done**: the same, with a live "done" from the shared stopping rule (``stop=information``).
 
 Per sensor: the recording time and path at the stop, whether "done" came (within the step limit), the joint
@@ -21,10 +24,15 @@ table is ``vical-evaluate``'s time-to-tolerance table (paired 95 % intervals aga
 
 Sensors: reset seeds from 60000 (no training, fitting or test uses them; ``experiments/collect_gap.py`` evaluates
 60000-60019 too); ``--sensors`` of them. ``--seed 40000`` measures on the tuning sensors instead (what a change is
-tried on before it meets the held-out ones), ``--conditions`` on some of the conditions.
+tried on before it meets the held-out ones), ``--conditions`` on some of the conditions, ``--set`` with guide
+settings changed for every condition. ``--out DIR`` keeps the runs: ``DIR/results.csv`` (``vical-evaluate``'s
+columns, one row per condition and sensor; ``vical.evaluation.results_file`` reads it back to pair with a later
+run) and ``DIR/summary.md`` (the tables printed).
 
-    python experiments/guided_comparison.py --sensors 30            # ~45 min on 2 cores (2 workers)
+    python experiments/guided_comparison.py --sensors 30 --out evaluations/guided   # ~60 min on 2 cores
     python experiments/guided_comparison.py --sensors 12 --seed 40000 --conditions "guided, greedy planner"
+    python experiments/guided_comparison.py --sensors 12 --seed 40000 --conditions "guided, greedy planner" \
+        --set reach.min_s=2.0
 """
 
 from __future__ import annotations
@@ -34,18 +42,20 @@ import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
+from pathlib import Path
 
 import numpy as np
 from hydra import compose, initialize_config_dir
 
 from vical.apps.cli import plain
-from vical.apps.collect import build_robot, mdp_config, nominal_sensor
-from vical.apps.evaluate import stops_table
-from vical.apps.guide import CONF_DIR, build_guide, check_settings
+from vical.apps.collect import build_robot, nominal_sensor
+from vical.apps.evaluate import results_csv, stops_table
+from vical.apps.guide import CONF_DIR, build_guide, check_settings, guided_mdp
 from vical.calib.tasks import CalibrationTask
 from vical.config_checks import from_mapping
-from vical.evaluation.harness import EpisodeRow, calibrate_row, instantiate_policy
+from vical.evaluation.harness import EpisodeRow, Evaluation, calibrate_row, instantiate_policy, summarize
 from vical.evaluation.time_to_tolerance import summarize_stops
+from vical.io.atomic import files_together
 from vical.policies.stopping import StopRule, information_settings, with_stop
 
 FIRST_SEED = 60000
@@ -75,7 +85,7 @@ def guided_row(name: str, settings: list[str], task: str, seed: int) -> EpisodeR
     cfg = config(settings, task, seed)
     s = check_settings(cfg)
     policy = with_stop(instantiate_policy(plain(cfg.policy)[task], name), StopRule.from_config(plain(cfg.stop)))
-    mdp = mdp_config(cfg, policy)
+    mdp = guided_mdp(cfg, policy)
     rig = build_robot(cfg.person, "person")
     try:
         guide = build_guide(cfg, s, rig, policy, mdp, nominal_sensor(s, rig), None, None, lambda line: None)
@@ -84,7 +94,8 @@ def guided_row(name: str, settings: list[str], task: str, seed: int) -> EpisodeR
     finally:
         rig.close()
     row = EpisodeRow(policy=name, seed=seed, recording_time_s=result.duration, path_length_m=result.path_length,
-                     steps=result.steps, coverage_reached=result.goal_reached)  # fmt: skip
+                     steps=result.steps, coverage_reached=result.goal_reached,
+                     decision_ms=1e3 * result.decision_s / max(result.steps, 1))  # fmt: skip
     return calibrate_row(row, from_mapping(CalibrationTask, plain(cfg.task), "task"), recording)
 
 
@@ -106,8 +117,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=FIRST_SEED, help="the first sensor's reset seed")
     p.add_argument("--conditions", nargs="+", choices=list(CONDITIONS), default=list(CONDITIONS),
                    help="the conditions run (the reference's is always among them)")  # fmt: skip
+    p.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                   help="vical-guide settings for every condition (after each condition's own)")  # fmt: skip
+    p.add_argument("--out", type=Path, help="a directory for results.csv and summary.md (written together)")
     args = p.parse_args(argv)
-    conditions = {name: CONDITIONS[name] for name in CONDITIONS if name == REFERENCE or name in args.conditions}
+    conditions = {name: [*CONDITIONS[name], *args.set] for name in CONDITIONS
+                  if name == REFERENCE or name in args.conditions}  # fmt: skip
     rows: dict[str, list[EpisodeRow]] = {name: [] for name in conditions}
     seeds = range(args.seed, args.seed + args.sensors)
     runs = [(name, settings, args.task, seed) for seed in seeds for name, settings in conditions.items()]
@@ -119,18 +134,28 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{n}/{len(runs)} seed {row.seed} {row.policy}: {row.steps} poses, {row.recording_time_s:.1f} s, "
                   f"{row.path_length_m:.2f} m, done {row.coverage_reached}, {errors} "
                   f"[{time.perf_counter() - start:.0f} s]", file=sys.stderr, flush=True)  # fmt: skip
-    summaries = summarize_stops(rows, args.task, tolerances(args.task), REFERENCE)
-    print(f"## {args.task} task, {args.sensors} simulated sensors (seeds {seeds[0]}-{seeds[-1]})")
-    print(stops_table(summaries))
-    print("\n| condition | true rotation median [deg] | true translation median [mm] | time offset median [ms] | "
-          "failed calibrations |")  # fmt: skip
-    print("|---|---|---|---|---|")
+    summary = summary_markdown(rows, args, seeds)
+    print(summary, end="")
+    if args.out is not None:
+        with files_together(args.out) as path_of:
+            path_of("results.csv").write_text(results_csv([Evaluation(rs, summarize(n, rs)) for n, rs in rows.items()]))
+            path_of("summary.md").write_text(summary)
+    return 0
+
+
+def summary_markdown(rows: dict[str, list[EpisodeRow]], args: argparse.Namespace, seeds: range) -> str:
+    """The time-to-tolerance table against the reference and each condition's median true errors."""
+    settings = f", with {' '.join(args.set)}" if args.set else ""
+    lines = [f"## {args.task} task, {args.sensors} simulated sensors (seeds {seeds[0]}-{seeds[-1]}){settings}",
+             stops_table(summarize_stops(rows, args.task, tolerances(args.task), REFERENCE)), "",
+             "| condition | true rotation median [deg] | true translation median [mm] | time offset median [ms] | "
+             "failed calibrations |", "|---|---|---|---|---|"]  # fmt: skip
     for name, rs in rows.items():
         ok = [r for r in rs if not r.failed]
         rotation, translation, offset = (np.median([getattr(r, k) for r in ok]) if ok else np.nan
                                          for k in ("rotation_deg", "translation_mm", "time_offset_ms"))  # fmt: skip
-        print(f"| {name} | {rotation:.3f} | {translation:.2f} | {offset:.3f} | {len(rs) - len(ok)} |")
-    return 0
+        lines.append(f"| {name} | {rotation:.3f} | {translation:.2f} | {offset:.3f} | {len(rs) - len(ok)} |")
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

@@ -16,11 +16,13 @@ import pytest
 from hydra import compose, initialize_config_dir
 from stopped_collections import calibrate_joint, file_size_limit
 
-from vical.apps.guide import CONF_DIR, check_settings, guide
+from vical.apps.cli import plain
+from vical.apps.guide import CONF_DIR, check_settings, guide, guided_mdp
 from vical.collection.page import GuidePage, PageSettings
 from vical.config_checks import ConfigError
 from vical.data import Target
 from vical.env.lookahead import ReachTiming
+from vical.evaluation.harness import instantiate_policy
 from vical.geometry import T_CAM_BODY, CameraModel, make_transform
 from vical.io.bag import write_bag
 from vical.io.euroc import read_euroc
@@ -79,6 +81,24 @@ def test_bad_settings_are_refused_by_key(tmp_path, monkeypatch):
     with pytest.raises(ConfigError, match=r"trained on the coverage state: name one with policy\.run_dir="):
         guide(config(out, f"policy.run_dir={PAPER_POLICY_DIR}"))
     assert not (tmp_path / "o").exists()
+
+
+def test_a_guided_step_is_one_reach_of_a_person_and_a_learned_policy_keeps_its_trained_box():
+    cfg = config("out=unused")
+    reach, box = check_settings(cfg).reach, np.asarray(cfg.workspace.action_scale, dtype=float)
+    for axis in (0, 3, 4, 5):  # each of the box's steps takes the reach's least time ...
+        step = np.zeros(6)
+        step[axis] = box[axis]
+        assert reach.motion_time(step) == pytest.approx(reach.min_s)
+        if axis in (0, 3):  # ... and a longer move or roll more
+            assert reach.motion_time(1.2 * step) > reach.min_s + 0.1
+    assert box[4:] == pytest.approx(2 * np.asarray(cfg.workspace.orientation[1:]))  # pitch, yaw: bound to bound
+    planner = instantiate_policy(plain(cfg.policy)["joint"], "planner")
+    assert guided_mdp(cfg, planner).action_scale == pytest.approx(box)
+    learned_cfg = config("out=unused", "policy=learned_person")
+    learned = instantiate_policy(plain(learned_cfg.policy)["joint"], "learned")
+    trained = guided_mdp(learned_cfg, learned).action_scale
+    assert trained == pytest.approx(learned.action_scale) and trained[0] == pytest.approx(0.3)
 
 
 def test_a_port_in_use_is_one_line_naming_the_key(tmp_path):

@@ -96,6 +96,13 @@ def check_settings(cfg: DictConfig) -> GuideSettings:
     return GuideSettings(**check_output(cfg), **own)
 
 
+def guided_mdp(cfg: DictConfig, policy: Policy) -> MdpConfig:
+    """The MDP of a guided run: ``vical-collect``'s (``mdp_config``), in which a learned policy steps in the box it
+    was trained in and every other policy in the guide's (``workspace.action_scale``: a person's step)."""
+    mdp = mdp_config(cfg, policy)
+    return mdp if policy.action_scale is None else replace(mdp, action_scale=tuple(policy.action_scale))
+
+
 class Shown(Person):
     """Every guidance shown to each of ``people`` (the page, and the simulated person who follows it)."""
 
@@ -112,7 +119,7 @@ def guide(cfg: DictConfig) -> int:
     s = check_settings(cfg)
     policy = instantiate_policy(plain(cfg.policy)[s.task], cfg.policy.get("name", "policy"))
     policy = with_stop(policy, StopRule.from_config(plain(cfg.get("stop"))))
-    mdp = mdp_config(cfg, policy)
+    mdp = guided_mdp(cfg, policy)
     policy.check(RobotEpisode(mdp))  # before anything starts: a policy of another workspace or state
     holder = build_robot(cfg.person, "person")
     page = None

@@ -213,7 +213,7 @@ class Guide(LiveEpisode):
         self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, "
                       f"{self._elapsed():.1f} s")  # fmt: skip
         return CollectResult(episode.steps, self.state.path_length, self._elapsed(), self.stream.frames,
-                             self.state.goal_reached, reason)  # fmt: skip
+                             self.state.goal_reached, reason, episode.decision_s)  # fmt: skip
 
     def _step(self, frame: PoseFrame, action: np.ndarray) -> None:
         """Show the action's goal, wait for the person to settle, update the state with where the sensor is."""

@@ -139,7 +139,8 @@ class Limits:
 
 @dataclass(frozen=True)
 class CollectResult:
-    """What a collection did: steps, path [m], sensor time [s], frames and why it ended."""
+    """What a collection did: steps, path [m], sensor time [s], frames, why it ended and the policy's total time
+    choosing its actions [s] (wall time: what the arm or the person waited)."""
 
     steps: int
     path_length: float
@@ -147,12 +148,14 @@ class CollectResult:
     frames: int
     goal_reached: bool
     reason: str
+    decision_s: float = 0.0
 
 
 class RobotEpisode:
     """What a policy reads of its episode, off the env: ``config``, ``action_space``, ``pose_offset``, ``steps``, the
-    episode's ``state`` and workspace ``frame`` (a planner predicts from them; set when the episode starts) and its
-    ``step_timing`` (an arm's motion, then the MDP's ``settle_time``; the guide sets a person's reach)."""
+    episode's ``state`` and workspace ``frame`` (a planner predicts from them; set when the episode starts), its
+    ``step_timing`` (an arm's motion, then the MDP's ``settle_time``; the guide sets a person's reach) and
+    ``decision_s``, the policy's wall time choosing its actions so far [s] (``run_policy``)."""
 
     def __init__(self, config: MdpConfig) -> None:
         self.config = config
@@ -161,6 +164,7 @@ class RobotEpisode:
         self.action_space = gym.spaces.Box(-scale, scale, dtype=np.float32)
         self.pose_offset = np.zeros(6)
         self.steps = 0
+        self.decision_s = 0.0
         self.state: EpisodeState | None = None
         self.frame: PoseFrame | None = None
 
@@ -282,7 +286,9 @@ def run_policy(
     state, mdp = episode.state, episode.config
     max_steps = limits.max_steps or policy.max_steps or mdp.max_steps
     while episode.steps < max_steps:
+        deciding = time.perf_counter()
         action = policy.act(state.observation(episode.pose_offset, episode.steps), episode)
+        episode.decision_s += time.perf_counter() - deciding
         if policy.finished:
             return "the policy's last waypoint"
         step(action)
@@ -460,7 +466,7 @@ class Collector(LiveEpisode):
         duration = self._sensor_time()
         self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, {duration:.1f} s")
         return CollectResult(episode.steps, self.state.path_length, duration, self.stream.frames,
-                             self.state.goal_reached, reason)  # fmt: skip
+                             self.state.goal_reached, reason, episode.decision_s)  # fmt: skip
 
     def _step(self, frame: PoseFrame, action: np.ndarray) -> None:
         """Move by one action inside the workspace (as ``CalibrationEnv`` does), rest, update the state."""

@@ -35,6 +35,8 @@ class Policy(ABC):
         reads_state: its actions depend on the env's state (a learned policy): it runs only in the state
             it was trained on. The baselines' actions do not, so any state's stopping rule can end their
             episodes (``vical.policies.stopping``).
+        action_scale: (6,) the action box its actions were trained in (a learned policy: it acts in no other);
+            None: it acts in whatever box its env has (``vical-guide`` gives those a person's step).
     """
 
     name: str = "policy"
@@ -42,6 +44,7 @@ class Policy(ABC):
     max_steps: int | None = None
     env_settings: Mapping[str, Any] = MappingProxyType({})
     reads_state: bool = False
+    action_scale: np.ndarray | None = None
 
     def check(self, env: CalibrationEnv) -> None:  # noqa: B027 (optional hook)
         """Raise ``ConfigError`` (one line: what and what to do) when the policy cannot run in ``env``.

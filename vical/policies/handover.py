@@ -47,6 +47,7 @@ class HandoverPolicy(GreedyInformationPolicy):
     ) -> None:
         super().__init__(settings, reward, samples, name)
         self.learned = learned
+        self.action_scale = learned.action_scale  # its first steps are the learned policy's
         self.handover = int(handover)
         self.trained_steps = int(learned.env_settings["max_steps"])
 
