@@ -25,9 +25,10 @@ table is ``vical-evaluate``'s time-to-tolerance table (paired 95 % intervals aga
 Sensors: reset seeds from 60000 (no training, fitting or test uses them; ``experiments/collect_gap.py`` evaluates
 60000-60019 too); ``--sensors`` of them. ``--seed 40000`` measures on the tuning sensors instead (what a change is
 tried on before it meets the held-out ones), ``--conditions`` on some of the conditions, ``--set`` with guide
-settings changed for every condition. ``--out DIR`` keeps the runs: ``DIR/results.csv`` (``vical-evaluate``'s
-columns, one row per condition and sensor; ``vical.evaluation.results_file`` reads it back to pair with a later
-run) and ``DIR/summary.md`` (the tables printed).
+settings changed for every condition, ``--reuse`` with the rows of the other conditions from an earlier run's
+``results.csv`` (on the same sensors: what a change does not touch need not run again). ``--out DIR`` keeps the
+runs: ``DIR/results.csv`` (``vical-evaluate``'s columns, one row per condition and sensor;
+``vical.evaluation.results_file`` reads it back) and ``DIR/summary.md`` (the tables printed).
 
     python experiments/guided_comparison.py --sensors 30 --out evaluations/guided   # ~60 min on 2 cores
     python experiments/guided_comparison.py --sensors 12 --seed 40000 --conditions "guided, greedy planner"
@@ -54,6 +55,7 @@ from vical.apps.guide import CONF_DIR, build_guide, check_settings, guided_mdp
 from vical.calib.tasks import CalibrationTask
 from vical.config_checks import from_mapping
 from vical.evaluation.harness import EpisodeRow, Evaluation, calibrate_row, instantiate_policy, summarize
+from vical.evaluation.results_file import read_results
 from vical.evaluation.time_to_tolerance import summarize_stops
 from vical.io.atomic import files_together
 from vical.policies.stopping import StopRule, information_settings, with_stop
@@ -120,6 +122,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
                    help="vical-guide settings for every condition (after each condition's own)")  # fmt: skip
     p.add_argument("--out", type=Path, help="a directory for results.csv and summary.md (written together)")
+    p.add_argument("--reuse", type=Path, metavar="RESULTS_CSV",
+                   help="an earlier --out's results.csv: its rows of the conditions not run now join the table")
     args = p.parse_args(argv)
     conditions = {name: [*CONDITIONS[name], *args.set] for name in CONDITIONS
                   if name == REFERENCE or name in args.conditions}  # fmt: skip
@@ -134,6 +138,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{n}/{len(runs)} seed {row.seed} {row.policy}: {row.steps} poses, {row.recording_time_s:.1f} s, "
                   f"{row.path_length_m:.2f} m, done {row.coverage_reached}, {errors} "
                   f"[{time.perf_counter() - start:.0f} s]", file=sys.stderr, flush=True)  # fmt: skip
+    if args.reuse is not None:  # what the settings changed here do not touch, from an earlier run on these sensors
+        for row in read_results(args.reuse):
+            if row.policy not in conditions and row.seed in seeds:
+                rows.setdefault(row.policy, []).append(row)
     summary = summary_markdown(rows, args, seeds)
     print(summary, end="")
     if args.out is not None:
