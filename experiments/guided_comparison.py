@@ -9,7 +9,7 @@ The same simulated person (``person=sim``: 7 cm / 10 deg placement error per pos
   from a person's step (``workspace.action_scale``: what one reach covers, where the learned policies below
   step in the arm's box they were trained in);
 - **guided, greedy planner**: the information-greedy planner (``policy=greedy_information``), predicting the same
-  reaches;
+  reaches among as many candidates (``conf/guide.yaml``'s ``policy.samples``);
 - **guided, learned (person)**: the policy trained with the simulated person in the arm's place
   (``policy=learned_person``, ``vical-train +experiment=train_person_policy``), "done" by its own rule;
 - **guided, learned (arm)**: the collection policy shipped for an arm (``policy=learned``);
