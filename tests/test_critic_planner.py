@@ -39,7 +39,7 @@ def test_a_predicted_state_is_the_observation_the_agent_then_sees():
         for _ in range(3):
             env.step(planner.act(None, env))
         action = rng.uniform(env.action_space.low, env.action_space.high)
-        prediction = Lookahead(env.state, env.frame, env.pose_offset, env.config).predict(action)
+        prediction = Lookahead(env.state, env.frame, env.pose_offset, env.config, env.step_timing).predict(action)
         fraction = (env.steps + 1) / planner.trained_steps
         predicted = env.state.information_observation(prediction.ratios, prediction.goal, fraction)
         observed, *_ = env.step(action)

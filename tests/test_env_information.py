@@ -248,7 +248,7 @@ def test_the_axis_uncertainty_extends_the_state_with_the_extrinsics_axes_and_the
             assert obs[INFORMATION_SIZE : INFORMATION_SIZE + 3].max() <= obs[rotation] + 1e-6  # the worst axis at most
             assert obs[INFORMATION_SIZE + 3 :].max() <= obs[translation] + 1e-6
         # a prediction carries the axes its step would leave, in the same units
-        prediction = Lookahead(env.state, env.frame, env.pose_offset, env.config).predict(np.zeros(6))
+        prediction = Lookahead(env.state, env.frame, env.pose_offset, env.config, env.step_timing).predict(np.zeros(6))
         assert prediction.axes.shape == (AXIS_SIZE,) and np.all((prediction.axes > 0) & (prediction.axes < 1))
     finally:
         env.close()

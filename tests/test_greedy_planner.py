@@ -45,7 +45,7 @@ def test_a_predicted_step_sheds_the_excess_the_recorded_step_then_sheds(task):
         for _ in range(10):
             action = rng.uniform(env.action_space.low, env.action_space.high)
             before = env.state.excess
-            prediction = Lookahead(env.state, env.frame, env.pose_offset, env.config).predict(action)
+            prediction = Lookahead(env.state, env.frame, env.pose_offset, env.config, env.step_timing).predict(action)
             env.step(action)
             predicted.append(before - prediction.excess)
             recorded.append(before - env.state.excess)

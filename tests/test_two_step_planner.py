@@ -42,7 +42,7 @@ def test_a_second_predicted_step_sheds_the_excess_the_two_recorded_steps_then_sh
         for _ in range(8):
             first, second = rng.uniform(env.action_space.low, env.action_space.high, (2, 6))
             before = env.state.excess
-            lookahead = Lookahead(env.state, env.frame, env.pose_offset, env.config)
+            lookahead = Lookahead(env.state, env.frame, env.pose_offset, env.config, env.step_timing)
             prediction = lookahead.predict(first)
             information = prediction.tracker.information.copy()
             after = lookahead.following(prediction)
@@ -85,7 +85,7 @@ def test_it_takes_the_best_first_step_by_its_two_steps_reward():
         for _ in range(STEPS):
             rng = np.random.default_rng()
             rng.bit_generator.state = generator.bit_generator.state  # the draws the planner is about to make
-            lookahead = Lookahead(env.state, env.frame, env.pose_offset, env.config)
+            lookahead = Lookahead(env.state, env.frame, env.pose_offset, env.config, env.step_timing)
             actions, predictions = predicted_moves(lookahead, candidate_actions(env.action_space.high, 12, rng))
             first = np.array([planner.score(p, env.state.excess, env) for p in predictions])
             values = {}

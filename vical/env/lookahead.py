@@ -155,7 +155,7 @@ class Lookahead:
         frame: the workspace frame (offsets to camera body poses).
         offset: (6,) the current workspace offset.
         config: the MDP (workspace bounds, information settings).
-        timing: how long a step records (None: the arm's, resting the MDP's ``settle_time``).
+        timing: how long a step records (the episode's ``step_timing``: an arm's motion or a person's reach).
 
     Raises:
         ValueError: the state has no information tracker, or no frame has posed the board yet.
@@ -167,13 +167,13 @@ class Lookahead:
         frame: PoseFrame,
         offset: np.ndarray,
         config: MdpConfig,
-        timing: StepTiming | None = None,
+        timing: StepTiming,
     ) -> None:
         tracker = state.information
         if tracker is None or tracker.last_pose is None or (tracker.uses_imu and tracker.last_time is None):
             raise ValueError("a lookahead needs the information state and a frame that posed the board")
         self.state, self.frame, self.config = state, frame, config
-        self.timing = ArmTiming(config.settle_time) if timing is None else timing
+        self.timing = timing
         self.tracker = tracker
         self.offset = np.asarray(offset, dtype=float)
         T_world_cam = self._camera(self.offset)
