@@ -3,9 +3,11 @@ simulated person that records and calibrates. The page in a real browser: tests/
 
 import json
 import logging
+import signal
 import socket
 import subprocess
 import sys
+import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -13,11 +15,14 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import yaml
 from hydra import compose, initialize_config_dir
 from stopped_collections import calibrate_joint, file_size_limit
 
 from vical.apps.cli import plain
-from vical.apps.guide import CONF_DIR, check_settings, guide, guided_mdp
+from vical.apps.collect import build_robot, nominal_sensor
+from vical.apps.guide import CONF_DIR, build_guide, check_settings, guide, guided_mdp
+from vical.collection import page as page_module
 from vical.collection.page import GuidePage, PageSettings
 from vical.config_checks import ConfigError
 from vical.data import Target
@@ -28,6 +33,7 @@ from vical.io.bag import write_bag
 from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.learned import PAPER_POLICY_DIR
+from vical.policies.stopping import StopRule, with_stop
 from vical.robot import CameraDetections, CameraImage, Guidance
 
 
@@ -71,7 +77,8 @@ def test_bad_settings_are_refused_by_key(tmp_path, monkeypatch):
         ConfigError, match=rf"^person: no rosbridge at ws://localhost:{port} within 1 s: is rosbridge_server running\?$"
     ):
         guide(config(out, "person=ros", f"person.port={port}", "person.timeout=1", "guess.camchain=null"))
-    with pytest.raises(ConfigError, match=r"^person: faults: a held sensor's faults are \['imu_gap', 'camera_gap'\]"):
+    held = r"\['imu_gap', 'camera_gap', 'lens_covered'\]"
+    with pytest.raises(ConfigError, match=rf"^person: faults: a held sensor's faults are {held}"):
         guide(config(out, "+person.faults.latency=0.1"))
     # A policy trained for another state layout and workspace (the paper's coverage state): refused before it runs,
     # as the learned policy and as the state the default planner would plan on.
@@ -161,13 +168,76 @@ def test_the_page_serves_the_guidance_the_live_image_with_the_outline_and_the_re
                 _get(page.url + "/files/" + name)
         assert b"vical-guide" in _get(page.url + "/")
         assert not page.wait_closed(0.05)
-        urllib.request.urlopen(urllib.request.Request(page.url + "/close", method="POST"), timeout=5).close()
+        _post(page.url + "/close")
         assert page.wait_closed(1.0)
     finally:
         page.close()
     with pytest.raises(urllib.error.URLError):
         _get(page.url + "/state.json")
     assert not [r for r in caplog.records if "GET /" in r.getMessage()]  # no line per request (the guide prints)
+
+
+def _post(url: str) -> None:
+    urllib.request.urlopen(urllib.request.Request(url, method="POST"), timeout=5).close()
+
+
+def test_a_closed_tab_is_gone_and_a_reloaded_one_is_not(monkeypatch):
+    """The tab's ``pagehide`` beacon (``POST /left``) followed by a poll is a reload: the person still sees the page;
+    followed by silence for ``RELOAD_GRACE_S``, the tab was closed: ``gone`` says so and ends ``wait_closed``."""
+    monkeypatch.setattr(page_module, "RELOAD_GRACE_S", 0.3)
+    page = GuidePage(CameraModel.from_hfov(1.0, 640, 480), Target.aprilgrid(), PageSettings(port=0))
+    try:
+        _get(page.url + "/state.json")
+        assert page.gone() is None
+        _post(page.url + "/left")
+        _get(page.url + "/state.json")  # the reloaded page polls
+        time.sleep(0.4)
+        assert page.gone() is None and not page.wait_closed(0.1)
+        _post(page.url + "/left")
+        assert page.gone() is None  # within the grace: it may still be reloading
+        started = time.monotonic()
+        assert page.wait_closed(5.0) and time.monotonic() - started < 2.0
+        assert page.gone() == "the guide's page was closed"
+    finally:
+        page.close()
+
+
+@pytest.mark.parametrize("viewed", [True, False])
+def test_while_the_planner_decides_a_viewed_sensor_streams_on_and_an_unviewed_simulation_waits(viewed):
+    """The guide's planner decides in a worker thread while the loop reads the sensor for a viewer (the page's live
+    image): frames are shown during every decision and the simulated person's clock moves on (holding still while
+    the guide thinks). Without a viewer a simulated sensor is not read while the planner decides: its clock stands,
+    so a comparison's result does not depend on how fast the machine decides."""
+    cfg = config("out=unused", "person.images=false", "page.enabled=false", "progress=false", "limits.max_steps=2",
+                 "seed=3")  # fmt: skip
+    s = check_settings(cfg)
+    policy = with_stop(instantiate_policy(plain(cfg.policy)["joint"], "planner"), StopRule.from_config(plain(cfg.stop)))
+    mdp = guided_mdp(cfg, policy)
+    rig = build_robot(cfg.person, "person")
+    decisions, shown = [], []
+    act = policy.act
+
+    def timed_act(observation, episode):
+        started, sim_before = time.perf_counter(), rig.sim.time_ns
+        action = act(observation, episode)
+        decisions.append((started, time.perf_counter(), sim_before, rig.sim.time_ns))
+        return action
+
+    policy.act = timed_act
+    try:
+        guide_ = build_guide(cfg, s, rig, policy, mdp, nominal_sensor(s, rig), None, None, lambda line: None)
+        if viewed:
+            guide_.stream.viewer = lambda frame, corners, ids: shown.append(time.perf_counter())
+        result = guide_.run(3)
+    finally:
+        rig.close()
+    assert result.steps == 2 and len(decisions) == 2
+    for started, ended, sim_before, sim_after in decisions:
+        if viewed:
+            assert sum(started <= t <= ended for t in shown) >= 1 and sim_after > sim_before
+        else:
+            assert sim_after == sim_before
+    assert result.decision_s >= sum(ended - started for started, ended, _, _ in decisions)
 
 
 def test_the_guide_runs_headless_records_and_calibrates(tmp_path, capsys):
@@ -206,19 +276,62 @@ def test_a_disk_that_takes_no_more_stops_the_guide_with_one_line_and_a_calibrata
 
 
 @pytest.mark.integration
-def test_a_sensor_lost_during_the_guidance_stops_it_with_one_line_and_a_calibratable_recording(tmp_path, capsys):
-    """The simulated sensor's IMU stops 20 s after it started (a pulled cable): the guide stops once it has heard
-    nothing for ``limits.wait_timeout`` (1 s here), with status 1 and one line naming the silent stream, and the
-    recording so far calibrates."""
+@pytest.mark.parametrize(
+    ("fault", "stopped"),
+    [
+        (["person.faults.imu_gap=[20.0,1000.0]", "limits.wait_timeout=1"],
+         "stopped: no IMU samples for 1 s while the camera streams"),
+        (["person.faults.lens_covered=[20.0,1000.0]", "limits.lost_frames=10"],
+         "stopped: the board was out of view for 10 frames in a row; check the lighting"),
+    ],
+    ids=["lost sensor", "lost board"],
+)  # fmt: skip
+def test_a_sensor_or_board_lost_during_the_guidance_stops_it_with_one_line_and_a_calibratable_recording(
+    tmp_path, capsys, fault, stopped
+):
+    """20 s after the simulated sensor started, its IMU stops (a pulled cable), or its frames come dark (a finger on
+    the lens): the guide stops once it has heard no IMU for ``limits.wait_timeout`` (1 s here), or seen no board in
+    ``limits.lost_frames`` frames (10 here), with status 1 and one line saying which, and the recording so far
+    calibrates."""
     out = tmp_path / "out"
-    status = guide(config(f"out={out}", "page.enabled=false", "report=false", "seed=3", "limits.wait_timeout=1",
-                          "person.faults.imu_gap=[20.0,1000.0]"))  # fmt: skip
+    status = guide(config(f"out={out}", "page.enabled=false", "report=false", "seed=3", *fault))
     err = capsys.readouterr().err
     assert status == 1
     (line,) = [line for line in err.splitlines() if line.startswith("vical-guide")]
-    assert line.startswith("vical-guide: error: stopped: no IMU samples for 1 s while the camera streams")
+    assert line.startswith(f"vical-guide: error: {stopped}")
     assert f"the recording so far is in {out / 'recording'}" in line
-    assert "stopped: no IMU samples" in (out / "collect.yaml").read_text()
+    assert yaml.safe_load((out / "collect.yaml").read_text())["outcome"].startswith(stopped)
+    assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 80
+    assert calibrate_joint(out, tmp_path / "cal") == 0
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("sig", "status", "name"), [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
+def test_an_interrupted_guide_says_so_in_one_line_and_keeps_a_calibratable_recording(tmp_path, sig, status, name):
+    """A real signal after the third pose, with the page on (the planner decides in a worker thread while the guide
+    reads): status 130 / 143, one line saying where the recording is, and the recording so far calibrates."""
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "vical.apps.guide", f"out={out}", "page.port=0", "page.linger=0", "seed=3"]
+    # A shell's background job inherits SIGINT ignored; Ctrl-C reaches the app only with the default action.
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
+    try:
+        for line in proc.stdout:
+            if line.startswith("step 3:"):
+                break
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == status, err
+    (line,) = [line for line in err.splitlines() if line.startswith("vical-guide")]
+    assert line.startswith(f"vical-guide: interrupted ({name}): the recording so far is in {out / 'recording'} ("), line
+    assert "Traceback" not in err and f"interrupted ({name})" in (out / "collect.yaml").read_text()
     assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 80
     assert calibrate_joint(out, tmp_path / "cal") == 0
 

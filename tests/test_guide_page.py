@@ -1,6 +1,7 @@
-"""vical-guide's page in a real browser (Debian's headless Chromium, driven by Selenium): a simulated person is guided
-live while the page shows the instruction in words, the live image, a bar per parameter group and the instructions
-so far; then the result with the calibration's plots; its Close button ends the app with status 0.
+"""vical-guide's page in a real browser (Debian's headless Chromium, driven by Selenium), with a simulated person: the
+page follows the guidance live (the image at >= 5 Hz, each new instruction within 0.5 s of the guide's decision, the
+bars moving) until "done", then shows the result with the calibration's plots, and its Close button ends the app with
+status 0; a closed tab, or a lost sensor, stops the recording with one line and keeps it calibratable.
 
 Integration tier: it needs Debian's ``chromium`` and ``chromium-driver`` (``.ci/run`` installs them)."""
 
@@ -8,13 +9,20 @@ import re
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
+import numpy as np
 import pytest
+import yaml
 from selenium import webdriver
 from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import WebDriverWait
+from stopped_collections import calibrate_joint
+
+from vical.io.euroc import read_euroc
+from vical.io.kalibr import read_target_yaml
 
 pytestmark = pytest.mark.integration
 
@@ -46,10 +54,12 @@ def browser(tmp_path):
 
 
 class Output:
-    """A process's output lines, read as they come (so that its pipe never fills), and the page's address."""
+    """A process's output lines, read as they come (so that its pipe never fills), each with its wall time [ms], and
+    the page's address."""
 
     def __init__(self, proc: subprocess.Popen) -> None:
         self.lines: list[str] = []
+        self.stamped: list[tuple[float, str]] = []  # (time.time() in ms, line)
         self.url: str | None = None
         self.found = threading.Event()
         self._thread = threading.Thread(target=self._read, args=(proc,), daemon=True)
@@ -57,6 +67,7 @@ class Output:
 
     def _read(self, proc: subprocess.Popen) -> None:
         for line in proc.stdout:
+            self.stamped.append((1e3 * time.time(), line))
             self.lines.append(line)
             match = re.search(r"the guide's page: (http://\S+)", line)
             if match:
@@ -64,40 +75,140 @@ class Output:
                 self.found.set()
         self.found.set()
 
+    def text(self) -> str:
+        return "".join(self.lines)
 
-def _live_width(driver) -> int:
-    return driver.execute_script("return document.getElementById('live').naturalWidth")
 
-
-def test_the_page_guides_a_simulated_person_live_and_shows_the_result(tmp_path, browser):
-    out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "vical.apps.guide", f"out={out}", "page.port=0", "page.linger=300",
-           "limits.max_steps=6", "seed=3"]  # fmt: skip
+def _guide(out: Path, *settings: str) -> tuple[subprocess.Popen, Output]:
+    cmd = [sys.executable, "-m", "vical.apps.guide", f"out={out}", "page.port=0", "page.linger=300", "seed=3",
+           *settings]  # fmt: skip
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    output = Output(proc)
+    assert output.found.wait(120) and output.url, output.text()
+    return proc, output
+
+
+def _ended(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
+
+
+# What the page showed and when (Date.now() [ms]): each loaded live image, each new instruction, each new set of bars.
+WATCH = """
+const log = window.vicalLog = {images: [], words: [], bars: []};
+const keep = (list, text) => { if (!list.length || list[list.length - 1][1] !== text) list.push([Date.now(), text]); };
+document.getElementById("live").addEventListener("load", () => log.images.push(Date.now()));
+new MutationObserver(() => keep(log.words, document.getElementById("words").textContent))
+  .observe(document.getElementById("words"), {childList: true, characterData: true, subtree: true});
+new MutationObserver(() => keep(log.bars, document.getElementById("bars").textContent))
+  .observe(document.getElementById("bars"), {childList: true, characterData: true, subtree: true});
+"""
+
+
+BAR_TEXTS = "return [...document.querySelectorAll('#bars .group')].map(g => g.firstChild.textContent)"
+
+
+def _instruction_latencies(output: Output, words: list[list]) -> list[float]:
+    """[s] from each instruction's line (printed as the guide shows it) to the page showing its words; instructions
+    that repeat the one before are not a change the page can show."""
+    latencies, previous = [], None
+    for at, line in output.stamped:
+        if not line.startswith("next: "):
+            continue
+        text = line.removeprefix("next: ").strip()
+        if text != previous:
+            seen = [t for t, w in words if w == text and t >= at - 50]  # 50 ms: the two clocks' reading order
+            assert seen, f"the page never showed {text!r}"
+            latencies.append(max(0.0, seen[0] - at) / 1e3)
+        previous = text
+    return latencies
+
+
+def test_the_page_guides_a_simulated_person_live_until_done_and_shows_the_result(tmp_path, browser):
+    out = tmp_path / "out"
+    proc, output = _guide(out)
     try:
-        output = Output(proc)
-        assert output.found.wait(120) and output.url, "".join(output.lines)
         browser.get(output.url)
-        wait = WebDriverWait(browser, 240, poll_frequency=0.2)
-        # Live: an instruction in words, the image as the sensor sees it, a bar per parameter group.
+        browser.execute_script(WATCH)
+        wait = WebDriverWait(browser, 600, poll_frequency=0.2)
+        # Live: an instruction in words, the image as the sensor sees it, a bar per parameter group; then "done".
         wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, "#history li"))
-        assert browser.find_element(By.ID, "words").text
-        wait.until(lambda d: _live_width(d) == 640)
-        bars = wait.until(lambda d: d.find_elements(By.CSS_SELECTOR, "#bars .group"))
-        assert all(re.fullmatch(r"\w+: \d+\.\d\dx tolerance", b.text.strip()) for b in bars), [b.text for b in bars]
+        wait.until(lambda d: d.execute_script("return document.getElementById('live').naturalWidth") == 640)
+        # read in one script: the page rebuilds the bars at every poll
+        bars = wait.until(lambda d: d.execute_script(BAR_TEXTS))
+        assert all(re.fullmatch(r"\w+: \d+\.\d\dx tolerance", b.strip()) for b in bars), bars
+        wait.until(lambda d: d.find_element(By.ID, "words").get_attribute("class") == "done")
+        log = browser.execute_script("return window.vicalLog")
+        assert browser.find_element(By.ID, "words").text.startswith("done")
         # The result: the outcome, the calibration's results and plots.
         wait.until(lambda d: d.find_element(By.ID, "result").is_displayed())
         outcome = browser.find_element(By.ID, "outcome").text
-        assert "steps: 6" in outcome and "calibration: done" in outcome, outcome
+        assert "goal reached: true" in outcome and "calibration: done" in outcome, outcome
         summary = browser.find_element(By.ID, "summary").text
         assert summary.startswith("vical calibration results: task joint") and "fx" in summary, summary
         plotted = "return [...document.querySelectorAll('#files img')].some(i => i.complete && i.naturalWidth > 0)"
         wait.until(lambda d: d.execute_script(plotted))
         browser.find_element(By.ID, "close").click()
-        assert proc.wait(timeout=60) == 0, "".join(output.lines)
+        assert proc.wait(timeout=60) == 0, output.text()
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        _ended(proc)
     assert (out / "calibration" / "camchain-imucam.yaml").is_file()
-    assert any("next: " in line for line in output.lines)
+    # The live image while the person was guided (the first instruction to "done"), decisions included.
+    first, done = log["words"][0][0], next(t for t, w in log["words"] if w.startswith("done"))
+    images = np.array([t for t in log["images"] if first <= t <= done])
+    rate, gap = len(images) / ((done - first) / 1e3), np.diff(images).max() / 1e3
+    assert rate >= 5.0, f"the live image updated at {rate:.1f} Hz (longest pause {gap:.2f} s)"
+    latencies = _instruction_latencies(output, log["words"])
+    assert len(latencies) >= 5 and max(latencies) <= 0.5, latencies
+    assert len({text for _, text in log["bars"]}) >= 3  # the predicted errors moved as the data came
+    print(f"live image {rate:.1f} Hz (longest pause {gap:.2f} s); instruction latency median "
+          f"{np.median(latencies):.2f} s, max {max(latencies):.2f} s over {len(latencies)}")  # fmt: skip
+
+
+def _close_tab(driver) -> None:
+    """Close the page's tab (a blank tab keeps the browser open, as a person's other tabs do)."""
+    page = driver.current_window_handle
+    driver.switch_to.new_window("tab")
+    blank = driver.current_window_handle
+    driver.switch_to.window(page)
+    driver.close()
+    driver.switch_to.window(blank)
+
+
+def test_a_closed_tab_stops_the_guide_with_one_line_and_a_calibratable_recording(tmp_path, browser):
+    out = tmp_path / "out"
+    proc, output = _guide(out)
+    try:
+        browser.get(output.url)
+        browser.refresh()  # a reload is no close
+        WebDriverWait(browser, 300, poll_frequency=0.2).until(lambda d: "step 4:" in output.text())
+        _close_tab(browser)
+        assert proc.wait(timeout=60) == 1, output.text()
+    finally:
+        _ended(proc)
+    (line,) = [line for line in output.lines if line.startswith("vical-guide: error")]
+    assert line.startswith("vical-guide: error: stopped: the guide's page was closed;"), line
+    assert f"the recording so far is in {out / 'recording'}" in line
+    assert yaml.safe_load((out / "collect.yaml").read_text())["outcome"].startswith("stopped: the guide's page was")
+    assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 80
+    assert calibrate_joint(out, tmp_path / "cal") == 0
+
+
+def test_a_lost_sensor_stops_the_guide_and_the_page_says_why(tmp_path, browser):
+    """The IMU stops 12 s into the run (a pulled cable): the page's result says the guide stopped and why; its Close
+    button ends the app with the fault's status 1; the recording so far is kept."""
+    out = tmp_path / "out"
+    proc, output = _guide(out, "limits.wait_timeout=1", "person.faults.imu_gap=[12.0,1000.0]")
+    try:
+        browser.get(output.url)
+        wait = WebDriverWait(browser, 300, poll_frequency=0.2)
+        wait.until(lambda d: d.find_element(By.ID, "result").is_displayed())
+        outcome = browser.find_element(By.ID, "outcome").text
+        assert "outcome: stopped: no IMU samples for 1 s while the camera streams" in outcome, outcome
+        browser.find_element(By.ID, "close").click()
+        assert proc.wait(timeout=60) == 1, output.text()
+    finally:
+        _ended(proc)
+    assert "the recording so far is in" in output.text()
+    assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 40

@@ -9,8 +9,9 @@ from scipy.spatial.transform import Rotation
 from vical.calib.result import FramePoses
 from vical.calib.solve.plausibility import board_scale, wrong_board_scale
 from vical.calib.tasks import CalibrationTask, run_task
-from vical.collection.runner import Limits, SensorStream, read_until
+from vical.collection.runner import CollectionStopped, Limits, SensorStream, read_until
 from vical.config_checks import from_mapping
+from vical.data import NS_PER_S
 from vical.geometry import T_CAM_BODY, interpolate_transforms, invert_transform, make_transform
 from vical.io.euroc import EurocStreamWriter
 from vical.robot import SensorStreamError
@@ -223,3 +224,24 @@ def test_a_sensor_that_delivers_no_images_or_no_imu_stops_the_reading_naming_the
         assert rig.time < 300.0
     finally:
         rig.close()
+
+
+def test_a_covered_lens_delivers_dark_frames_without_the_board_until_the_guide_stops(settings):
+    """``faults.lens_covered`` from 1 s on: the frames before show the board, those after still come (the camera
+    streams) but dark and without it, and reading them stops after ``limits.lost_frames`` of them in a row."""
+    sim_config, sampling, _ = settings
+    rig = HandHeldRig(sim_config, sampling, 7, keep_images=True, faults=RigFaults(lens_covered=(1.0, 1e6)))
+    stream = SensorStream(rig.sensor, rig.target, None, Limits(lost_frames=5))
+    seen: list[tuple[int, np.ndarray, np.ndarray]] = []
+    images: list[np.ndarray] = []
+    stream.viewer = lambda frame, corners, ids: images.append(frame.image)
+    rig.sensor.start()
+    try:
+        with pytest.raises(CollectionStopped, match=r"^the board was out of view for 5 frames in a row"):
+            read_until(stream, lambda: rig.time > 30.0, seen.extend)
+    finally:
+        rig.close()
+    before = [ids for t, _, ids in seen if t < 0.9 * NS_PER_S]
+    assert before and all(len(ids) >= 20 for ids in before)
+    assert images[-1].max() == 0 and images[0].max() > 100
+    assert 1.0 < rig.time < 2.0  # stopped at the fifth dark frame (10 Hz)

@@ -12,8 +12,8 @@ time, "done") and as progress lines; it writes ``<out>/recording`` (EuRoC, with 
 then ``vical-calibrate`` calibrates it into ``<out>/calibration``, and the page shows the result.
 
 Exit status: 0 done; 2 a user error (a bad setting, an existing ``out``, a port in use), before anything starts;
-1 the guide stopped on a fault (the board lost, a broken sensor stream: the recording so far is kept and
-calibratable) or the calibration failed; 130 Ctrl-C (the recording closed).
+1 the guide stopped on a fault (the board lost, a broken sensor stream, the page's tab closed: the recording so far
+is kept and calibratable) or the calibration failed; 130 Ctrl-C (the recording closed).
 """
 
 from __future__ import annotations
@@ -112,6 +112,9 @@ class Shown(Person):
     def show(self, guidance: Guidance) -> None:
         for person in self.people:
             person.show(guidance)
+
+    def gone(self) -> str | None:
+        return next((why for why in (p.gone() for p in self.people) if why is not None), None)
 
 
 def guide(cfg: DictConfig) -> int:

@@ -16,7 +16,11 @@ mean for the person what they mean for the arm.
    the sensor until the person has settled (``Arrival``); the frames and IMU samples update the state with the
    env's own code (``vical.env.state.EpisodeState``); the offset is where the PnP puts the sensor, not the goal.
 3. **Stop** when the policy's stopping rule holds (every group predicted within tolerance: "done"), at the step
-   limit, the time limit (of recording) or when the board is lost (``Limits.lost_frames``).
+   limit, the time limit (of recording), when the board is lost (``Limits.lost_frames``) or the person can no longer
+   be guided (``Person.gone``: the page's tab closed).
+
+While the policy decides, the guide reads on for a live sensor or a viewer (``LiveEpisode._decision_wait``): the
+page's image follows the sensor, and the person, who holds still meanwhile, is recorded.
 
 The path is the sum of the straight lines between the settled poses. Everything the sensor delivers from the
 start pose on is written as it arrives when a writer is given (``vical.io.euroc.EurocStreamWriter``).
@@ -207,7 +211,7 @@ class Guide(LiveEpisode):
         episode.state, episode.frame = self.state, frame
         self.policy.reset(episode, np.random.default_rng(seed))
         reason = run_policy(self.policy, episode, self.limits, lambda action: self._step(frame, action),
-                            lambda: self._elapsed() > self.limits.time_limit)  # fmt: skip
+                            lambda: self._elapsed() > self.limits.time_limit, self._decision_wait())  # fmt: skip
         if self.state.goal_reached:
             self.person.show(Guidance(None, DONE, dict(self.state.goal_ratios), self._elapsed(), done=True))
         self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, "
@@ -268,7 +272,11 @@ class Guide(LiveEpisode):
 
     # ------------------------------------------------------------------ data
     def _take(self, detections: list[tuple[int, np.ndarray, np.ndarray]]) -> None:
-        """Keep the detections for the state and the pose of each frame that shows enough of the board."""
+        """Keep the detections for the state and the pose of each frame that shows enough of the board; stop when the
+        person can no longer be guided (every read comes here, after the recording has its data)."""
+        why = self.person.gone()
+        if why is not None:
+            raise CollectionStopped(f"{why}; reloading the page does not stop the guide, closing it does")
         super()._take(detections)
         for stamp, corners, ids in detections:
             T_cam_board = self._pose(corners, ids)

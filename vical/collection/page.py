@@ -12,7 +12,12 @@ threaded server, in a thread of its own; localhost only by default, nothing from
   (green) and the board's outline where the next pose puts it (orange), projected with the guide's camera (the
   datasheet's, as the guide's PnP);
 - ``/files/<name>``: the calibration's files (results, plots, report) once it is done;
-- ``POST /close``: the person has read the result: the app stops serving (``wait_closed``).
+- ``POST /close``: the person has read the result: the app stops serving (``wait_closed``);
+- ``POST /left``: the tab is going away (its ``pagehide``): unless the page polls again within ``RELOAD_GRACE_S`` (a
+  reload), the person has closed it and ``gone`` says so (the guide stops, keeping the recording).
+
+The script polls ``/state.json`` every ``POLL_MS`` and loads the next frame whenever there is a new one and the last
+has loaded: the live image follows the sensor at up to 1000 / ``POLL_MS`` frames a second.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from __future__ import annotations
 import json
 import socket
 import threading
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,6 +47,8 @@ BACKGROUND = 96  # grey level of a corner-level frame's image
 DETECTED = (60, 200, 60)  # BGR
 OUTLINE = (0, 140, 255)  # BGR
 FILE_SUFFIXES = (".png", ".pdf", ".txt", ".yaml", ".csv")  # what /files serves
+POLL_MS = 100  # [ms] between the script's polls: a 10 Hz live image at most, an instruction seen 50 ms late on average
+RELOAD_GRACE_S = 3.0  # [s] a tab that left and has not polled again since is closed, not reloading
 
 
 @dataclass(frozen=True)
@@ -67,6 +75,8 @@ class GuidePage(Person):
         self.target = target
         self._lock = threading.Lock()
         self._closed = threading.Event()
+        self._polled_at: float | None = None  # [s] monotonic: the script's last poll
+        self._left_at: float | None = None  # [s] monotonic: the tab's last ``pagehide``
         self._frame: np.ndarray | None = None  # the latest image, grey (H, W)
         self._corners = np.zeros((0, 2))
         self._frames = 0
@@ -110,9 +120,23 @@ class GuidePage(Person):
         with self._lock:  # the folder is complete: listed once, not at every poll
             self._result, self._files, self._file_list, self._results_text = result, files, names, text
 
+    def gone(self) -> str | None:
+        """Why the person no longer sees the page (its tab closed), or None (``vical.robot.Person.gone``)."""
+        with self._lock:
+            left, polled = self._left_at, self._polled_at
+        if left is None or (polled is not None and polled > left) or time.monotonic() - left < RELOAD_GRACE_S:
+            return None
+        return "the guide's page was closed"
+
     def wait_closed(self, seconds: float) -> bool:
-        """Serve until the page's Close button or ``seconds`` [s]; whether it was closed."""
-        return self._closed.wait(seconds)
+        """Serve until the page's Close button, its tab closed or ``seconds`` [s]; whether it was closed."""
+        end = time.monotonic() + seconds
+        while not self._closed.wait(min(0.2, max(0.0, end - time.monotonic()))):
+            if self.gone() is not None:
+                return True
+            if time.monotonic() >= end:
+                return False
+        return True
 
     def close(self) -> None:
         """Stop serving (again: nothing)."""
@@ -170,12 +194,18 @@ class GuidePage(Person):
         if path == "/":
             return Response(PAGE, mimetype="text/html")
         if path == "/state.json":
+            with self._lock:
+                self._polled_at = time.monotonic()
             return Response(json.dumps(self._state()), mimetype="application/json", headers=NO_CACHE)
         if path == "/frame.jpg":
             return Response(self._jpeg(), mimetype="image/jpeg", headers=NO_CACHE)
         if path == "/close" and request.method == "POST":
             self._closed.set()
             return Response("closed", mimetype="text/plain")
+        if path == "/left" and request.method == "POST":
+            with self._lock:
+                self._left_at = time.monotonic()
+            return Response("left", mimetype="text/plain")
         if path.startswith("/files/"):
             return self._file(path.removeprefix("/files/"))
         return NotFound()
@@ -191,7 +221,7 @@ class GuidePage(Person):
 
 
 class _Quiet(WSGIRequestHandler):
-    """Serves without a log line per request (the page polls four times a second; the guide's lines would drown)."""
+    """Serves without a log line per request (the page polls ten times a second; the guide's lines would drown)."""
 
     def log_request(self, *args, **kwargs) -> None:
         pass
@@ -238,7 +268,9 @@ pre { background: #fff; border: 1px solid #ccc; padding: 0.5em; max-width: 60em;
 <div id="result" hidden><h2>result</h2><ul id="outcome"></ul><pre id="summary"></pre><div id="files"></div>
   <button id="close" type="button">Close</button></div>
 <script>
-let frames = -1;
+const live = document.getElementById("live");
+let frames = -1, loading = !live.complete;  // the first frame loads with the page
+live.onload = live.onerror = () => { loading = false; };
 function bar(name, ratio) {
   const row = document.createElement("div");
   row.className = "group"; row.dataset.group = name;
@@ -272,7 +304,7 @@ async function poll() {
       ...Object.entries(s.ratios).map(([k, v]) => bar(k, v)));
     document.getElementById("history").replaceChildren(...s.history.map(h => {
       const li = document.createElement("li"); li.textContent = h; return li; }));
-    if (s.frames !== frames) { frames = s.frames; document.getElementById("live").src = "/frame.jpg?n=" + frames; }
+    if (s.frames !== frames && !loading) { frames = s.frames; loading = true; live.src = "/frame.jpg?n=" + frames; }
     if (s.result) {
       document.getElementById("result").hidden = false;
       document.getElementById("outcome").replaceChildren(...Object.entries(s.result).map(([k, v]) => {
@@ -281,8 +313,9 @@ async function poll() {
       if (document.getElementById("files").childElementCount !== s.files.length) files(s.files);
     }
   } catch (e) { document.getElementById("stage").textContent = "the guide has stopped serving"; return; }
-  setTimeout(poll, 250);
+  setTimeout(poll, __POLL_MS__);
 }
+addEventListener("pagehide", () => navigator.sendBeacon("/left"));
 document.getElementById("close").onclick = async () => {
   await fetch("/close", {method: "POST"});
   document.getElementById("stage").textContent = "closed";
@@ -290,6 +323,6 @@ document.getElementById("close").onclick = async () => {
 poll();
 </script>
 </body></html>
-"""
+""".replace("__POLL_MS__", str(POLL_MS))
 
 __all__ = ["GuidePage", "PageSettings"]

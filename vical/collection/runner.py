@@ -12,7 +12,8 @@
    policy's action becomes a goal inside the workspace bounds around the start pose (exactly as
    the env clips it), the arm moves there and rests ``settle_time``; the frames and IMU samples
    that arrived update the state with the env's own code (``vical.env.state.EpisodeState``),
-   until the policy's stopping rule holds, it is done, or the step or time limit is reached.
+   until the policy's stopping rule holds, it is done, or the step or time limit is reached. While
+   the policy decides, a live sensor is read on (``decide``): its driver's buffers do not fill.
 
 Everything the sensor delivers after the alignment is written as it arrives
 (``vical.io.euroc.EurocStreamWriter``), so a kill leaves a readable, calibratable recording. A
@@ -28,6 +29,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import gymnasium as gym
@@ -116,7 +118,7 @@ class Limits:
         max_refused: consecutive steps the arm refuses (with their fallbacks) that stop the run.
         max_imu_gap: [s] the longest gap between IMU samples that is not a broken stream.
         wait_timeout: [s] wall time to wait for sensor data before the stream counts as broken.
-        poll_interval: [s] between reads while waiting.
+        poll_interval: [s] from one read to the next while waiting (at least).
     """
 
     max_steps: int | None = None
@@ -224,7 +226,7 @@ class SensorStream:
         if self._lost >= self.limits.lost_frames:
             raise CollectionStopped(
                 f"the board was out of view for {self._lost} frames in a row; check the lighting and the "
-                "board's position, then align again"
+                "board's position, then start again"
             )
         return detections
 
@@ -280,14 +282,16 @@ def run_policy(
     limits: Limits,
     step: Callable[[np.ndarray], None],
     over_time: Callable[[], bool],
+    wait: Callable[[Callable[[], bool]], None] | None = None,
 ) -> str:
     """The policy loop of an episode off the env (the arm's and the guided person's): act, ``step``, until the policy's
-    last waypoint, its stopping rule, the step limit or ``over_time()``; why it stopped."""
+    last waypoint, its stopping rule, the step limit or ``over_time()``; why it stopped. With ``wait``, each action is
+    decided while ``wait`` runs (``decide``)."""
     state, mdp = episode.state, episode.config
     max_steps = limits.max_steps or policy.max_steps or mdp.max_steps
     while episode.steps < max_steps:
         deciding = time.perf_counter()
-        action = policy.act(state.observation(episode.pose_offset, episode.steps), episode)
+        action = decide(policy, state.observation(episode.pose_offset, episode.steps), episode, wait)
         episode.decision_s += time.perf_counter() - deciding
         if policy.finished:
             return "the policy's last waypoint"
@@ -300,13 +304,31 @@ def run_policy(
     return f"the step limit ({max_steps})"
 
 
-def read_until(stream: SensorStream, done: Callable[[], bool], take: Callable[[list], None]) -> None:
-    """Read ``stream`` (handing the detections to ``take``) until ``done()``; ``SensorStreamError`` naming the stream
-    when the IMU or the camera delivers nothing for ``limits.wait_timeout``."""
+def decide(
+    policy: Policy, observation: np.ndarray, episode: RobotEpisode, wait: Callable[[Callable[[], bool]], None] | None
+) -> np.ndarray:
+    """The policy's action for ``observation``. With ``wait``, the policy decides in a worker thread while ``wait``
+    gets a ``decided()`` to run until (reading a live sensor, whose frames the page shows and whose driver buffers
+    would fill); what ``wait`` raises (a lost stream, Ctrl-C) ends the loop once the decision is over. The policy
+    reads the episode's state, which nothing updates while it decides: ``wait`` only keeps what it reads."""
+    if wait is None:
+        return policy.act(observation, episode)
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="vical-decide") as worker:
+        decision = worker.submit(policy.act, observation, episode)
+        wait(decision.done)
+        return decision.result()
+
+
+def read_until(
+    stream: SensorStream, done: Callable[[], bool], take: Callable[[list], None], pause: float | None = None
+) -> None:
+    """Read ``stream`` (handing the detections to ``take``) until ``done()``, a read every ``pause`` [s] at most (None:
+    ``limits.poll_interval``); ``SensorStreamError`` naming the stream when the IMU or the camera delivers nothing for
+    ``limits.wait_timeout``."""
     limits = stream.limits
     heard = dict.fromkeys(STREAMS, time.monotonic())
     while not done():
-        before = stream.last_stamps()
+        before, started = stream.last_stamps(), time.monotonic()
         take(stream.read())
         now = time.monotonic()
         for name, was, is_ in zip(STREAMS, before, stream.last_stamps(), strict=True):
@@ -315,7 +337,7 @@ def read_until(stream: SensorStream, done: Callable[[], bool], take: Callable[[l
         silent = tuple(name for name in STREAMS if now - heard[name] > limits.wait_timeout)
         if silent:
             raise SensorStreamError(SILENT[silent].format(limits.wait_timeout))
-        time.sleep(limits.poll_interval)
+        time.sleep(max(0.0, (limits.poll_interval if pause is None else pause) - (time.monotonic() - started)))
 
 
 STREAMS = ("imu", "camera")  # the order of ``SensorStream.last_stamps``
@@ -384,6 +406,18 @@ class LiveEpisode:
             return start is not None and self.stream.last_imu_ns - start >= seconds * NS_PER_S
 
         read_until(self.stream, rested, self._take)
+
+    def _decision_wait(self) -> Callable[[Callable[[], bool]], None] | None:
+        """How the policy loop waits while the policy decides (``decide``): reading the sensor, when its data come with
+        the wall clock (a driver's buffers would fill) or a viewer shows its live image; None (not reading) for a
+        simulated sensor without a viewer, whose clock moves only as it is read: a simulated run then does not depend
+        on how fast the machine decides. A simulated sensor with a viewer is read once a camera period: its clock then
+        moves as the wall clock does, and the simulated person waits as long as the decision takes."""
+        sensor = self.stream.sensor
+        if sensor.paced_by_reads and self.stream.viewer is None:
+            return None
+        pause = 1.0 / sensor.camera_rate_hz if sensor.paced_by_reads else None
+        return lambda decided: read_until(self.stream, decided, self._take, pause)
 
     def _update_state(self) -> None:
         """Feed the frames read since the last update (and all IMU samples) to the state: once per step, as the env."""
@@ -461,7 +495,8 @@ class Collector(LiveEpisode):
             self._report()
 
         reason = run_policy(self.policy, episode, self.limits, step,
-                            lambda: time.monotonic() - self._started > self.limits.time_limit)  # fmt: skip
+                            lambda: time.monotonic() - self._started > self.limits.time_limit,
+                            self._decision_wait())  # fmt: skip
         self.arm.stop()
         duration = self._sensor_time()
         self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, {duration:.1f} s")

@@ -196,11 +196,14 @@ class ViSensor(Device):
     Attributes:
         image_size: (width, height) [px] of the camera frames.
         camera_rate_hz, imu_rate_hz: the nominal rates of the two streams.
+        paced_by_reads: its time passes only as it is read (a simulation), not with the wall clock: a loop that reads
+            it while it waits for something else (a policy deciding) moves its clock by however long that takes.
     """
 
     image_size: tuple[int, int]
     camera_rate_hz: float
     imu_rate_hz: float
+    paced_by_reads: bool = False
 
     @abstractmethod
     def start(self) -> None:
@@ -248,3 +251,7 @@ class Person(ABC):
     @abstractmethod
     def show(self, guidance: Guidance) -> None:
         """Tell the person what to do next (returns at once; the guide watches the sensor for the rest)."""
+
+    def gone(self) -> str | None:
+        """Why the person can no longer be guided (a page's tab closed), or None while they can."""
+        return None

@@ -58,6 +58,8 @@ class RigFaults:
         tracking_noise_rad: [rad] standard deviation per axis of the orientation it ends with.
         imu_gap: ``(start, duration)`` [s] after ``start()`` during which the IMU delivers nothing, or None.
         camera_gap: the same for the camera's frames.
+        lens_covered: ``(start, duration)`` [s] after ``start()`` during which the frames come dark, without the
+            board (a finger on the lens), or None.
         refuse_after: motions after which the arm refuses every goal (a protective stop), or None.
     """
 
@@ -66,6 +68,7 @@ class RigFaults:
     tracking_noise_rad: float = 0.0
     imu_gap: tuple[float, float] | None = None
     camera_gap: tuple[float, float] | None = None
+    lens_covered: tuple[float, float] | None = None
     refuse_after: int | None = None
 
     def __post_init__(self) -> None:
@@ -75,10 +78,12 @@ class RigFaults:
                 raise ValueError(f"RigFaults.{name} must be a number >= 0, got {value}")
         if self.refuse_after is not None and int(self.refuse_after) < 0:
             raise ValueError(f"RigFaults.refuse_after must be a number of motions >= 0, got {self.refuse_after}")
-        for name in ("imu_gap", "camera_gap"):
+        for name in ("imu_gap", "camera_gap", "lens_covered"):
             gap = getattr(self, name)
             if gap is not None and (len(gap) != 2 or min(gap) < 0):
                 raise ValueError(f"RigFaults.{name} must be (start, duration) in seconds >= 0, got {gap}")
+            if gap is not None:
+                object.__setattr__(self, name, (float(gap[0]), float(gap[1])))
 
 
 class SimRig:
@@ -136,11 +141,8 @@ def sim_rig(
     faults: Mapping[str, Any] | None = None,
 ) -> SimRig:
     """The ``robot=sim`` factory of ``vical-collect`` (``conf/robot/sim.yaml``): a ``SimRig`` from config mappings."""
-    f = dict(faults or {})
-    if f.get("imu_gap") is not None:
-        f["imu_gap"] = tuple(f["imu_gap"])
     return SimRig(SimConfig.from_mapping(sim), SensorSampling.from_config(sensor), int(seed),
-                  bool(asymmetric_distortion), RigFaults(**f))  # fmt: skip
+                  bool(asymmetric_distortion), RigFaults(**dict(faults or {})))  # fmt: skip
 
 
 class SimArm(Arm):
@@ -215,6 +217,13 @@ class SensorRig(Protocol):
         """Let ``seconds`` [s] pass, the sensor recording."""
 
 
+def _dark(frame: CameraImage | CameraDetections) -> CameraImage | CameraDetections:
+    """``frame`` as it comes with a finger on the lens: black, without the board."""
+    if isinstance(frame, CameraImage):
+        return CameraImage(frame.t_ns, np.zeros_like(frame.image))
+    return CameraDetections(frame.t_ns, np.zeros((0, 2)), np.zeros(0, dtype=np.int64))
+
+
 class SimViSensor(ViSensor):
     """The simulated camera + IMU as a ``ViSensor``: rendered grey images (the board's analytic corners where the
     rig's recorder keeps no images: a comparison at corner level), the IMU model's samples; on the arm of a
@@ -222,8 +231,10 @@ class SimViSensor(ViSensor):
     ``recorder`` records, their ``faults`` apply).
 
     Clocks: the IMU clock is the simulation clock; camera stamps are in the camera clock, exposed at
-    ``t_cam + time_offset`` (the sensor's truth).
+    ``t_cam + time_offset`` (the sensor's truth). The simulation moves only as the sensor is read (``read``).
     """
+
+    paced_by_reads = True
 
     def __init__(self, rig: SensorRig) -> None:
         self._rig = rig
@@ -261,6 +272,9 @@ class SimViSensor(ViSensor):
             frames = [CameraDetections(t, uv, i) for t, uv, i in zip(stamps, corners, ids, strict=True)]
         self._frames_read += len(stamps)
         frames = [f for f, keep in zip(frames, self._outside(self._rig.faults.camera_gap, stamps), strict=True) if keep]
+        frames = [f if seen else _dark(f)
+                  for f, seen in zip(frames, self._outside(self._rig.faults.lens_covered, [f.t_ns for f in frames]),
+                                     strict=True)]  # fmt: skip
         imu = recorder.imu_samples()
         new = np.arange(self._imu_read, len(imu))
         new = new[self._outside(self._rig.faults.imu_gap, imu.t[new])]

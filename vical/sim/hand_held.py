@@ -219,7 +219,7 @@ class HandHeldRig(Person):
         self.recorder.close()
 
 
-SENSOR_FAULTS = ("imu_gap", "camera_gap")
+SENSOR_FAULTS = ("imu_gap", "camera_gap", "lens_covered")
 NO_FAULTS = MappingProxyType(dict.fromkeys(SENSOR_FAULTS))  # the streams never stop
 
 
@@ -235,7 +235,8 @@ def hand_held_rig(
     """The ``person=sim`` factory of ``vical-guide`` (``conf/person/sim.yaml``): a simulated person (``HandModel``
     settings in ``hand``) with the simulated sensor drawn with ``seed``; ``images``: render every frame (the page's
     live image and the EuRoC recording need them; false: the board's analytic corners only); ``faults``: the
-    sensor's (``RigFaults.imu_gap``, ``camera_gap``: a stream that stops, as a pulled cable's)."""
+    sensor's (``RigFaults.imu_gap``, ``camera_gap``: a stream that stops, as a pulled cable's; ``lens_covered``: frames
+    without the board)."""
     if "tremor_band_hz" in hand:
         hand["tremor_band_hz"] = tuple(hand["tremor_band_hz"])
     return HandHeldRig(SimConfig.from_mapping(sim), SensorSampling.from_config(sensor), int(seed), HandModel(**hand),
@@ -248,4 +249,4 @@ def sensor_faults(faults: Mapping[str, Any]) -> RigFaults:
     unknown = sorted(set(faults) - set(SENSOR_FAULTS))
     if unknown:
         raise ValueError(f"faults: a held sensor's faults are {list(SENSOR_FAULTS)}, not {unknown}")
-    return RigFaults(**{k: None if v is None else tuple(float(x) for x in v) for k, v in faults.items()})
+    return RigFaults(**faults)
