@@ -23,13 +23,13 @@ import urllib.request
 import numpy as np
 
 from vical.calib.synthetic import default_camera
-from vical.collection.page import GuidePage, PageSettings
+from vical.collection.page import POLL_MS, GuidePage, PageSettings
 from vical.data import Target
 from vical.geometry import T_CAM_BODY, make_transform
 from vical.robot import CameraImage, Guidance
 
 CAMERA_HZ = 30.0
-POLL_S = 0.25  # the page script's interval
+POLL_S = POLL_MS / 1e3  # the page script's interval
 INSTRUCTIONS = 40
 
 
