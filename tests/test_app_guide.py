@@ -305,6 +305,20 @@ def test_a_sensor_or_board_lost_during_the_guidance_stops_it_with_one_line_and_a
     assert calibrate_joint(out, tmp_path / "cal") == 0
 
 
+def test_a_board_never_seen_stops_the_guide_before_it_records_in_one_line(tmp_path, capsys):
+    """The lens is covered from the start: the guide cannot find the board in its first rest, says so in one line with
+    what to do, records nothing and says that too."""
+    out = tmp_path / "out"
+    status = guide(config(f"out={out}", "page.enabled=false", "seed=3", "person.faults.lens_covered=[0.0,1000.0]"))
+    err = capsys.readouterr().err
+    assert status == 1
+    (line,) = [line for line in err.splitlines() if line.startswith("vical-guide")]
+    assert line == (
+        "vical-guide: error: stopped: the board was not seen in the first 1 s; hold the sensor so that the whole "
+        f"board is in view, then start again; no frame was recorded ({out / 'recording'}): nothing to calibrate"
+    )
+
+
 def _default_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 

@@ -264,13 +264,12 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
         with contextlib.suppress(OSError):  # a full disk (the fault, maybe) takes neither; the line below says why
             write_summary(s, None, f"stopped: {err}", writer.frames)
             _write_bag(cfg, s)
-        report_error(APP, f"stopped: {err}; the arm is stopped and the recording so far is in {writer.path} "
-                          f"({writer.frames} frames): {calibrate_hint(s)}")  # fmt: skip
+        report_error(APP, f"stopped: {err}; the arm is stopped and {recording_kept(s, writer)}")
         return None
     except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (vical.apps.entry)
         write_summary(s, None, f"interrupted ({interrupted_by(err)})", writer.frames)
-        print(f"{APP}: interrupted ({interrupted_by(err)}): the arm is stopped and the recording so far is in "
-              f"{writer.path} ({writer.frames} frames): {calibrate_hint(s)}", file=sys.stderr)  # fmt: skip
+        print(f"{APP}: interrupted ({interrupted_by(err)}): the arm is stopped and {recording_kept(s, writer)}",
+              file=sys.stderr)  # fmt: skip
         raise SystemExit(interrupted_status(err)) from None
     write_summary(s, result, f"done: {result.reason}", writer.frames)
     _write_bag(cfg, s)
@@ -303,6 +302,13 @@ def _calibrate_args(s: CollectionOutput) -> list[str]:
 
 def calibrate_hint(s: CollectionOutput) -> str:
     return "calibrate it with: vical-calibrate " + " ".join(_calibrate_args(s))
+
+
+def recording_kept(s: CollectionOutput, writer: EurocStreamWriter) -> str:
+    """What a stopped collection leaves: where its recording is and how to calibrate it, or that it holds no frame."""
+    if writer.frames == 0:
+        return f"no frame was recorded ({writer.path}): nothing to calibrate"
+    return f"the recording so far is in {writer.path} ({writer.frames} frames): {calibrate_hint(s)}"
 
 
 def calibrate_or_stop(s: CollectionOutput, result: CollectResult, report: bool) -> int:

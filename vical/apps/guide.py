@@ -37,13 +37,13 @@ from vical.apps.collect import (
     aside,
     board,
     build_robot,
-    calibrate_hint,
     calibrate_or_stop,
     check_output,
     finish,
     lens_spread,
     mdp_config,
     nominal_sensor,
+    recording_kept,
     write_summary,
 )
 from vical.apps.entry import interrupted_by, interrupted_status
@@ -209,15 +209,13 @@ def _run(cfg, s: GuideSettings, holder, policy, mdp, nominal, page) -> CollectRe
     except FAULTS as err:
         with contextlib.suppress(OSError):  # a full disk (the fault, maybe) takes no summary; the line below says why
             write_summary(s, None, f"stopped: {err}", writer.frames)
-        report_error(APP, f"stopped: {err}; the recording so far is in {writer.path} ({writer.frames} frames): "
-                          f"{calibrate_hint(s)}")  # fmt: skip
+        report_error(APP, f"stopped: {err}; {recording_kept(s, writer)}")
         if page is not None:
             page.finish({"outcome": f"stopped: {err}", "frames": writer.frames}, None)
         return None
     except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (vical.apps.entry)
         write_summary(s, None, f"interrupted ({interrupted_by(err)})", writer.frames)
-        print(f"{APP}: interrupted ({interrupted_by(err)}): the recording so far is in {writer.path} "
-              f"({writer.frames} frames): {calibrate_hint(s)}", file=sys.stderr)  # fmt: skip
+        print(f"{APP}: interrupted ({interrupted_by(err)}): {recording_kept(s, writer)}", file=sys.stderr)
         raise SystemExit(interrupted_status(err)) from None
     write_summary(s, result, f"done: {result.reason}", writer.frames)
     return result
