@@ -5,7 +5,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.vical-installed
 export MUJOCO_GL ?= egl
 
-.PHONY: venv test test-all lint train tables demo bench clean
+.PHONY: venv test test-all browser lint train tables demo bench clean
 
 venv: $(STAMP)
 
@@ -30,9 +30,19 @@ test: lint
 	$(PYTEST) --durations=15
 
 # Both tiers: the unit tests and the integration ones (subprocesses, Ray, training runs, the tutorials,
-# the 40-trial statistics). CI runs this.
-test-all: lint
+# the 40-trial statistics, vical-guide's page in a browser). CI runs this.
+test-all: lint browser
 	$(PYTEST) -m "" --durations=30
+
+# The page's browser test (tests/test_guide_page.py) drives Debian's headless Chromium: installed here as root, or
+# with sudo in CI (CI set); elsewhere that test skips, saying how to install it (in CI it fails instead).
+BROWSER := /usr/bin/chromium /usr/bin/chromedriver
+browser:
+	@if ! ls $(BROWSER) >/dev/null 2>&1; then \
+		if [ "$$(id -u)" -eq 0 ]; then SUDO=; elif [ -n "$$CI" ]; then SUDO=sudo; else \
+			echo "make: Chromium is not installed and this is not root: the page's browser test will skip"; exit 0; fi; \
+		$$SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -qq chromium chromium-driver; \
+	fi
 
 train: venv
 	$(VENV)/bin/vical-train +experiment=train_paper_policy
