@@ -276,7 +276,7 @@ class Guide(LiveEpisode):
         person can no longer be guided (every read comes here, after the recording has its data)."""
         why = self.person.gone()
         if why is not None:
-            raise CollectionStopped(f"{why}; reloading the page does not stop the guide, closing it does")
+            raise CollectionStopped(why)
         super()._take(detections)
         for stamp, corners, ids in detections:
             T_cam_board = self._pose(corners, ids)
