@@ -31,12 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 from hydra import compose, initialize_config_dir
 
-from vical.apps.cli import plain
-from vical.apps.collect import board, build_robot, nominal_sensor
+from vical.apps.collect import board, build_robot, configured_policy, nominal_sensor
 from vical.apps.guide import CONF_DIR, build_guide, check_settings, guided_mdp
 from vical.collection.page import POLL_MS, GuidePage
-from vical.evaluation.harness import instantiate_policy
-from vical.policies.stopping import StopRule, with_stop
 from vical.robot import Guidance, Person
 
 FIRST_SEED = 40000  # the guide's tuning sensors (held-out comparisons use 60000 on)
@@ -100,7 +97,7 @@ def guided(seed: int, steps: int, reading: bool) -> Run:
         cfg = compose(config_name="guide", overrides=[f"seed={seed}", f"limits.max_steps={steps}", "progress=false",
                                                       "page.port=0", "out=unused"])  # fmt: skip
     s = check_settings(cfg)
-    policy = with_stop(instantiate_policy(plain(cfg.policy)[s.task], "planner"), StopRule.from_config(plain(cfg.stop)))
+    policy = configured_policy(cfg, s.task, "planner")
     mdp = guided_mdp(cfg, policy)
     rig = build_robot(cfg.person, "person")
     nominal = nominal_sensor(s, rig)

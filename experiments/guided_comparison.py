@@ -49,16 +49,16 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 
 from vical.apps.cli import plain
-from vical.apps.collect import build_robot, nominal_sensor
+from vical.apps.collect import build_robot, configured_policy, nominal_sensor
 from vical.apps.evaluate import results_csv, stops_table
 from vical.apps.guide import CONF_DIR, build_guide, check_settings, guided_mdp
 from vical.calib.tasks import CalibrationTask
 from vical.config_checks import from_mapping
-from vical.evaluation.harness import EpisodeRow, Evaluation, calibrate_row, instantiate_policy, summarize
+from vical.evaluation.harness import EpisodeRow, Evaluation, calibrate_row, summarize
 from vical.evaluation.results_file import read_results
 from vical.evaluation.time_to_tolerance import summarize_stops
 from vical.io.atomic import files_together
-from vical.policies.stopping import StopRule, information_settings, with_stop
+from vical.policies.stopping import StopRule, information_settings
 
 FIRST_SEED = 60000
 # A person who loses the board from view goes on with the routine (a live vical-guide stops after 60 frames so that
@@ -86,7 +86,7 @@ def guided_row(name: str, settings: list[str], task: str, seed: int) -> EpisodeR
     """One sensor (``seed``) held by the simulated person in condition ``name``: the stop and the true errors."""
     cfg = config(settings, task, seed)
     s = check_settings(cfg)
-    policy = with_stop(instantiate_policy(plain(cfg.policy)[task], name), StopRule.from_config(plain(cfg.stop)))
+    policy = configured_policy(cfg, task, name)
     mdp = guided_mdp(cfg, policy)
     rig = build_robot(cfg.person, "person")
     try:
@@ -123,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="vical-guide settings for every condition (after each condition's own)")  # fmt: skip
     p.add_argument("--out", type=Path, help="a directory for results.csv and summary.md (written together)")
     p.add_argument("--reuse", type=Path, metavar="RESULTS_CSV",
-                   help="an earlier --out's results.csv: its rows of the conditions not run now join the table")
+                   help="an earlier --out's results.csv: the rows of conditions not run now")  # fmt: skip
     args = p.parse_args(argv)
     conditions = {name: [*CONDITIONS[name], *args.set] for name in CONDITIONS
                   if name == REFERENCE or name in args.conditions}  # fmt: skip

@@ -1,5 +1,6 @@
 """Collections that stopped early: a child process whose files the kernel stops growing (what a full disk does to a
-writer, without filling one), and the calibration of the recording a stopped collection left."""
+writer, without filling one), one that Ctrl-C reaches, and the calibration of the recording a stopped collection
+left."""
 
 import resource
 import signal
@@ -19,6 +20,12 @@ def file_size_limit(nbytes: int) -> Callable[[], None]:
         resource.setrlimit(resource.RLIMIT_FSIZE, (nbytes, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
 
     return limit
+
+
+def default_sigint() -> None:
+    """A ``preexec_fn`` for ``subprocess``: SIGINT's default action, as a terminal gives it (a shell's background job
+    inherits SIGINT ignored; Ctrl-C reaches the command only with the default action)."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def calibrate_joint(out: Path, calibration: Path) -> int:

@@ -14,7 +14,7 @@ import yaml
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 from scipy.spatial.transform import Rotation
-from stopped_collections import calibrate_joint, file_size_limit
+from stopped_collections import calibrate_joint, default_sigint, file_size_limit
 
 from vical.apps.collect import CONF_DIR, build_collector, check_settings, collect, mdp_config, nominal_sensor
 from vical.calib.metrics import parameter_errors
@@ -288,10 +288,6 @@ def test_the_greedy_planner_plans_on_the_arm_from_the_runners_state_and_reaches_
     assert summary["goal_reached"] and summary["steps"] < 20
 
 
-def _default_sigint() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 KILL_ARGS = ["policy=random_moving", "limits.max_steps=40", "calibrate=false", "seed=2"]
 
 
@@ -301,7 +297,7 @@ def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, s
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "vical.apps.collect", f"out={out}", *KILL_ARGS]
     # A shell's background job inherits SIGINT ignored; Ctrl-C reaches the app only with the default action.
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
     listed = out / "recording" / "mav0" / "cam0" / "data.csv"
     deadline = time.monotonic() + 240
     while (not listed.is_file() or listed.read_text().count("\n") < 120) and time.monotonic() < deadline:

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 import yaml
 from hydra import compose, initialize_config_dir
-from stopped_collections import calibrate_joint, file_size_limit
+from stopped_collections import calibrate_joint, default_sigint, file_size_limit
 
 from vical.apps.cli import plain
-from vical.apps.collect import build_robot, nominal_sensor
+from vical.apps.collect import build_robot, configured_policy, nominal_sensor
 from vical.apps.guide import CONF_DIR, build_guide, check_settings, guide, guided_mdp
 from vical.collection import page as page_module
 from vical.collection.page import GuidePage, PageSettings
@@ -33,7 +33,6 @@ from vical.io.bag import write_bag
 from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_camchain, read_target_yaml
 from vical.policies.learned import PAPER_POLICY_DIR
-from vical.policies.stopping import StopRule, with_stop
 from vical.robot import CameraDetections, CameraImage, Guidance
 
 
@@ -211,7 +210,7 @@ def test_while_the_planner_decides_a_viewed_sensor_streams_on_and_an_unviewed_si
     cfg = config("out=unused", "person.images=false", "page.enabled=false", "progress=false", "limits.max_steps=2",
                  "seed=3")  # fmt: skip
     s = check_settings(cfg)
-    policy = with_stop(instantiate_policy(plain(cfg.policy)["joint"], "planner"), StopRule.from_config(plain(cfg.stop)))
+    policy = configured_policy(cfg, "joint", "planner")
     mdp = guided_mdp(cfg, policy)
     rig = build_robot(cfg.person, "person")
     decisions, shown = [], []
@@ -319,10 +318,6 @@ def test_a_board_never_seen_stops_the_guide_before_it_records_in_one_line(tmp_pa
     )
 
 
-def _default_sigint() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 @pytest.mark.integration
 @pytest.mark.parametrize(("sig", "status", "name"), [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
 def test_an_interrupted_guide_says_so_in_one_line_and_keeps_a_calibratable_recording(tmp_path, sig, status, name):
@@ -331,7 +326,7 @@ def test_an_interrupted_guide_says_so_in_one_line_and_keeps_a_calibratable_recor
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "vical.apps.guide", f"out={out}", "page.port=0", "page.linger=0", "seed=3"]
     # A shell's background job inherits SIGINT ignored; Ctrl-C reaches the app only with the default action.
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint)
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
     try:
         for line in proc.stdout:
             if line.startswith("step 3:"):

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from imu_streams import static_stream
+from stopped_collections import default_sigint
 
 from vical.calib.synthetic import make_recording
 from vical.data import ImuNoise
@@ -88,11 +89,6 @@ def test_imu_noise_interrupted_in_the_allan_computation_writes_nothing(
 PROGRESS_BAR = re.compile(r"\d+%\|")
 
 
-def _default_sigint() -> None:
-    """A shell's background job inherits SIGINT ignored; Ctrl-C reaches the command only with the default action."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def signal_at_marker(
     app: str, args: list[str], marker: str, sig: int, cwd: Path | None = None
 ) -> tuple[int, list[str], str]:
@@ -100,7 +96,7 @@ def signal_at_marker(
     sleep); its exit status, its stderr lines that start with its name (its progress bars left out: they carry its
     name too), and its whole stderr."""
     proc = subprocess.Popen([str(Path(sys.executable).parent / app), *args], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, cwd=cwd, preexec_fn=_default_sigint)  # fmt: skip
+                            stderr=subprocess.PIPE, text=True, cwd=cwd, preexec_fn=default_sigint)  # fmt: skip
     seen = ""
     while marker not in seen:
         char = proc.stderr.read(1)
@@ -291,7 +287,7 @@ def test_a_real_signal_during_the_steps_stops_vical_sim_demo_in_one_line(sig, st
     """Signalled once it printed its start (the marker: 'Panda at home', on stdout), while it moves 200 steps."""
     proc = subprocess.Popen([str(Path(sys.executable).parent / "vical-sim-demo"), "--steps", "200"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=_default_sigint)  # fmt: skip
+                            preexec_fn=default_sigint)  # fmt: skip
     assert proc.stdout.readline().startswith("Panda at home")
     os.kill(proc.pid, sig)
     _, stderr = proc.communicate(timeout=60)

@@ -180,11 +180,17 @@ def aside(out: Path) -> Path:
     return unused_sibling(out, "new")
 
 
+def configured_policy(cfg: DictConfig, task: str, name: str | None = None) -> Policy:
+    """The ``policy`` group's policy for ``task`` with the ``stop`` group's stopping rule (``vical-collect``'s and
+    ``vical-guide``'s); ``name`` (None: the group's own) labels it."""
+    policy = instantiate_policy(plain(cfg.policy)[task], name or cfg.policy.get("name", "policy"))
+    return with_stop(policy, StopRule.from_config(plain(cfg.get("stop"))))
+
+
 def collect(cfg: DictConfig) -> int:
     """Collect and calibrate as ``cfg`` says; the exit status (module doc)."""
     s = check_settings(cfg)
-    policy = instantiate_policy(plain(cfg.policy)[s.task], cfg.policy.get("name", "policy"))
-    policy = with_stop(policy, StopRule.from_config(plain(cfg.get("stop"))))
+    policy = configured_policy(cfg, s.task)
     mdp = mdp_config(cfg, policy)
     policy.check(RobotEpisode(mdp))  # before connecting: a policy of another workspace or state
     rig = build_robot(cfg.robot)

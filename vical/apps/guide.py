@@ -39,6 +39,7 @@ from vical.apps.collect import (
     build_robot,
     calibrate_or_stop,
     check_output,
+    configured_policy,
     finish,
     lens_spread,
     mdp_config,
@@ -56,12 +57,10 @@ from vical.data import SensorTruth
 from vical.env.information import Guess
 from vical.env.lookahead import ReachTiming
 from vical.env.settings import MdpConfig
-from vical.evaluation.harness import instantiate_policy
 from vical.io.atomic import replace_directory
 from vical.io.euroc import EurocStreamWriter
 from vical.io.kalibr import write_imu_yaml, write_target_yaml
 from vical.policies.base import Policy
-from vical.policies.stopping import StopRule, with_stop
 from vical.robot import Guidance, Person
 
 APP = "vical-guide"
@@ -120,8 +119,7 @@ class Shown(Person):
 def guide(cfg: DictConfig) -> int:
     """Guide, record and calibrate as ``cfg`` says; the exit status (module doc)."""
     s = check_settings(cfg)
-    policy = instantiate_policy(plain(cfg.policy)[s.task], cfg.policy.get("name", "policy"))
-    policy = with_stop(policy, StopRule.from_config(plain(cfg.get("stop"))))
+    policy = configured_policy(cfg, s.task)
     mdp = guided_mdp(cfg, policy)
     policy.check(RobotEpisode(mdp))  # before anything starts: a policy of another workspace or state
     holder = build_robot(cfg.person, "person")
