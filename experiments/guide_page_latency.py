@@ -6,7 +6,7 @@ Measured against what it must keep up with, side by side in the same run:
   the guide hands it frames at a camera's 30 Hz, against that camera rate (a ratio >= 1: the page can show every
   frame of the sensor);
 - **instruction latency**: from the guide's ``show`` to a client polling ``/state.json`` as the page's script does
-  (every 250 ms) reading the new words, against the poll interval itself (what the script's polling costs
+  (every ``POLL_MS``) reading the new words, against the poll interval itself (what the script's polling costs
   unavoidably: half of it on average);
 - **state size**: the bytes of ``/state.json``.
 

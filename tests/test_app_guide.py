@@ -181,21 +181,40 @@ def _post(url: str) -> None:
 
 
 def test_a_closed_tab_is_gone_and_a_reloaded_one_is_not(monkeypatch):
-    """The tab's ``pagehide`` beacon (``POST /left``) followed by a poll is a reload: the person still sees the page;
-    followed by silence for ``RELOAD_GRACE_S``, the tab was closed: ``gone`` says so and ends ``wait_closed``."""
+    """A load of the page's ``pagehide`` beacon (``POST /left``) followed by another load's poll is a reload: the person
+    still sees the page; followed by silence for ``RELOAD_GRACE_S``, the tab was closed: ``gone`` says so and ends
+    ``wait_closed``. A poll of the closed load that reaches the server after its beacon (in flight when the tab
+    closed) does not bring it back."""
     monkeypatch.setattr(page_module, "RELOAD_GRACE_S", 0.3)
     page = GuidePage(CameraModel.from_hfov(1.0, 640, 480), Target.aprilgrid(), PageSettings(port=0))
     try:
-        _get(page.url + "/state.json")
+        _get(page.url + "/state.json?page=a")
         assert page.gone() is None
-        _post(page.url + "/left")
-        _get(page.url + "/state.json")  # the reloaded page polls
+        _post(page.url + "/left?page=a")
+        _get(page.url + "/state.json?page=b")  # the reloaded page polls
         time.sleep(0.4)
         assert page.gone() is None and not page.wait_closed(0.1)
-        _post(page.url + "/left")
+        _post(page.url + "/left?page=b")
+        _get(page.url + "/state.json?page=b")  # its last poll, in flight as the tab closed
         assert page.gone() is None  # within the grace: it may still be reloading
         started = time.monotonic()
         assert page.wait_closed(5.0) and time.monotonic() - started < 2.0
+        assert page.gone() == "the guide's page was closed"
+    finally:
+        page.close()
+
+
+def test_a_tab_closed_beside_another_open_one_leaves_the_person_watching(monkeypatch):
+    monkeypatch.setattr(page_module, "RELOAD_GRACE_S", 0.1)
+    page = GuidePage(CameraModel.from_hfov(1.0, 640, 480), Target.aprilgrid(), PageSettings(port=0))
+    try:
+        for load in ("a", "b"):
+            _get(page.url + f"/state.json?page={load}")
+        _post(page.url + "/left?page=a")
+        time.sleep(0.2)
+        assert page.gone() is None
+        _post(page.url + "/left?page=b")
+        time.sleep(0.2)
         assert page.gone() == "the guide's page was closed"
     finally:
         page.close()

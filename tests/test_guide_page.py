@@ -182,7 +182,9 @@ def test_a_closed_tab_stops_the_guide_with_one_line_and_a_calibratable_recording
     proc, output = _guide(out)
     try:
         browser.get(output.url)
-        browser.refresh()  # a reload is no close
+        browser.refresh()  # a reload is no close, nor is a visit elsewhere and back
+        browser.get("data:text/html,<p>elsewhere</p>")
+        browser.back()
         WebDriverWait(browser, 300, poll_frequency=0.2).until(lambda d: "step 4:" in output.text())
         _close_tab(browser)
         assert proc.wait(timeout=60) == 1, output.text()

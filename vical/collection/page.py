@@ -6,15 +6,18 @@ viewer (``SensorStream.viewer``: every frame with its detections). It serves, on
 threaded server, in a thread of its own; localhost only by default, nothing from the internet):
 
 - ``/``: the page (HTML, CSS and a script that polls the two below; no external resources);
-- ``/state.json``: the instruction, the groups' predicted error over tolerance, the time, the stage, the history of
-  instructions, the result;
+- ``/state.json?page=<id>``: the instruction, the groups' predicted error over tolerance, the time, the stage, the
+  history of instructions, the result;
 - ``/frame.jpg``: the latest frame (grey; a corner-level sensor's on a plain background) with the detected corners
   (green) and the board's outline where the next pose puts it (orange), projected with the guide's camera (the
   datasheet's, as the guide's PnP);
 - ``/files/<name>``: the calibration's files (results, plots, report) once it is done;
 - ``POST /close``: the person has read the result: the app stops serving (``wait_closed``);
-- ``POST /left``: the tab is going away (its ``pagehide``): unless the page polls again within ``RELOAD_GRACE_S`` (a
-  reload), the person has closed it and ``gone`` says so (the guide stops, keeping the recording).
+- ``POST /left?page=<id>``: the tab is going away (its ``pagehide``): unless another load of the page polls within
+  ``RELOAD_GRACE_S`` (a reload), the person has closed it and ``gone`` says so (the guide stops, keeping the recording).
+
+Each load of the page polls with an id of its own: a poll that was in flight when its tab closed may reach the server
+after the tab's ``/left``, and must not count as the page being back.
 
 The script polls ``/state.json`` every ``POLL_MS`` and loads the next frame whenever there is a new one and the last
 has loaded: the live image follows the sensor at up to 1000 / ``POLL_MS`` frames a second.
@@ -48,7 +51,7 @@ DETECTED = (60, 200, 60)  # BGR
 OUTLINE = (0, 140, 255)  # BGR
 FILE_SUFFIXES = (".png", ".pdf", ".txt", ".yaml", ".csv")  # what /files serves
 POLL_MS = 100  # [ms] between the script's polls: a 10 Hz live image at most, an instruction seen 50 ms late on average
-RELOAD_GRACE_S = 3.0  # [s] a tab that left and has not polled again since is closed, not reloading
+RELOAD_GRACE_S = 3.0  # [s] a tab that left with no other load of the page polling since is closed, not reloading
 
 
 @dataclass(frozen=True)
@@ -75,8 +78,9 @@ class GuidePage(Person):
         self.target = target
         self._lock = threading.Lock()
         self._closed = threading.Event()
-        self._polled_at: float | None = None  # [s] monotonic: the script's last poll
-        self._left_at: float | None = None  # [s] monotonic: the tab's last ``pagehide``
+        self._polling: set[str] = set()  # the page's loads (their ids) that poll and have not left
+        self._left: set[str] = set()  # the loads that left: polls of theirs still in flight do not bring them back
+        self._left_at: float | None = None  # [s] monotonic: the last ``pagehide`` of a load
         self._frame: np.ndarray | None = None  # the latest image, grey (H, W)
         self._corners = np.zeros((0, 2))
         self._frames = 0
@@ -123,8 +127,8 @@ class GuidePage(Person):
     def gone(self) -> str | None:
         """Why the person no longer sees the page (its tab closed), or None (``vical.robot.Person.gone``)."""
         with self._lock:
-            left, polled = self._left_at, self._polled_at
-        if left is None or (polled is not None and polled > left) or time.monotonic() - left < RELOAD_GRACE_S:
+            left, polling = self._left_at, bool(self._polling)
+        if left is None or polling or time.monotonic() - left < RELOAD_GRACE_S:
             return None
         return "the guide's page was closed"
 
@@ -194,8 +198,10 @@ class GuidePage(Person):
         if path == "/":
             return Response(PAGE, mimetype="text/html")
         if path == "/state.json":
+            load = request.args.get("page", "")
             with self._lock:
-                self._polled_at = time.monotonic()
+                if load not in self._left:
+                    self._polling.add(load)
             return Response(json.dumps(self._state()), mimetype="application/json", headers=NO_CACHE)
         if path == "/frame.jpg":
             return Response(self._jpeg(), mimetype="image/jpeg", headers=NO_CACHE)
@@ -203,7 +209,10 @@ class GuidePage(Person):
             self._closed.set()
             return Response("closed", mimetype="text/plain")
         if path == "/left" and request.method == "POST":
+            load = request.args.get("page", "")
             with self._lock:
+                self._polling.discard(load)
+                self._left.add(load)
                 self._left_at = time.monotonic()
             return Response("left", mimetype="text/plain")
         if path.startswith("/files/"):
@@ -270,6 +279,8 @@ pre { background: #fff; border: 1px solid #ccc; padding: 0.5em; max-width: 60em;
 <script>
 const live = document.getElementById("live");
 let frames = -1, loading = !live.complete;  // the first frame loads with the page
+const newLoad = () => Date.now().toString(36) + Math.random().toString(36).slice(2);
+let load = newLoad();  // this load's id (module doc); restored from the back-forward cache, it polls as a new one
 live.onload = live.onerror = () => { loading = false; };
 function bar(name, ratio) {
   const row = document.createElement("div");
@@ -295,7 +306,7 @@ function files(names) {
 }
 async function poll() {
   try {
-    const s = await (await fetch("/state.json", {cache: "no-store"})).json();
+    const s = await (await fetch("/state.json?page=" + load, {cache: "no-store"})).json();
     const words = document.getElementById("words");
     words.textContent = s.words || s.stage; words.className = s.done ? "done" : "";
     document.getElementById("elapsed").textContent = s.elapsed_s.toFixed(1);
@@ -315,7 +326,8 @@ async function poll() {
   } catch (e) { document.getElementById("stage").textContent = "the guide has stopped serving"; return; }
   setTimeout(poll, __POLL_MS__);
 }
-addEventListener("pagehide", () => navigator.sendBeacon("/left"));
+addEventListener("pagehide", () => navigator.sendBeacon("/left?page=" + load));  // polls may follow it: same id
+addEventListener("pageshow", e => { if (e.persisted) load = newLoad(); });
 document.getElementById("close").onclick = async () => {
   await fetch("/close", {method: "POST"});
   document.getElementById("stage").textContent = "closed";
