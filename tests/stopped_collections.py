@@ -1,9 +1,10 @@
 """Collections that stopped early: a child process whose files the kernel stops growing (what a full disk does to a
-writer, without filling one), one that Ctrl-C reaches, and the calibration of the recording a stopped collection
-left."""
+writer, without filling one), one that Ctrl-C reaches, one still running when its test ends, and the calibration of
+the recording a stopped collection left."""
 
 import resource
 import signal
+import subprocess
 from collections.abc import Callable
 from pathlib import Path
 
@@ -26,6 +27,13 @@ def default_sigint() -> None:
     """A ``preexec_fn`` for ``subprocess``: SIGINT's default action, as a terminal gives it (a shell's background job
     inherits SIGINT ignored; Ctrl-C reaches the command only with the default action)."""
     signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
+def kill_if_running(proc: subprocess.Popen) -> None:
+    """Kill ``proc`` if it still runs (a test that failed before it stopped), and reap it."""
+    if proc.poll() is None:
+        proc.kill()
+        proc.wait()
 
 
 def calibrate_joint(out: Path, calibration: Path) -> int:

@@ -296,7 +296,6 @@ KILL_ARGS = ["policy=random_moving", "limits.max_steps=40", "calibrate=false", "
 def test_a_killed_or_interrupted_run_leaves_a_calibratable_recording(tmp_path, sig):
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "vical.apps.collect", f"out={out}", *KILL_ARGS]
-    # A shell's background job inherits SIGINT ignored; Ctrl-C reaches the app only with the default action.
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
     listed = out / "recording" / "mav0" / "cam0" / "data.csv"
     deadline = time.monotonic() + 240

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 from hydra import compose, initialize_config_dir
-from stopped_collections import calibrate_joint, default_sigint, file_size_limit
+from stopped_collections import calibrate_joint, default_sigint, file_size_limit, kill_if_running
 
 from vical.apps.cli import plain
 from vical.apps.collect import build_robot, configured_policy, nominal_sensor
@@ -344,7 +344,6 @@ def test_an_interrupted_guide_says_so_in_one_line_and_keeps_a_calibratable_recor
     reads): status 130 / 143, one line saying where the recording is, and the recording so far calibrates."""
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "vical.apps.guide", f"out={out}", "page.port=0", "page.linger=0", "seed=3"]
-    # A shell's background job inherits SIGINT ignored; Ctrl-C reaches the app only with the default action.
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
     try:
         for line in proc.stdout:
@@ -353,9 +352,7 @@ def test_an_interrupted_guide_says_so_in_one_line_and_keeps_a_calibratable_recor
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
     finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        kill_if_running(proc)
     assert proc.returncode == status, err
     (line,) = [line for line in err.splitlines() if line.startswith("vical-guide")]
     assert line.startswith(f"vical-guide: interrupted ({name}): the recording so far is in {out / 'recording'} ("), line

@@ -21,7 +21,7 @@ from selenium import webdriver
 from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import WebDriverWait
-from stopped_collections import calibrate_joint
+from stopped_collections import calibrate_joint, kill_if_running
 
 from vical.io.euroc import read_euroc
 from vical.io.kalibr import read_target_yaml
@@ -89,12 +89,6 @@ def _guide(out: Path, *settings: str) -> tuple[subprocess.Popen, Output]:
     return proc, output
 
 
-def _ended(proc: subprocess.Popen) -> None:
-    if proc.poll() is None:
-        proc.kill()
-        proc.wait()
-
-
 # What the page showed and when (Date.now() [ms]): each loaded live image, each new instruction, each new set of bars.
 WATCH = """
 const log = window.vicalLog = {images: [], words: [], bars: []};
@@ -153,7 +147,7 @@ def test_the_page_guides_a_simulated_person_live_until_done_and_shows_the_result
         browser.find_element(By.ID, "close").click()
         assert proc.wait(timeout=60) == 0, output.text()
     finally:
-        _ended(proc)
+        kill_if_running(proc)
     assert (out / "calibration" / "camchain-imucam.yaml").is_file()
     # The live image while the person was guided (the first instruction to "done"), decisions included.
     first, done = log["words"][0][0], next(t for t, w in log["words"] if w.startswith("done"))
@@ -189,7 +183,7 @@ def test_a_closed_tab_stops_the_guide_with_one_line_and_a_calibratable_recording
         _close_tab(browser)
         assert proc.wait(timeout=60) == 1, output.text()
     finally:
-        _ended(proc)
+        kill_if_running(proc)
     (line,) = [line for line in output.lines if line.startswith("vical-guide: error")]
     assert line.startswith("vical-guide: error: stopped: the guide's page was closed;"), line
     assert f"the recording so far is in {out / 'recording'}" in line
@@ -212,6 +206,6 @@ def test_a_lost_sensor_stops_the_guide_and_the_page_says_why(tmp_path, browser):
         browser.find_element(By.ID, "close").click()
         assert proc.wait(timeout=60) == 1, output.text()
     finally:
-        _ended(proc)
+        kill_if_running(proc)
     assert "the recording so far is in" in output.text()
     assert len(read_euroc(out / "recording", read_target_yaml(out / "target.yaml")).frames) >= 40
