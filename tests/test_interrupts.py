@@ -124,7 +124,7 @@ def test_a_real_signal_during_the_allan_computation_stops_vical_imu_noise_in_one
     out = tmp_path / "out"
     command = [str(path), "--out", str(out)]
     status_seen, lines, stderr = signal_at_marker("vical-imu-noise", command, "Allan deviation", sig)  # progress bar
-    assert status_seen == status
+    assert status_seen == status, stderr
     assert lines == [f"vical-imu-noise: interrupted ({name}); --out {out} is as it was: the outputs are written "
                      "whole or not at all"], stderr  # fmt: skip
     assert "Traceback" not in stderr and not out.exists()
@@ -153,7 +153,7 @@ def test_a_real_signal_during_the_detection_stops_vical_calibrate_in_one_line(si
     command = [str(root / "euroc"), "--target", str(root / "target.yaml"), "--imu-yaml", str(root / "imu.yaml"),
                "--out", str(out)]  # fmt: skip
     status_seen, lines, stderr = signal_at_marker("vical-calibrate", command, "EuRoC cam0", sig)  # the detection's bar
-    assert status_seen == status
+    assert status_seen == status, stderr
     assert lines == [f"vical-calibrate: interrupted ({name}); --out {out} is as it was: the outputs are written "
                      "whole or not at all"], stderr  # fmt: skip
     assert "Traceback" not in stderr and not out.exists()
@@ -165,7 +165,7 @@ def test_a_real_signal_while_a_static_imu_is_generated_stops_vical_record_in_one
     out = tmp_path / "static"
     status_seen, lines, stderr = signal_at_marker("vical-record", ["mode=static_imu", f"out={out}"], "vical-record:",
                                                   sig)  # fmt: skip
-    assert status_seen == status
+    assert status_seen == status, stderr
     assert lines == [as_it_was("vical-record", f"out={out}", name)], stderr
     assert "Traceback" not in stderr and not out.exists()
     assert_next_run_leaves_no_temporary(["mode=static_imu", "static_duration=60", f"out={out}"], tmp_path)
@@ -186,7 +186,7 @@ def test_a_real_signal_while_frames_are_rendered_stops_vical_record_in_one_line(
     out = tmp_path / "rec"
     args = ["sensor.backend=render", "images=true", f"out={out}"]
     status_seen, lines, stderr = signal_at_marker("vical-record", args, "vical-record:", sig)  # the steps' bar
-    assert status_seen == status
+    assert status_seen == status, stderr
     assert lines == [as_it_was("vical-record", f"out={out}", name)], stderr
     assert "Traceback" not in stderr and not out.exists()
     assert_next_run_leaves_no_temporary(["steps=[[0.0,0.04,0.0,0.0,0.0,0.1]]", f"out={out}"], tmp_path)
@@ -213,7 +213,7 @@ def test_a_real_signal_while_the_bag_is_written_stops_vical_export_in_one_line(
     out = tmp_path / "kalibr_in"
     args = [str(recording_with_images), "--out", str(out)]
     status_seen, lines, stderr = signal_at_marker("vical-export", args, "writing data.bag", sig)
-    assert status_seen == status
+    assert status_seen == status, stderr
     assert lines == [as_it_was("vical-export", f"--out {out}", name)], stderr
     assert "Traceback" not in stderr and not out.exists()
 
@@ -224,7 +224,7 @@ def test_a_real_signal_during_the_episodes_stops_vical_evaluate_in_one_line(sig,
     out = tmp_path / "evaluation"
     args = ["episodes=3", "budgets=[]", f"out={out}"]
     status_seen, lines, stderr = signal_at_marker("vical-evaluate", args, "episodes:", sig, cwd=tmp_path)
-    assert status_seen == status
+    assert status_seen == status, stderr
     assert lines == [as_it_was("vical-evaluate", f"out={out}", name)], stderr
     assert "Traceback" not in stderr and sorted(tmp_path.iterdir()) == []
 
