@@ -1,6 +1,8 @@
 """Camera backends: analytic projection with visibility rules, rendering + distortion warp + detection."""
 
 import os
+import signal
+import sys
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -260,3 +262,45 @@ def test_render_of_a_180_deg_fisheye_matches_the_projection(sim, target, rendere
     dark = ~renderer.views.seen
     assert dark[0, 0] and dark[-1, -1] and not dark[240, 320]
     assert image[dark].max() == 0 and image[~dark].max() > 200  # the white board squares
+
+
+def _opengl_calls(k: int | None, counted: list[int]):
+    """A trace function: count the calls into PyOpenGL's Python code (its ctypes argument converters among them) and
+    send this process SIGINT at the ``k``-th: a Ctrl-C landing inside the GL context's calls."""
+
+    def trace(frame, event, arg):
+        if event == "call" and f"{os.sep}OpenGL{os.sep}" in frame.f_code.co_filename:
+            counted[0] += 1
+            if counted[0] == k:
+                signal.raise_signal(signal.SIGINT)
+        return None
+
+    return trace
+
+
+def test_a_ctrl_c_inside_the_gl_calls_of_a_render_stops_it_as_an_interrupt(sim, renderer):
+    """ctypes turns an exception raised while it converts a foreign call's argument into ``ctypes.ArgumentError``: a
+    Ctrl-C landing in PyOpenGL's converters (the GL context made current at every render) must still end the render as
+    ``KeyboardInterrupt`` (a command's one line and status 130), and the renderer renders on after it."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)  # an xdist worker may ignore SIGINT
+    try:
+        sim.reset()
+        renderer.set_camera(mean_sensor(SensorSampling()).camera)
+        T = camera_pose_cv(sim.model, sim.data)
+        counted = [0]
+        sys.settrace(_opengl_calls(None, counted))
+        try:
+            expected = renderer.image(sim.data, T)
+        finally:
+            sys.settrace(None)
+        assert counted[0] >= 1  # the render calls into PyOpenGL (EGL's eglMakeCurrent)
+        for k in range(1, counted[0] + 1):
+            sys.settrace(_opengl_calls(k, [0]))
+            try:
+                with pytest.raises(KeyboardInterrupt):
+                    renderer.image(sim.data, T)
+            finally:
+                sys.settrace(None)
+        np.testing.assert_array_equal(renderer.image(sim.data, T), expected)
+    finally:
+        signal.signal(signal.SIGINT, previous)
