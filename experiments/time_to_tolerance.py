@@ -123,7 +123,8 @@ def main() -> None:
             files.append(evaluate(task, where / f"handover_{Path(run).name}", ["handover"], run, args, "handover"))
         rows = by_policy([row for path in files for row in read_results(path)])
         tolerances = rule["information"]["tolerances"]
-        stops = summarize_stops(rows, task, tolerances, label(args.reference), rule["horizon_s"])
+        verifying = rule["out_of_reach"] and rule["verify_s"] is not None
+        stops = summarize_stops(rows, task, tolerances, label(args.reference), rule["horizon_s"], verifying)
         print(f"\n## {task} task, sensor={args.sensor}, seeds {args.seed}..{args.seed + args.episodes - 1}\n")
         print(stops_table(stops))
     for run in [args.reference, *args.runs]:

@@ -421,3 +421,21 @@ def test_the_guide_reads_a_recorded_sensor_stream_over_ros(tmp_path, capsys, ros
     _, T_first, _ = read_camchain(first / "calibration" / "camchain-imucam.yaml")
     _, T_ros, _ = read_camchain(out / "calibration" / "camchain-imucam.yaml")
     assert np.linalg.norm(T_ros[:3, 3] - T_first[:3, 3]) < 0.01
+
+
+@pytest.mark.integration
+def test_a_tolerance_out_of_reach_within_the_time_limit_stops_the_guide_saying_which_group_and_why(tmp_path, capsys):
+    """A tuning sensor with a 5.3x-noise IMU (sensor=practitioner, seed 40000) held by the simulated person: its time
+    offset cannot reach 0.1 ms within 40 s; the person is told to stop, and why, instead of holding on to the limit."""
+    out = tmp_path / "out"
+    args = [f"out={out}", "page.enabled=false", "sensor=practitioner", "seed=40000", "limits.time_limit=40",
+            "calibrate=false"]  # fmt: skip
+    assert guide(config(*args)) == 0
+    summary = yaml.safe_load((out / "collect.yaml").read_text())
+    verdict = summary["out_of_reach"]
+    assert not summary["goal_reached"] and summary["duration_s"] < 40 and verdict["horizon_s"] == 40
+    assert summary["outcome"] == f"done: out of reach: {verdict['reason']}"
+    captured = capsys.readouterr()
+    assert f"stopped at out of reach: {verdict['reason']}: " in captured.out
+    assert "goal at ~" in captured.out  # each step's line: when the goal is due at this rate
+    assert f"vical-guide: out of reach: {verdict['reason']} (collect.yaml: out_of_reach)" in captured.err

@@ -367,6 +367,13 @@ SUBPROCESS_CASES = [
     Case("vical-evaluate", "sensor.camera.hfov.mean=5", "sensor.camera.hfov.mean must be a number in (0.0, 3.14"),
     Case("vical-evaluate", "stop=information stop.max_steps=0", "stop.max_steps must be null or an integer >= 1"),
     Case("vical-evaluate", "stop=information stop.horizon_s=-5", "stop.horizon_s must be null or a time > 0"),
+    Case("vical-evaluate", "stop=information stop.horizon_s=0.2", "stop.horizon_s must be at least one step"),
+    Case("vical-evaluate", "sensor.imu.gyro_noise=0", "sensor.imu.gyro_noise must be a number in (0.0, inf)"),
+    Case("vical-collect", "limits.horizon_s=0.2 out=c", "limits.horizon_s must be at least one step of recording"),
+    Case("vical-collect", "sensor.imu.accel_noise=0 out=c", "sensor.imu.accel_noise must be a number in (0.0, inf)"),
+    Case("vical-guide", "limits.time_limit=0.5 page.enabled=false out=c", "limits.horizon_s must be at least one step"),
+    Case("vical-train", "env=information env.information.tolerances.rotation_deg=0", "tolerances.rotation_deg must be"),
+    Case("vical-train", "env=information env.information.tolerances.focal_px=-1", "tolerances.focal_px must be a"),
     Case(
         "vical-evaluate",
         "sensor=practitioner sensor.products.imu_noise_scale.low=20",

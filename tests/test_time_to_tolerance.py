@@ -71,3 +71,23 @@ def test_a_common_horizon_counts_every_run_not_stopped_by_then_at_it():
     assert capped.stopped == 0.25 and capped.right == 1.0
     assert capped.time_s == pytest.approx((20.0 + 3 * 45.0) / 4) and capped.median_time_s == 45.0
     assert capped.cut_short == 0.25
+
+
+def test_runs_stopped_as_out_of_reach_count_at_the_horizon_and_their_verdicts_and_forecasts_are_checked():
+    runs = [
+        row("p", 0, True, 20.0, 1.0),  # the goal at 20 s, predicted halfway at 25 s: within 1.5x
+        row("p", 1, True, 10.0, 0.5),  # predicted at 30 s: not within 1.5x
+        row("p", 2, False, 18.0, 1.0),  # out of reach at 18 s, and not reached by 90 s: right
+        row("p", 3, False, 25.0, 1.2),  # out of reach at 25 s, but reached at 70 s: wrong
+        row("p", 4, False, 45.0, 2.0),  # neither: ran to the horizon
+    ]
+    runs[0].predicted_s, runs[1].predicted_s = 25.0, 30.0
+    runs[2].out_of_reach, runs[2].verdict_s = "time_offset", 18.0
+    runs[3].out_of_reach, runs[3].verdict_s, runs[3].reached_s = "rotation", 25.0, 70.0
+    (p,) = summarize_stops({"p": runs}, "joint", TOLERANCES, None, horizon_s=45.0, verifying=True)
+    assert p.stopped == pytest.approx(2 / 5) and p.out_of_reach == pytest.approx(2 / 5)
+    assert p.verdict_right == 0.5 and p.forecast_right == 0.5
+    assert p.time_s == pytest.approx((20.0 + 10.0 + 3 * 45.0) / 5)  # giving up early is never rewarded
+    assert p.cut_short == 0.0  # a verdict is an end, not a limit
+    (unchecked,) = summarize_stops({"p": runs}, "joint", TOLERANCES, None, horizon_s=45.0)
+    assert math.isnan(unchecked.verdict_right)  # not run on: nothing to check the verdicts by

@@ -37,6 +37,7 @@ from vical.config_checks import ConfigError, from_mapping, require
 from vical.data import SensorTruth, Target
 from vical.env.calibration import declared_lens_spread
 from vical.env.information import Guess, LensSpread
+from vical.env.reachability import check_horizon
 from vical.env.settings import MdpConfig
 from vical.evaluation.harness import instantiate_policy, policy_mdp
 from vical.io.atomic import replace_directory, unused_sibling
@@ -193,6 +194,7 @@ def collect(cfg: DictConfig) -> int:
     policy = configured_policy(cfg, s.task)
     mdp = mdp_config(cfg, policy)
     policy.check(RobotEpisode(mdp))  # before connecting: a policy of another workspace or state
+    check_horizon(s.limits.horizon_s, "limits.horizon_s", mdp.reset_hold, RobotEpisode(mdp).step_timing)
     rig = build_robot(cfg.robot)
     try:
         nominal = nominal_sensor(s, rig)
@@ -278,6 +280,8 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
               file=sys.stderr)  # fmt: skip
         raise SystemExit(interrupted_status(err)) from None
     write_summary(s, result, f"done: {result.reason}", writer.frames)
+    if result.out_of_reach is not None:  # the reason, whatever the progress lines: what to change, and where
+        print(f"{APP}: {result.reason} (collect.yaml: out_of_reach)", file=sys.stderr)
     _write_bag(cfg, s)
     return result
 
@@ -337,10 +341,17 @@ def _calibrate(s: CollectionOutput, report: bool) -> int:
 
 
 def write_summary(s: CollectionOutput, result: CollectResult | None, outcome: str, frames: int) -> None:
+    """``collect.yaml``: how the collection ended; for a finished one, its numbers, the verdict of a run stopped as out
+    of reach and each goal group's forecast (its ratio to tolerance, the recording it needs, its ratio at the
+    horizon)."""
     summary: dict[str, Any] = {"outcome": outcome, "frames": frames, "task": s.task}
     if result is not None:
         summary.update({"steps": result.steps, "path_length_m": round(result.path_length, 4),
                         "duration_s": round(result.duration, 3), "goal_reached": result.goal_reached})  # fmt: skip
+        if result.out_of_reach is not None:
+            summary["out_of_reach"] = result.out_of_reach.as_dict()
+        if result.forecast:
+            summary["forecast"] = {g: f.as_dict() for g, f in result.forecast.items()}
     dump_yaml(s.out / "collect.yaml", summary)
 
 

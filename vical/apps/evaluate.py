@@ -292,19 +292,25 @@ def _interval_cell(interval: Interval | None, fmt: str) -> str:
 def stops_table(stops: Sequence[StopSummary]) -> str:
     """Markdown table of ``vical.evaluation.time_to_tolerance.summarize_stops``."""
     lines = [
-        "| policy | sensors | stopped | right | cut short | time [s] (mean / median) | path [m] "
-        "| decision [ms / step] | time vs reference [s] | path vs reference [m] |",
-        "|" + "---|" * 10,
+        "| policy | sensors | stopped | right | out of reach | verdict right | forecast within 1.5x | cut short "
+        "| time [s] (mean / median) | path [m] | decision [ms / step] | time vs reference [s] "
+        "| path vs reference [m] |",
+        "|" + "---|" * 13,
     ]
     for s in stops:
-        right = "-" if math.isnan(s.right) else f"{s.right:.0%}"
+        right, verdict, forecast = (_share_cell(v) for v in (s.right, s.verdict_right, s.forecast_right))
         decision = "-" if math.isnan(s.decision_ms) else f"{s.decision_ms:.1f}"
         time_versus, path_versus = _interval_cell(s.time_versus, "{:+.1f}"), _interval_cell(s.path_versus, "{:+.2f}")
         lines.append(
-            f"| {s.policy} | {s.sensors} | {s.stopped:.0%} | {right} | {s.cut_short:.0%} | "
-            f"{s.time_s:.1f} / {s.median_time_s:.1f} | {s.path_m:.2f} | {decision} | {time_versus} | {path_versus} |"
+            f"| {s.policy} | {s.sensors} | {s.stopped:.0%} | {right} | {s.out_of_reach:.0%} | {verdict} | {forecast} "
+            f"| {s.cut_short:.0%} | {s.time_s:.1f} / {s.median_time_s:.1f} | {s.path_m:.2f} | {decision} "
+            f"| {time_versus} | {path_versus} |"
         )
     return "\n".join(lines)
+
+
+def _share_cell(value: float) -> str:
+    return "-" if math.isnan(value) else f"{value:.0%}"
 
 
 def overridden_env_keys(overrides: Sequence[str]) -> list[str]:
@@ -363,7 +369,8 @@ def evaluate(
     stops = []
     if stop.rule == "information":
         tolerances = information_settings(stop)["information"]["tolerances"]
-        stops = summarize_stops(rows, cfg.task.name, tolerances, reference, stop.horizon_s)
+        verifying = stop.out_of_reach and stop.verify_s is not None
+        stops = summarize_stops(rows, cfg.task.name, tolerances, reference, stop.horizon_s, verifying)
     with files_together(out) as path_of:  # overwrite=true: the old set stays until the new one is whole
         path_of(RESULTS).write_text(results_csv(evaluations))
         path_of(SUMMARY).write_text(summary_markdown(cfg, summaries, seeds, effort, reference, stop, stops))
@@ -391,7 +398,8 @@ def yardstick_config(task: str, kind: str = "yardstick") -> dict[str, Any]:
     }
     stop = StopRule.from_config(plain(cfg.get("stop")))
     if stop.rule == "information":
-        out["stop"] = {**information_settings(stop), "horizon_s": stop.horizon_s}
+        out["stop"] = {**information_settings(stop), "horizon_s": stop.horizon_s, "out_of_reach": stop.out_of_reach,
+                       "verify_s": stop.verify_s}  # fmt: skip
     return out
 
 

@@ -56,6 +56,7 @@ from vical.config_checks import ConfigError, from_mapping
 from vical.data import SensorTruth
 from vical.env.information import Guess
 from vical.env.lookahead import ReachTiming
+from vical.env.reachability import check_horizon
 from vical.env.settings import MdpConfig
 from vical.io.atomic import replace_directory
 from vical.io.euroc import EurocStreamWriter
@@ -122,6 +123,7 @@ def guide(cfg: DictConfig) -> int:
     policy = configured_policy(cfg, s.task)
     mdp = guided_mdp(cfg, policy)
     policy.check(RobotEpisode(mdp))  # before anything starts: a policy of another workspace or state
+    check_horizon(s.limits.horizon_s, "limits.horizon_s", mdp.reset_hold, ReachTiming(rest=mdp.settle_time))
     holder = build_robot(cfg.person, "person")
     page = None
     try:
@@ -216,6 +218,8 @@ def _run(cfg, s: GuideSettings, holder, policy, mdp, nominal, page) -> CollectRe
         print(f"{APP}: interrupted ({interrupted_by(err)}): {recording_kept(s, writer)}", file=sys.stderr)
         raise SystemExit(interrupted_status(err)) from None
     write_summary(s, result, f"done: {result.reason}", writer.frames)
+    if result.out_of_reach is not None:  # the reason, whatever the progress lines: what to change, and where
+        print(f"{APP}: {result.reason} (collect.yaml: out_of_reach)", file=sys.stderr)
     return result
 
 

@@ -57,6 +57,7 @@ from vical.policies.base import Policy
 from vical.robot import Guidance, Person, ViSensor
 
 DONE = "done: hold still, the calibration is good enough"
+OUT_OF_REACH = "stop: this sensor cannot reach the tolerances in time"
 
 
 @dataclass(frozen=True)
@@ -210,14 +211,17 @@ class Guide(LiveEpisode):
         episode = self.episode
         episode.state, episode.frame = self.state, frame
         self.policy.reset(episode, np.random.default_rng(seed))
-        reason = run_policy(self.policy, episode, self.limits, lambda action: self._step(frame, action),
-                            lambda: self._elapsed() > self.limits.time_limit, self._decision_wait())  # fmt: skip
-        if self.state.goal_reached:
-            self.person.show(Guidance(None, DONE, dict(self.state.goal_ratios), self._elapsed(), done=True))
+        reason, verdict = run_policy(self.policy, episode, self.limits, lambda action: self._step(frame, action),
+                                     lambda: self._elapsed() > self.limits.time_limit,
+                                     self._decision_wait())  # fmt: skip
+        if self.state.goal_reached or verdict is not None:
+            words = DONE if verdict is None else f"{OUT_OF_REACH}: {verdict.line()}"
+            self.person.show(Guidance(None, words, dict(self.state.goal_ratios), self._elapsed(), done=True))
         self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, "
                       f"{self._elapsed():.1f} s")  # fmt: skip
         return CollectResult(episode.steps, self.state.path_length, self._elapsed(), self.stream.frames,
-                             self.state.goal_reached, reason, episode.decision_s)  # fmt: skip
+                             self.state.goal_reached, reason, episode.decision_s, verdict,
+                             self.state.forecast(self.limits.horizon_s))  # fmt: skip
 
     def _step(self, frame: PoseFrame, action: np.ndarray) -> None:
         """Show the action's goal, wait for the person to settle, update the state with where the sensor is."""
@@ -317,4 +321,4 @@ class Guide(LiveEpisode):
         if not goal:
             return "no state"
         worst = max(goal, key=goal.get)
-        return f"worst {worst} {goal[worst]:.2f}x tolerance"
+        return f"worst {worst} {goal[worst]:.2f}x tolerance{self.state.reach.outlook()}"

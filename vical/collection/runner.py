@@ -43,6 +43,7 @@ from vical.data import NS_PER_S, ImuSamples, Target
 from vical.env.actions import goal_offset
 from vical.env.information import Guess
 from vical.env.lookahead import ArmTiming, StepTiming
+from vical.env.reachability import GroupForecast, OutOfReach
 from vical.env.settings import MdpConfig
 from vical.env.state import EpisodeState
 from vical.env.workspace import PoseFrame, look_at_rotation
@@ -114,6 +115,9 @@ class Limits:
     Attributes:
         max_steps: policy steps (None: the MDP's ``max_steps``).
         time_limit: [s] wall time of the whole collection.
+        horizon_s: [s] of recording within which the tolerances must be reached: the run stops there, or as soon as
+            the information state's forecast calls a group out of reach within it (``vical.env.reachability``);
+            None: no horizon.
         lost_frames: consecutive frames without the board that stop the run.
         max_refused: consecutive steps the arm refuses (with their fallbacks) that stop the run.
         max_imu_gap: [s] the longest gap between IMU samples that is not a broken stream.
@@ -123,6 +127,7 @@ class Limits:
 
     max_steps: int | None = None
     time_limit: float = 900.0
+    horizon_s: float | None = 45.0
     lost_frames: int = 60
     max_refused: int = 3
     max_imu_gap: float = 0.1
@@ -135,14 +140,17 @@ class Limits:
         for name in ("time_limit", "max_imu_gap", "wait_timeout"):
             if not float(getattr(self, name)) > 0:
                 raise ValueError(f"limits.{name} must be > 0, got {getattr(self, name)}")
+        if self.horizon_s is not None and not float(self.horizon_s) > 0:
+            raise ValueError(f"limits.horizon_s must be > 0 [s of recording] or null, got {self.horizon_s}")
         if int(self.lost_frames) < 1 or int(self.max_refused) < 1 or float(self.poll_interval) < 0:
             raise ValueError("limits.lost_frames and limits.max_refused must be >= 1, limits.poll_interval >= 0")
 
 
 @dataclass(frozen=True)
 class CollectResult:
-    """What a collection did: steps, path [m], sensor time [s], frames, why it ended and the policy's total time
-    choosing its actions [s] (wall time: what the arm or the person waited)."""
+    """What a collection did: steps, path [m], sensor time [s], frames, why it ended, the policy's total time
+    choosing its actions [s] (wall time: what the arm or the person waited), the verdict of a run stopped as out of
+    reach and each goal group's forecast at the end (``vical.env.reachability``)."""
 
     steps: int
     path_length: float
@@ -151,6 +159,8 @@ class CollectResult:
     goal_reached: bool
     reason: str
     decision_s: float = 0.0
+    out_of_reach: OutOfReach | None = None
+    forecast: dict[str, GroupForecast] = field(default_factory=dict)
 
 
 class RobotEpisode:
@@ -283,25 +293,32 @@ def run_policy(
     step: Callable[[np.ndarray], None],
     over_time: Callable[[], bool],
     wait: Callable[[Callable[[], bool]], None] | None = None,
-) -> str:
+) -> tuple[str, OutOfReach | None]:
     """The policy loop of an episode off the env (the arm's and the guided person's): act, ``step``, until the policy's
-    last waypoint, its stopping rule, the step limit or ``over_time()``; why it stopped. With ``wait``, each action is
+    last waypoint, its stopping rule, the forecast's out-of-reach verdict or the horizon (``limits.horizon_s``), the
+    step limit or ``over_time()``; why it stopped, and the verdict when it was one. With ``wait``, each action is
     decided while ``wait`` runs (``decide``)."""
     state, mdp = episode.state, episode.config
     max_steps = limits.max_steps or policy.max_steps or mdp.max_steps
+    judged = policy.stop_at_coverage and state.reach is not None  # a policy that stops at the goal gives up too
     while episode.steps < max_steps:
         deciding = time.perf_counter()
         action = decide(policy, state.observation(episode.pose_offset, episode.steps), episode, wait)
         episode.decision_s += time.perf_counter() - deciding
         if policy.finished:
-            return "the policy's last waypoint"
+            return "the policy's last waypoint", None
         step(action)
         if policy.stop_at_coverage and state.goal_reached:
             return "the goal (" + ("every parameter group within tolerance" if mdp.state == "information"
-                                   else "coverage complete") + ")"  # fmt: skip
+                                   else "coverage complete") + ")", None  # fmt: skip
+        verdict = state.reach.verdict(limits.horizon_s) if judged else None
+        if verdict is not None:
+            return f"out of reach: {verdict.line()}", verdict
+        if limits.horizon_s is not None and state.recording_s >= limits.horizon_s:
+            return f"the horizon ({limits.horizon_s:g} s of recording)", None
         if over_time():
-            return f"the time limit ({limits.time_limit:.0f} s)"
-    return f"the step limit ({max_steps})"
+            return f"the time limit ({limits.time_limit:.0f} s)", None
+    return f"the step limit ({max_steps})", None
 
 
 def decide(
@@ -494,14 +511,15 @@ class Collector(LiveEpisode):
             self._step(frame, action)
             self._report()
 
-        reason = run_policy(self.policy, episode, self.limits, step,
-                            lambda: time.monotonic() - self._started > self.limits.time_limit,
-                            self._decision_wait())  # fmt: skip
+        reason, verdict = run_policy(self.policy, episode, self.limits, step,
+                                     lambda: time.monotonic() - self._started > self.limits.time_limit,
+                                     self._decision_wait())  # fmt: skip
         self.arm.stop()
         duration = self._sensor_time()
         self.progress(f"stopped at {reason}: {episode.steps} steps, {self.state.path_length:.2f} m, {duration:.1f} s")
         return CollectResult(episode.steps, self.state.path_length, duration, self.stream.frames,
-                             self.state.goal_reached, reason, episode.decision_s)  # fmt: skip
+                             self.state.goal_reached, reason, episode.decision_s, verdict,
+                             self.state.forecast(self.limits.horizon_s))  # fmt: skip
 
     def _step(self, frame: PoseFrame, action: np.ndarray) -> None:
         """Move by one action inside the workspace (as ``CalibrationEnv`` does), rest, update the state."""
@@ -562,7 +580,7 @@ class Collector(LiveEpisode):
         if self.mdp.state == "information":
             goal = s.goal_ratios
             worst = max(goal, key=goal.get)
-            what = f"excess {s.excess:.2f} e-folds, worst {worst} {goal[worst]:.2f}x tolerance"
+            what = f"excess {s.excess:.2f} e-folds, worst {worst} {goal[worst]:.2f}x tolerance{s.reach.outlook()}"
         else:
             what = f"coverage {np.mean(list(s.coverage.progress().values())):.0%} of the way"
         time_s = self._sensor_time()

@@ -25,6 +25,7 @@ from vical.env.information import (
     features,
     tolerance_ratios,
 )
+from vical.env.reachability import GroupForecast, ReachForecast
 from vical.env.settings import MdpConfig
 
 RATE_FRAMES = 20  # latest frames whose stamps give the camera's frame rate
@@ -89,6 +90,7 @@ class EpisodeState:
         self.image_size = (int(image_size[0]), int(image_size[1]))
         self.coverage = Coverage(config.workspace, config.thresholds, config.view_novelty)
         self.information: InformationTracker | None = None
+        self.reach: ReachForecast | None = None  # the information state's: whether the goal is in reach in time
         self.ratios: dict[str, float] = {}
         self.path_length = 0.0
         self.frames = 0
@@ -103,13 +105,17 @@ class EpisodeState:
         self.path_length = 0.0
         self.frames = 0
         self._stamps = []
+        self._first_stamp: int | None = None
         self.information = None
+        self.reach = None
         self.ratios = {}
         if self.config.state == "information":
             if guess is None:
                 raise ValueError("the information state needs a guess of the sensor to linearise at")
             self.information = InformationTracker(task, self.target, guess)
             self._update_ratios()
+            tolerances = self.config.information.tolerances
+            self.reach = ReachForecast({g: tolerances.of(g) for g in self.goal_ratios})
             if self.config.information.sensor_context:
                 self._sensor = sensor_features(self.target, guess)
 
@@ -125,11 +131,24 @@ class EpisodeState:
                 self.coverage.add_view(view)
         self.frames += len(corners)
         self._stamps = (self._stamps + [int(t) for t in stamps])[-RATE_FRAMES:]
+        if self._first_stamp is None and stamps:
+            self._first_stamp = int(stamps[0])
         if self.information is not None:
             points = self.target.points
             seen = zip(stamps, corners, ids, strict=True)
             self.information.add_frames([FrameObservation(-1, int(t), c, i, points[i]) for t, c, i in seen], imu)
             self._update_ratios()
+            if self._stamps:
+                self.reach.add(self.recording_s, self.goal_ratios)
+
+    def forecast(self, horizon_s: float | None) -> dict[str, GroupForecast]:
+        """Each goal group's reachability forecast now, at ``horizon_s`` (empty: not the information state)."""
+        return {} if self.reach is None else self.reach.groups(horizon_s)
+
+    @property
+    def recording_s(self) -> float:
+        """[s] from the episode's first frame to its latest (the clock of the reachability forecast)."""
+        return 0.0 if self._first_stamp is None else (self._stamps[-1] - self._first_stamp) / 1e9
 
     @property
     def frame_rate(self) -> float | None:

@@ -40,6 +40,7 @@ from vical.calib.tasks import CalibrationTask, TaskOutcome, run_task, task_score
 from vical.config_checks import ConfigError, require
 from vical.data import NS_PER_S, CameraFrames, Recording, SensorTruth
 from vical.env.calibration import CalibrationEnv
+from vical.env.reachability import OutOfReach, check_horizon
 from vical.geometry import CameraModel
 from vical.parallel import ParallelConfig, connect_ray, imap_ordered
 from vical.policies.base import Policy
@@ -148,6 +149,12 @@ class EpisodeRow:
         decision_ms: the policy's mean time [ms] to choose an action (its ``act``), per step of the episode.
         coverage_reached: every trajectory of the episode reached the MDP's terminal condition (the
             coverage; for a policy of the information state: every parameter group within tolerance).
+        out_of_reach: the group the reachability forecast called out of reach within the horizon ("" none;
+            ``stop.out_of_reach``), at ``verdict_s`` [s] of recording: the run stopped there (its recording is
+            calibrated up to it).
+        predicted_s: the goal's recording time [s] the forecast predicted halfway to it (``halfway_forecast``).
+        reached_s: when the goal was met [s]: at the stop, or (``stop.verify_s``) after an out-of-reach verdict, the
+            run going on to check it; None: not within the run.
         failed: the calibration raised ``CalibrationError``; ``error`` holds its message.
     """
 
@@ -172,6 +179,10 @@ class EpisodeRow:
     frames: int = 0
     decision_ms: float | None = None
     coverage_reached: bool = False
+    out_of_reach: str = ""
+    verdict_s: float | None = None
+    predicted_s: float | None = None
+    reached_s: float | None = None
     failed: bool = False
     error: str = ""
 
@@ -224,12 +235,24 @@ class Evaluation:
 @dataclass(frozen=True)
 class Trajectory:
     """One executed trajectory: its recording, the steps taken, whether the coverage completed and the policy's
-    total time choosing its actions [s]."""
+    total time choosing its actions [s]; with the reachability verdict (``run_trajectory``), the verdict, the goal's
+    recording time [s] the forecast predicted halfway to it (``halfway_forecast``) and when the goal was met [s] (past
+    the verdict too)."""
 
     recording: Recording
     steps: int
     coverage_reached: bool
     decision_s: float = 0.0
+    out_of_reach: OutOfReach | None = None
+    predicted_s: float | None = None
+    reached_s: float | None = None
+
+    @property
+    def used(self) -> Recording:
+        """The recording the run ends with: all of it, or up to the verdict of a run stopped as out of reach."""
+        if self.out_of_reach is None:
+            return self.recording
+        return self.recording.until(self.recording.t0 + int(self.out_of_reach.at_s * NS_PER_S))
 
 
 def policy_mdp(policy: Policy) -> dict[str, Any]:
@@ -263,18 +286,28 @@ def build_env(env_cfg: Mapping[str, Any], policy: Policy) -> CalibrationEnv:
 
 
 def run_trajectory(
-    env: CalibrationEnv, policy: Policy, seed: int, noise_stream: int = 0, horizon_s: float | None = None
+    env: CalibrationEnv,
+    policy: Policy,
+    seed: int,
+    noise_stream: int = 0,
+    horizon_s: float | None = None,
+    out_of_reach: bool = False,
+    verify_s: float | None = None,
 ) -> Trajectory:
     """One episode of ``policy`` on the sensor of ``seed``: until termination, truncation or the policy is done,
     or, with ``horizon_s``, the first step that ends at or past that much simulated time [s] (the time-to-tolerance
-    summary counts a run not stopped by its horizon at it: what it would record after is never used).
+    summary counts a run not stopped by its horizon at it: what it would record after is never used), or, with
+    ``out_of_reach`` (the information state), the step at which its reachability forecast calls the goal out of
+    reach within the horizon (``vical.env.reachability``). With ``verify_s`` a run called out of reach goes on to
+    that much time, to see whether it reaches the goal after all (its recording is used up to the verdict).
 
     ``noise_stream`` selects the sensor noise of the recording (another trajectory of the same sensor
     records other noise).
     """
     obs, _ = env.reset(seed=seed, options={"noise_stream": noise_stream})
     policy.reset(env, np.random.default_rng(seed))
-    deciding = 0.0
+    deciding, verdict, reached, forecasts = 0.0, None, None, []
+    reach = env.state.reach if out_of_reach and horizon_s is not None else None
     for _ in range(env.config.max_steps):
         start = time.perf_counter()
         action = policy.act(obs, env)
@@ -282,9 +315,33 @@ def run_trajectory(
         if policy.finished:  # a fixed trajectory past its last waypoint: nothing left to record
             break
         obs, _, terminated, truncated, _ = env.step(action)
-        if terminated or truncated or (horizon_s is not None and env.sim.time_ns >= horizon_s * NS_PER_S):
+        time_s = env.sim.time_ns / NS_PER_S
+        if terminated:
+            reached = time_s
             break
-    return Trajectory(env.recording(), env.steps, env.goal_reached, deciding)
+        if reach is None:
+            limit = horizon_s
+        else:
+            forecasts.append((reach.time_s, reach.needed_s()))
+            verdict = verdict or reach.verdict(horizon_s)
+            if verdict is not None and verify_s is None:
+                break
+            limit = horizon_s if verdict is None else verify_s
+        if truncated or (limit is not None and time_s >= limit):
+            break
+    predicted = halfway_forecast(forecasts, reached) if verdict is None else None
+    return Trajectory(env.recording(), env.steps, env.goal_reached and verdict is None, deciding, verdict,
+                      predicted, reached)  # fmt: skip
+
+
+def halfway_forecast(forecasts: Sequence[tuple[float, float]], reached_s: float | None) -> float | None:
+    """The goal's predicted recording time [s] when half the time a run took to reach it was in (``forecasts``: the
+    forecast's time and prediction after each step): what the forecast told a user halfway; None without a goal
+    reached, or an infinite prediction."""
+    if reached_s is None:
+        return None
+    halfway = next((needed for t, needed in forecasts if t >= reached_s / 2), None)
+    return halfway if halfway is not None and math.isfinite(halfway) else None
 
 
 def _optional(value: float | None) -> float | None:
@@ -364,7 +421,10 @@ class PolicyEvaluator:
         paper_protocol: bool = False,
     ) -> None:
         self.spec = spec
-        self.horizon_s = spec.stop.horizon_s if spec.stop.rule == "information" else None
+        information = spec.stop.rule == "information"
+        self.horizon_s = spec.stop.horizon_s if information else None
+        self.out_of_reach = information and spec.stop.out_of_reach
+        self.verify_s = spec.stop.verify_s if self.out_of_reach else None
         self.task = CalibrationTask.from_config(env_cfg["task"])
         self.budgets = check_budgets(budgets)
         self.paper_protocol = paper_protocol
@@ -374,6 +434,7 @@ class PolicyEvaluator:
         self.envs = [build_env(env_cfg, p) for p in self.policies]
         for policy, env in zip(self.policies, self.envs, strict=True):
             policy.check(env)
+            check_horizon(self.horizon_s, "stop.horizon_s", env.config.reset_hold, env.step_timing)
         if len(self.policies) == 2:  # the paper's baselines: intrinsics from the first trajectory's frames
             if self.budgets:
                 raise ConfigError(
@@ -388,13 +449,19 @@ class PolicyEvaluator:
         Returns one row per budget below the episode's path, then the whole episode's row (``budget_m = inf``).
         """
         pairs = zip(self.envs, self.policies, strict=True)
-        runs = [run_trajectory(env, p, seed, k, self.horizon_s) for k, (env, p) in enumerate(pairs)]
-        recording = runs[-1].recording
+        runs = [run_trajectory(env, p, seed, k, self.horizon_s, self.out_of_reach, self.verify_s)
+                for k, (env, p) in enumerate(pairs)]  # fmt: skip
+        recording = runs[-1].used
+        verdict = runs[-1].out_of_reach
         common = {
             "policy": self.spec.name,
             "seed": seed,
             "steps": sum(r.steps for r in runs),
             "coverage_reached": all(r.coverage_reached for r in runs),
+            "out_of_reach": "" if verdict is None else verdict.group,
+            "verdict_s": None if verdict is None else verdict.at_s,
+            "predicted_s": runs[-1].predicted_s,
+            "reached_s": runs[-1].reached_s,
             "decision_ms": 1e3 * sum(r.decision_s for r in runs) / max(sum(r.steps for r in runs), 1),
             "prior_score_pct": prior_score(self.task, self.envs[-1].product.datasheet, recording.truth),
         }

@@ -13,6 +13,11 @@ whole episodes:
   **horizon** (``stop.horizon_s``) an episode that had not stopped by then counts at the horizon, whenever its own
   limit ended it (a policy gains nothing by a short step limit either; ``cut short`` says how many ended before
   it), and a stop after the horizon is no stop;
+- **out of reach**: the share stopped because the reachability forecast called the goal out of reach within the
+  horizon (``stop.out_of_reach``, ``vical.env.reachability``); such a run counts at the horizon, so giving up early
+  is never rewarded. **Verdict right**: of those, the share that did not reach the goal when run on to
+  ``stop.verify_s`` (nan: not run on). **Forecast**: of the runs stopped at the goal, the share whose predicted time
+  (the forecast halfway to it) is within a factor ``FORECAST_FACTOR`` of the measured;
 - **decision**: the policy's mean time to choose an action [ms per step] (what a robot waits between motions);
 - the paired difference of time and path to the reference policy's on the same sensors, with its 95 % bootstrap
   interval (``vical.evaluation.intervals.paired_by_sensor``: none unless both ran the same sensors, at least
@@ -32,6 +37,8 @@ from vical.evaluation.harness import END, EpisodeRow
 from vical.evaluation.intervals import Interval, paired_by_sensor
 from vical.evaluation.seed_choice import SCORED_GROUPS, stopped_right
 
+FORECAST_FACTOR = 1.5  # a predicted time to the tolerances within this factor of the measured one is right
+
 
 @dataclass(frozen=True)
 class StopSummary:
@@ -43,6 +50,9 @@ class StopSummary:
         time_s, median_time_s: mean and median recording time at the stop [s]; path_m: mean path [m].
         decision_ms: mean time to choose an action [ms per step] (nan: not recorded).
         cut_short: share of the episodes that neither stopped nor reached the horizon (0 without one).
+        out_of_reach: share stopped as out of reach; verdict_right: share of those that did not reach the goal when
+            run on (nan: none, or not run on); forecast_right: share of the stopped whose predicted time was within
+            ``FORECAST_FACTOR`` of the measured (nan: none stopped, or no forecast).
         time_versus, path_versus: paired differences to the reference (None for the reference itself, or too few
             common sensors).
     """
@@ -56,6 +66,9 @@ class StopSummary:
     path_m: float
     decision_ms: float
     cut_short: float
+    out_of_reach: float
+    verdict_right: float
+    forecast_right: float
     time_versus: Interval | None
     path_versus: Interval | None
 
@@ -72,10 +85,33 @@ def at_horizon(row: EpisodeRow, horizon_s: float | None) -> EpisodeRow:
 
 
 def _cut_short(rows: Sequence[EpisodeRow], horizon_s: float | None) -> float:
-    """The share of ``rows`` that neither stopped nor reached ``horizon_s`` (their own limit came first)."""
+    """The share of ``rows`` that neither stopped (at the goal, or as out of reach) nor reached ``horizon_s`` (their
+    own limit came first)."""
     if horizon_s is None or not rows:
         return 0.0
-    return float(np.mean([not r.coverage_reached and r.recording_time_s < horizon_s for r in rows]))
+    ended = [r.coverage_reached or bool(r.out_of_reach) for r in rows]
+    return float(np.mean([not e and r.recording_time_s < horizon_s for r, e in zip(rows, ended, strict=True)]))
+
+
+def _share(flags: Sequence[bool]) -> float:
+    return float(np.mean(flags)) if flags else math.nan
+
+
+def out_of_reach_rows(rows: Sequence[EpisodeRow], horizon_s: float | None) -> list[EpisodeRow]:
+    """The runs of ``rows`` stopped as out of reach within ``horizon_s`` (any time without one)."""
+    return [r for r in rows if r.out_of_reach and (horizon_s is None or (r.verdict_s or 0.0) <= horizon_s)]
+
+
+def verdict_right(row: EpisodeRow) -> bool:
+    """Whether an out-of-reach verdict held: the run, gone on past it (``stop.verify_s``), never reached the goal."""
+    return row.reached_s is None
+
+
+def forecast_right(row: EpisodeRow) -> bool:
+    """A stopped run's predicted time to the goal was within ``FORECAST_FACTOR`` of its measured one."""
+    if row.predicted_s is None or row.recording_time_s <= 0:
+        return False
+    return 1 / FORECAST_FACTOR <= row.predicted_s / row.recording_time_s <= FORECAST_FACTOR
 
 
 def _mean_decision_ms(rows: Sequence[EpisodeRow]) -> float:
@@ -92,9 +128,11 @@ def summarize_stops(
     tolerances: Mapping[str, float],
     reference: str | None,
     horizon_s: float | None = None,
+    verifying: bool = False,
 ) -> list[StopSummary]:
     """Every policy's stops from its rows (``{policy: rows}``, every budget; the whole episodes are used), counted
-    at the common ``horizon_s`` [s] where one is given."""
+    at the common ``horizon_s`` [s] where one is given; ``verifying``: the runs stopped as out of reach were run on
+    (``stop.verify_s``), so their verdicts are checked."""
     if task not in SCORED_GROUPS:
         raise ValueError(f"task must be one of {sorted(SCORED_GROUPS)}, got {task!r}")
     whole = {name: [r for r in rs if r.budget_m == END] for name, rs in rows.items()}
@@ -105,6 +143,9 @@ def summarize_stops(
             continue
         stopped = [r for r in mine if r.coverage_reached]
         right = [stopped_right(r, task, tolerances) for r in stopped]
+        given_up = out_of_reach_rows(whole[name], horizon_s)
+        checked = verifying and given_up
+        forecasts = any(r.predicted_s is not None for r in stopped)
         versus = reference is not None and name != reference and reference in ends
         times = [r.recording_time_s for r in mine]
         summaries.append(
@@ -118,6 +159,9 @@ def summarize_stops(
                 path_m=float(np.mean([r.path_length_m for r in mine])),
                 decision_ms=_mean_decision_ms(mine),
                 cut_short=_cut_short(whole[name], horizon_s),
+                out_of_reach=len(given_up) / len(mine),
+                verdict_right=_share([verdict_right(r) for r in given_up]) if checked else math.nan,
+                forecast_right=_share([forecast_right(r) for r in stopped]) if forecasts else math.nan,
                 time_versus=_paired(mine, ends[reference], "recording_time_s") if versus else None,
                 path_versus=_paired(mine, ends[reference], "path_length_m") if versus else None,
             )

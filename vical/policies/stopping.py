@@ -44,6 +44,10 @@ class StopRule:
         horizon_s: the time-to-tolerance summary's common horizon [s]: a run that has not stopped by then counts
             at it, whenever its own limit ended it (``vical.evaluation.time_to_tolerance``); None: each run at its
             own end.
+        out_of_reach: with a horizon, a run also stops when the information state's reachability forecast calls
+            the goal out of reach within it (``vical.env.reachability``); it counts at the horizon.
+        verify_s: [s] a run stopped as out of reach goes on to this much recording, to check the verdict (did a
+            longer run reach the goal?); None: it ends at the verdict.
     """
 
     rule: str = "policy"
@@ -51,6 +55,8 @@ class StopRule:
     workspace: str = DEFAULT_WORKSPACE
     max_steps: int | None = None
     horizon_s: float | None = None
+    out_of_reach: bool = True
+    verify_s: float | None = None
 
     def __post_init__(self) -> None:
         require(self.rule in RULES, "stop.rule", f"one of {RULES} (stop=policy or stop=information)", self.rule)
@@ -61,6 +67,11 @@ class StopRule:
         horizon = self.horizon_s
         ok = horizon is None or (isinstance(horizon, int | float) and not isinstance(horizon, bool) and horizon > 0)
         require(ok, "stop.horizon_s", "null or a time > 0 [s]", horizon)
+        require(isinstance(self.out_of_reach, bool), "stop.out_of_reach", "true or false", self.out_of_reach)
+        verify = self.verify_s
+        number = isinstance(verify, int | float) and not isinstance(verify, bool)
+        ok = verify is None or (horizon is not None and number and verify > horizon)
+        require(ok, "stop.verify_s", "null or a time beyond stop.horizon_s [s]", verify)
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any] | None) -> StopRule:

@@ -12,6 +12,7 @@ from typing import Any
 import gymnasium as gym
 import hydra.utils
 import numpy as np
+from hydra.errors import InstantiationException
 
 from vical.config_checks import ConfigError
 
@@ -38,8 +39,14 @@ class BoxActions:
 
 
 def make_env(env_cfg: Mapping[str, Any]) -> gym.Env:
-    """Instantiate the env config (``_target_`` + kwargs) and check its observation space."""
-    env = hydra.utils.instantiate(env_cfg)
+    """Instantiate the env config (``_target_`` + kwargs) and check its observation space; a setting the env refuses
+    is its own ``ConfigError`` line (naming the key), not Hydra's wrapper of it."""
+    try:
+        env = hydra.utils.instantiate(env_cfg)
+    except InstantiationException as err:
+        if isinstance(err.__cause__, ConfigError):
+            raise err.__cause__ from None
+        raise
     space = env.observation_space
     if not isinstance(space, gym.spaces.Box):
         raise ConfigError(f"env observation space must be a gymnasium Box, got {space} from {env_cfg['_target_']}")

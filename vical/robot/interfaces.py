@@ -235,7 +235,8 @@ class Guidance:
         words: the instruction ("move 20 cm closer, tilt the top away 25 deg"; "done" at the end).
         ratios: each parameter group's predicted error over its tolerance (the goal is every ratio <= 1).
         elapsed_s: [s] of recording so far.
-        done: the calibration is predicted good enough: stop moving.
+        done: stop moving: the calibration is predicted good enough, or (``words`` say which group and why) out of
+            reach in the time left.
     """
 
     T_board_body: np.ndarray | None

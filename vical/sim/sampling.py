@@ -246,7 +246,9 @@ class ImuSampling:
         require(self.sampling in IMU_SAMPLING, f"{key}.sampling", f"one of {IMU_SAMPLING}", self.sampling)
         require(self.noise_units in NOISE_UNITS, f"{key}.noise_units", f"one of {NOISE_UNITS}", self.noise_units)
         for name in ("accel_noise", "accel_random_walk", "gyro_noise", "gyro_random_walk"):
-            require_range(f"{key}.{name}", getattr(self, name), 0.0)
+            # the datasheet declares them: the calibrator and the information state weight the IMU by them (0: an
+            # IMU of infinite weight, whose every residual is exact)
+            require_range(f"{key}.{name}", getattr(self, name), 0.0, low_open=True)
         require_range(f"{key}.accel_bias_std", self.accel_bias_std, 0.0)
         require_range(f"{key}.gyro_bias_std", self.gyro_bias_std, 0.0)
         for name in INTRINSIC_STDS:
