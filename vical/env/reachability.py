@@ -26,14 +26,11 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
 
 from vical.config_checks import ConfigError, require_range
-
-if TYPE_CHECKING:
-    from vical.env.lookahead import StepTiming
 
 UNITS = {"focal": "px", "principal_point": "px", "distortion": "px", "rotation": "deg", "translation": "mm",
          "time_offset": "ms"}  # fmt: skip
@@ -252,7 +249,16 @@ def _forecast(info: float, power: float, t: float, horizon_s: float | None) -> G
     return GroupForecast(ratio, needed, (info * growth) ** -0.5)
 
 
-def check_horizon(horizon_s: float | None, key: str, reset_hold: float, timing: StepTiming) -> None:
+class StepDuration(Protocol):
+    """What a step's recording time is made of (``vical.env.lookahead``'s step timings, which import the state
+    that imports this module): a motion's time [s] for a pose change, then a rest [s]."""
+
+    rest: float
+
+    def motion_time(self, delta: np.ndarray) -> float: ...
+
+
+def check_horizon(horizon_s: float | None, key: str, reset_hold: float, timing: StepDuration) -> None:
     """``ConfigError`` naming ``key`` for a horizon [s] shorter than one step of recording: the rest at the start
     (``reset_hold``), then the shortest motion and the rest after it (``timing``)."""
     if horizon_s is None:

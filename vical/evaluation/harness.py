@@ -155,6 +155,9 @@ class EpisodeRow:
         predicted_s: the goal's recording time [s] the forecast predicted halfway to it (``halfway_forecast``).
         reached_s: when the goal was met [s]: at the stop, or (``stop.verify_s``) after an out-of-reach verdict, the
             run going on to check it; None: not within the run.
+        short_at_horizon: the goal's groups a run that did not meet it by the horizon (or its verdict) lacked, with
+            their predicted error over tolerance at the horizon (the forecast's, at the verdict): ``"time_offset 1.64
+            rotation 1.37"``; "" for a run that met it.
         failed: the calibration raised ``CalibrationError``; ``error`` holds its message.
     """
 
@@ -183,6 +186,7 @@ class EpisodeRow:
     verdict_s: float | None = None
     predicted_s: float | None = None
     reached_s: float | None = None
+    short_at_horizon: str = ""
     failed: bool = False
     error: str = ""
 
@@ -236,8 +240,9 @@ class Evaluation:
 class Trajectory:
     """One executed trajectory: its recording, the steps taken, whether the coverage completed and the policy's
     total time choosing its actions [s]; with the reachability verdict (``run_trajectory``), the verdict, the goal's
-    recording time [s] the forecast predicted halfway to it (``halfway_forecast``) and when the goal was met [s] (past
-    the verdict too)."""
+    recording time [s] the forecast predicted halfway to it (``halfway_forecast``), when the goal was met [s] (past
+    the verdict too) and, for a run that did not meet it by the verdict or the horizon, each goal group above its
+    tolerance with its ratio at the horizon (``short``)."""
 
     recording: Recording
     steps: int
@@ -246,6 +251,7 @@ class Trajectory:
     out_of_reach: OutOfReach | None = None
     predicted_s: float | None = None
     reached_s: float | None = None
+    short: dict[str, float] = field(default_factory=dict)
 
     @property
     def used(self) -> Recording:
@@ -306,7 +312,7 @@ def run_trajectory(
     """
     obs, _ = env.reset(seed=seed, options={"noise_stream": noise_stream})
     policy.reset(env, np.random.default_rng(seed))
-    deciding, verdict, reached, forecasts = 0.0, None, None, []
+    deciding, verdict, reached, forecasts, verdict_groups = 0.0, None, None, [], {}
     reach = env.state.reach if out_of_reach and horizon_s is not None else None
     for _ in range(env.config.max_steps):
         start = time.perf_counter()
@@ -323,15 +329,20 @@ def run_trajectory(
             limit = horizon_s
         else:
             forecasts.append((reach.time_s, reach.needed_s()))
-            verdict = verdict or reach.verdict(horizon_s)
-            if verdict is not None and verify_s is None:
-                break
+            if verdict is None and (verdict := reach.verdict(horizon_s)) is not None:
+                verdict_groups = reach.groups(horizon_s)  # the forecast the verdict was made on
+                if verify_s is None:
+                    break
             limit = horizon_s if verdict is None else verify_s
         if truncated or (limit is not None and time_s >= limit):
             break
     predicted = halfway_forecast(forecasts, reached) if verdict is None else None
+    short = {}
+    if reach is not None and (verdict is not None or reached is None):  # what it lacked, as of its end
+        at_horizon = verdict_groups if verdict is not None else reach.groups(horizon_s)
+        short = {g: f.ratio_at_horizon for g, f in at_horizon.items() if f.ratio_at_horizon > 1.0}
     return Trajectory(env.recording(), env.steps, env.goal_reached and verdict is None, deciding, verdict,
-                      predicted, reached)  # fmt: skip
+                      predicted, reached, short)  # fmt: skip
 
 
 def halfway_forecast(forecasts: Sequence[tuple[float, float]], reached_s: float | None) -> float | None:
@@ -462,6 +473,7 @@ class PolicyEvaluator:
             "verdict_s": None if verdict is None else verdict.at_s,
             "predicted_s": runs[-1].predicted_s,
             "reached_s": runs[-1].reached_s,
+            "short_at_horizon": " ".join(f"{g} {r:.3g}" for g, r in runs[-1].short.items()),
             "decision_ms": 1e3 * sum(r.decision_s for r in runs) / max(sum(r.steps for r in runs), 1),
             "prior_score_pct": prior_score(self.task, self.envs[-1].product.datasheet, recording.truth),
         }
