@@ -67,6 +67,20 @@ def test_a_slow_group_is_out_of_reach_with_the_time_it_needs_and_what_it_reaches
     assert forecast.verdict(400.0) is None  # within 2 x 400 s: in reach
 
 
+@pytest.mark.parametrize("board, group, aprilgrid", [("checkerboard", "translation", True),
+                                                     ("aprilgrid", "translation", False),
+                                                     ("checkerboard", "time_offset", False)])  # fmt: skip
+def test_a_checkerboard_sensors_verdict_names_an_aprilgrid_where_the_board_limits_the_group(board, group, aprilgrid):
+    # A checkerboard is detected only whole: its views never take the image's borders (docs/evaluation.md).
+    ratio = power_law(4.0, 10.0, 1.0)
+    forecast = ReachForecast(TOLERANCES, board_kind=board)
+    others = dict.fromkeys(TOLERANCES, 0.5)
+    feed(forecast, lambda t: {**others, group: 2 * ratio(t)}, 40.0)
+    line = forecast.verdict(45.0).line()
+    assert ("an aprilgrid instead of the checkerboard" in line) == aprilgrid
+    assert ("lower-noise IMU" if group == "translation" else "synchronised clock") in line
+
+
 def test_a_group_in_reach_within_the_margin_is_not_called_out_of_reach():
     ratio = power_law(2.0, 20.0, 1.0)  # needs 80 s: past the 45 s horizon, within 2 x 45 s
     forecast = ReachForecast(TOLERANCES)

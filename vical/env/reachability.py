@@ -52,6 +52,18 @@ REMEDIES = {
     "time_offset": "a synchronised clock (hardware-triggered camera and IMU; calibrate with --fixed-time-offset) or "
     "a lower-noise IMU",
 }
+# A checkerboard is detected only whole, so its corners never reach the image's borders: every unfinished
+# intrinsic run of the tuning sensors had one or a double-sphere lens, and checkerboards were 3x as common among
+# the unfinished joint runs as among the finished (docs/evaluation.md).
+APRILGRID = "an aprilgrid instead of the checkerboard (detected in part, so its views can reach the image's borders)"
+BOARD_LIMITED = ("focal", "principal_point", "distortion", "rotation", "translation")
+
+
+def remedy(group: str, board_kind: str = "") -> str:
+    """What would bring ``group`` within reach on a sensor with a ``board_kind`` board, beside a longer horizon."""
+    if board_kind == "checkerboard" and group in BOARD_LIMITED:
+        return f"{APRILGRID}, or {REMEDIES[group]}"
+    return REMEDIES[group]
 
 
 @dataclass(frozen=True)
@@ -103,7 +115,8 @@ class OutOfReach:
     Attributes:
         group: the parameter group; tolerance: its tolerance (in ``unit``); achievable: the error it is predicted to
         reach at the horizon (in ``unit``); needed_s: the recording time it would need [s] (inf: none at this
-        rate); horizon_s: the horizon [s]; at_s: the recording time of the verdict [s].
+        rate); horizon_s: the horizon [s]; at_s: the recording time of the verdict [s]; remedy: what would
+        change it (``remedy``).
     """
 
     group: str
@@ -113,6 +126,7 @@ class OutOfReach:
     needed_s: float
     horizon_s: float
     at_s: float
+    remedy: str
 
     def line(self) -> str:
         """The verdict as one line: which group, what it can reach, what would change it."""
@@ -126,7 +140,7 @@ class OutOfReach:
         return (
             f"the {name} cannot reach its tolerance {self.tolerance:g} {self.unit} within {self.horizon_s:g} s: it "
             f"{need}, and reaches ~{self.achievable:.2g} {self.unit} in {self.horizon_s:g} s; what would change it: "
-            f"{REMEDIES[self.group]}{longer}"
+            f"{self.remedy}{longer}"
         )
 
     def as_dict(self) -> dict[str, object]:
@@ -150,10 +164,12 @@ class ReachForecast:
     Args:
         tolerances: each goal group's tolerance in its own units (``{group: value}``).
         settings: warm-up, margin and rate window.
+        board_kind: the sensor's board (``Target.kind``; "" unknown): what the verdict's remedy names.
     """
 
     tolerances: Mapping[str, float]
     settings: ReachSettings = field(default_factory=ReachSettings)
+    board_kind: str = ""
     _times: list[float] = field(default_factory=list)
     _info: list[dict[str, float]] = field(default_factory=list)  # J = ratio^-2 per group, per update
     _needed: list[dict[str, float]] = field(default_factory=list)  # each group's needed_s at each update
@@ -220,7 +236,7 @@ class ReachForecast:
         f = groups[group]
         tolerance = float(self.tolerances[group])
         return OutOfReach(group, tolerance, tolerance * f.ratio_at_horizon, UNITS[group], f.needed_s, horizon_s,
-                          self.time_s)  # fmt: skip
+                          self.time_s, remedy(group, self.board_kind))  # fmt: skip
 
     def _late_for(self, group: str, limit_s: float) -> float:
         """[s] how long ``group`` has been predicted to need more than ``limit_s`` without a break (-1: not now)."""
