@@ -7,12 +7,20 @@ for SIGTERM (128 + the signal's number, as a shell reports them). ``vical-train`
 themselves what they kept (the checkpoint to resume from, the recording so far) and return
 ``interrupted_status``.
 
+Until the command's module is imported (its start-up: torch, GTSAM, MuJoCo, ~0.3-2 s) a signal ends the process
+at once with the same line and status (``during_start_up``): nothing has been written yet, and an exception raised
+inside an extension module's initialisation does not arrive as itself (GTSAM's becomes ``ImportError:
+initialization failed``). A module run with ``python -m`` is its own start-up: ``vical.apps`` sets the same
+handling before the module's imports (``start_up_of_module``). An interrupt that arrives inside a later import, as
+the cause of the error that import raised, ends the command as the interrupt itself.
+
 This module imports nothing heavy: the command's module is imported inside the handling.
 """
 
 from __future__ import annotations
 
 import importlib
+import os
 import signal
 import sys
 from collections.abc import Callable
@@ -56,22 +64,92 @@ def _kept(app: str, argv: list[str]) -> str:
     return AS_IT_WAS.format(where=given or f"{flag.strip('-=')} (its default)")
 
 
+def _interrupted_line(app: str, err: BaseException) -> str:
+    # From the line's start: a progress bar the interrupt cut short ends without a newline.
+    return f"\r{app}: interrupted ({interrupted_by(err)}); {_kept(app, sys.argv[1:])}"
+
+
+def _exit_at_once(app: str) -> Callable[[int, object], NoReturn]:
+    """A signal handler for the start-up of ``app``: the line and the status, and the process ends there."""
+
+    def handler(signum, frame) -> NoReturn:
+        err = Terminated() if signum == signal.SIGTERM else KeyboardInterrupt()
+        try:
+            sys.stdout.flush()
+            print(_interrupted_line(app, err), file=sys.stderr, flush=True)
+        finally:
+            os._exit(interrupted_status(err))
+
+    handler.start_up = True
+    return handler
+
+
+def _python_default(sig: int, handler: object) -> object:
+    """``handler``, or Python's own for ``sig`` where it is a start-up's."""
+    if not getattr(handler, "start_up", False):
+        return handler
+    return signal.default_int_handler if sig == signal.SIGINT else signal.SIG_DFL
+
+
+def _handled(ctrl_c: object) -> list[int]:
+    """The signals a command handles: SIGTERM, and Ctrl-C where Python does (a job started with SIGINT ignored
+    keeps it ignored)."""
+    return [signal.SIGTERM] + (
+        [signal.SIGINT] if _python_default(signal.SIGINT, ctrl_c) is signal.default_int_handler else []
+    )
+
+
+def during_start_up(app: str) -> None:
+    """Signals end ``app`` at once from here until the command runs."""
+    for sig in _handled(signal.getsignal(signal.SIGINT)):
+        signal.signal(sig, _exit_at_once(app))
+
+
+def start_up_of_module(argv: list[str]) -> None:
+    """For ``python -m vical.apps.<command>`` (``argv``: the interpreter's own, ``sys.orig_argv``): the start-up's
+    handling, set before the module's imports; its ``run`` takes over at the module's end."""
+    module = argv[argv.index("-m") + 1] if "-m" in argv[:-1] else ""
+    if module.startswith("vical.apps.") and module.count(".") == 2:
+        during_start_up("vical-" + module.rsplit(".", 1)[1].replace("_", "-"))
+
+
+def _interrupt_within(err: BaseException) -> KeyboardInterrupt | None:
+    """The interrupt that caused ``err`` (an import's ``ImportError``, raised for the interrupt inside it), if any."""
+    seen = set()
+    while err is not None and id(err) not in seen:
+        if isinstance(err, KeyboardInterrupt):
+            return err
+        seen.add(id(err))
+        err = err.__cause__ or err.__context__
+    return None
+
+
 def run(app: str, target: str | Callable[[], int | None]) -> NoReturn:
     """Run the command ``target`` (``module:function``, imported here, or the function itself: a module run with
-    ``python -m``) as ``app``: SIGTERM raises ``Terminated``; an interrupt that the command did not handle itself
-    ends in one line and 130 / 143."""
-    previous = signal.signal(signal.SIGTERM, _terminate)
+    ``python -m``) as ``app``: a signal during its import ends it at once; then SIGTERM raises ``Terminated``; an
+    interrupt that the command did not handle itself ends in one line and 130 / 143."""
+    previous = {sig: _python_default(sig, signal.getsignal(sig)) for sig in (signal.SIGTERM, signal.SIGINT)}
+    handled = _handled(previous[signal.SIGINT])
     try:
         if isinstance(target, str):
+            during_start_up(app)
             module, function = target.split(":")
             target = getattr(importlib.import_module(module), function)
+        signal.signal(signal.SIGTERM, _terminate)
+        if signal.SIGINT in handled:
+            signal.signal(signal.SIGINT, signal.default_int_handler)
         status = target()
     except KeyboardInterrupt as err:
-        # From the line's start: a progress bar the interrupt cut short ends without a newline.
-        print(f"\r{app}: interrupted ({interrupted_by(err)}); {_kept(app, sys.argv[1:])}", file=sys.stderr)
+        print(_interrupted_line(app, err), file=sys.stderr)
         status = interrupted_status(err)
+    except Exception as err:
+        if (interrupt := _interrupt_within(err)) is None:
+            raise
+        print(_interrupted_line(app, interrupt), file=sys.stderr)
+        status = interrupted_status(interrupt)
     finally:
-        signal.signal(signal.SIGTERM, previous)  # as it was (a test calls this in its own process)
+        for sig, handler in previous.items():  # as they were (a test calls this in its own process)
+            signal.signal(sig, handler)
     sys.exit(status)
 
 

@@ -1,0 +1,236 @@
+"""Faults at any moment, in every command: a real signal during the start-up (the interpreter's, the heavy imports',
+the command's first steps), as a console script and as ``python -m``, alone and beside a busy process; each ends
+with its exit status (130 Ctrl-C, 143 SIGTERM) and one line, never a traceback. A new console script is run here
+by being listed in ``pyproject.toml`` (``test_every_console_script_is_faulted``)."""
+
+import re
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from imu_streams import static_stream
+from stopped_collections import default_sigint, kill_if_running
+
+from vical.calib.synthetic import make_recording
+from vical.data import CameraFrames, ImuNoise
+from vical.io.csvfiles import write_imu_csv
+from vical.io.recording import save_recording
+
+ROOT = Path(__file__).resolve().parents[1]
+BIN = Path(sys.executable).parent
+
+# Seconds after vical's start-up handling is in place (the first ~50 ms of a process are the interpreter's own
+# start-up, before any of vical runs: a SIGTERM there takes its default action, 143 without a line): at once, during
+# numpy's, torch's, GTSAM's and MuJoCo's imports (~0.2-1.5 s on 2 cores), the command's first steps. Every command
+# below runs for longer than the last moment.
+MOMENTS = (0.0, 0.1, 0.3, 0.6, 1.0, 1.5)
+SIGNALS = {signal.SIGINT: (130, "Ctrl-C"), signal.SIGTERM: (143, "SIGTERM")}
+PROGRESS_BAR = re.compile(r"\d+%\|")
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> dict[str, Path]:
+    """A recording, one with 300 images (slow to export), and a resting IMU's CSV (slow to analyse)."""
+    folder = tmp_path_factory.mktemp("inputs")
+    rec = make_recording(duration=4.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=2)
+    long = make_recording(duration=30.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=3)
+    images = np.random.default_rng(0).integers(0, 256, (len(long.frames), 480, 640), dtype=np.uint8)
+    long = replace(long, frames=CameraFrames(long.frames.t, long.frames.corners, long.frames.ids, images))
+    write_imu_csv(static_stream(1800, 1), folder / "static.csv")
+    return {
+        "recording": save_recording(rec, folder / "rec"),
+        "with_images": save_recording(long, folder / "with_images"),
+        "static": folder / "static.csv",
+    }
+
+
+def command_args(app: str, inputs: dict[str, Path], out: Path) -> list[str]:
+    """Arguments with which ``app`` runs for several seconds, writing under ``out``."""
+    return {
+        "vical-calibrate": [str(inputs["recording"]), "--out", str(out / "calibration")],
+        "vical-imu-noise": [str(inputs["static"]), "--out", str(out / "noise")],
+        "vical-record": [f"out={out / 'recording'}", "images=true", "sensor.backend=render"],
+        "vical-export": [str(inputs["with_images"]), "--out", str(out / "export")],
+        "vical-evaluate": ["episodes=3", "budgets=[]", f"out={out / 'evaluation'}"],
+        "vical-train": [f"run_dir={out / 'run'}"],
+        "vical-sim-demo": ["--steps", "200"],
+        "vical-collect": [f"out={out / 'collection'}", "policy=random_moving", "calibrate=false"],
+        "vical-guide": [f"out={out / 'guide'}", "page.port=0", "page.linger=0"],
+    }[app]
+
+
+def console_scripts() -> list[str]:
+    return list(tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"])
+
+
+def command_line(app: str, form: str) -> list[str]:
+    """``app`` as its console script or as ``python -m vical.apps.<module>``."""
+    if form == "script":
+        return [str(BIN / app)]
+    return [sys.executable, "-m", "vical.apps." + app.removeprefix("vical-").replace("-", "_")]
+
+
+def catches_sigterm(pid: int) -> bool:
+    """Whether process ``pid`` handles SIGTERM (its caught-signals mask in ``/proc``): from vical's start-up on."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigCgt:"):
+            return bool(int(line.split()[1], 16) >> (signal.SIGTERM - 1) & 1)
+    return False
+
+
+def signal_after(cmd: list[str], seconds: float, sig: int, cwd: Path) -> tuple[int, str]:
+    """Run ``cmd``, send ``sig`` ``seconds`` after it handles SIGTERM; its exit status and stderr."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=cwd,
+                            preexec_fn=default_sigint)  # fmt: skip
+    try:
+        deadline = time.monotonic() + 30
+        while not catches_sigterm(proc.pid):
+            assert proc.poll() is None and time.monotonic() < deadline, f"{cmd} never handled SIGTERM"
+            time.sleep(0.001)
+        time.sleep(seconds)
+        assert proc.poll() is None, f"{cmd} ended before the signal at {seconds} s: {proc.communicate()[1]}"
+        proc.send_signal(sig)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        kill_if_running(proc)
+    return proc.returncode, stderr
+
+
+def assert_one_line(app: str, status: int, stderr: str, sig: int, when: str) -> None:
+    """Exit status 130 / 143, no traceback, and one line of ``app`` that says it was interrupted."""
+    expected, name = SIGNALS[sig]
+    assert "Traceback" not in stderr and "Error" not in stderr.replace("error:", ""), f"{when}:\n{stderr}"
+    # Python ends a process by SIGINT itself, whatever its exit status, once a KeyboardInterrupt has passed through
+    # code it ran with PyRun_* (an extension's initialisation does), as POSIX asks of a program that Ctrl-C stops:
+    # a shell reports 130 either way.
+    assert status == expected or (sig == signal.SIGINT and status == -signal.SIGINT), f"{when}: status {status}"
+    lines = [line for line in stderr.replace("\r", "\n").splitlines() if line.strip()]
+    own = [line for line in lines if line.startswith(app) and not PROGRESS_BAR.search(line)]
+    assert len(own) == 1 and own[0].startswith(f"{app}: interrupted ({name})"), f"{when}:\n{stderr}"
+
+
+@pytest.fixture
+def busy():
+    """A process that keeps one core busy, as another job on the machine does: the imports take longer."""
+    proc = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    yield
+    proc.kill()
+    proc.wait()
+
+
+def signals_through_start_up(app: str, form: str, inputs, tmp_path) -> None:
+    for k, seconds in enumerate(MOMENTS):
+        sig = (signal.SIGINT, signal.SIGTERM)[k % 2]
+        out = tmp_path / f"{k}"
+        out.mkdir()
+        cmd = [*command_line(app, form), *command_args(app, inputs, out)]
+        status, stderr = signal_after(cmd, seconds, sig, cwd=out)
+        assert_one_line(app, status, stderr, sig, f"{form} {app}, {signal.Signals(sig).name} at {seconds} s")
+
+
+def test_every_console_script_is_faulted(inputs, tmp_path):
+    """Every console script of the package has its arguments here, so the fault tests run it."""
+    for app in console_scripts():
+        assert command_args(app, inputs, tmp_path)
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("form", ["script", "module"])
+@pytest.mark.parametrize("app", console_scripts())
+def test_a_signal_at_any_moment_of_the_start_up_ends_in_one_line(app, form, inputs, tmp_path):
+    signals_through_start_up(app, form, inputs, tmp_path)
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("app", console_scripts())
+def test_a_signal_during_a_start_up_slowed_by_another_job_ends_in_one_line(app, inputs, tmp_path, busy):
+    signals_through_start_up(app, "script", inputs, tmp_path)
+
+
+def test_an_interrupt_that_an_import_turned_into_its_error_ends_the_command_as_the_interrupt(monkeypatch, capsys):
+    """GTSAM's initialisation, interrupted, raises ``ImportError: initialization failed`` from the interrupt: the
+    command ends as interrupted (130 / 143, one line), not with the ImportError."""
+    import vical.apps.entry as entry
+
+    for interrupt, status, name in [(KeyboardInterrupt, 130, "Ctrl-C"), (entry.Terminated, 143, "SIGTERM")]:
+
+        def initialise(interrupt=interrupt):
+            try:
+                raise interrupt()
+            except KeyboardInterrupt as err:
+                raise ImportError("initialization failed") from err
+
+        monkeypatch.setattr(sys, "argv", ["vical-sim-demo"])
+        with pytest.raises(SystemExit) as done:
+            entry.run("vical-sim-demo", initialise)
+        assert done.value.code == status
+        assert capsys.readouterr().err.strip() == f"vical-sim-demo: interrupted ({name}); nothing was written"
+
+
+def test_an_error_not_caused_by_an_interrupt_is_raised_as_it_is():
+    import vical.apps.entry as entry
+
+    def fails():
+        raise ImportError("no module named nothing")
+
+    with pytest.raises(ImportError, match="no module named nothing"):
+        entry.run("vical-sim-demo", fails)
+
+
+def test_the_start_up_handling_is_set_for_a_module_run_with_python_minus_m_and_given_back():
+    """``python -m vical.apps.<command>``: the package sets the start-up handling before the module's imports (while
+    Python finds the module, ``sys.argv[0]`` is ``-m``); the module's ``run`` leaves Python's own handlers behind."""
+    code = (
+        "import signal, sys\n"
+        "sys.argv[0] = '-m'\n"
+        "sys.orig_argv = [sys.executable, '-m', 'vical.apps.sim_demo']\n"
+        "import vical.apps\n"
+        "print(getattr(signal.getsignal(signal.SIGTERM), 'start_up', False))\n"
+        "import vical.apps.entry as entry\n"
+        "try:\n"
+        "    entry.run('vical-sim-demo', lambda: 0)\n"
+        "except SystemExit:\n"
+        "    print(signal.getsignal(signal.SIGTERM) is signal.SIG_DFL)\n"
+        "    print(signal.getsignal(signal.SIGINT) is signal.default_int_handler)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.stdout.split() == ["True", "True", "True"], done.stderr
+
+
+@pytest.mark.parametrize("sig", list(SIGNALS))
+def test_a_signal_during_the_start_up_ends_at_once_with_the_line_and_the_status(sig):
+    """The start-up's handler, with a real signal in a child: its line and 130 / 143, whatever the import does."""
+    code = (
+        "import os, signal, sys, time\n"
+        "sys.argv = ['vical-export', 'rec', '--out', 'out']\n"
+        "from vical.apps.entry import during_start_up\n"
+        "during_start_up('vical-export')\n"
+        f"os.kill(os.getpid(), {int(sig)})\n"
+        "time.sleep(5)\n"
+        "print('not reached')\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                          preexec_fn=default_sigint)  # fmt: skip
+    status, name = SIGNALS[sig]
+    assert done.returncode == status and done.stdout == ""
+    assert done.stderr.strip() == (
+        f"vical-export: interrupted ({name}); --out out is as it was: the outputs are written whole or not at all"
+    )
+
+
+def test_a_job_started_with_ctrl_c_ignored_keeps_it_ignored_through_the_start_up():
+    code = (
+        "import signal, sys\n"
+        "from vical.apps.entry import during_start_up\n"
+        "during_start_up('vical-export')\n"
+        "print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))  # fmt: skip
+    assert done.stdout.strip() == "True", done.stderr
