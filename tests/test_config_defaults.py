@@ -158,6 +158,7 @@ NO_COUNTERPART = {
     "record.yaml": "the app's own settings, checked by vical.apps.record.check_settings (no defaults)",
     "train.yaml": "seed, torch_threads, run_dir, resume: RunSettings has no defaults; `train` is in PAIRS",
     "env/pendulum.yaml": "gymnasium.make's arguments (the env id)",
+    "hydra/job_logging/run_log.yaml": "Python logging's dictConfig for vical-train, read by Hydra: no vical defaults",
     "robot/sim.yaml": "sim, sensor, seed and asymmetric_distortion interpolate the root config; `faults` is in PAIRS",
     "experiment/": "experiments override the groups' settings on purpose: they are what differs, not defaults",
     "hydra/launcher/": "the launcher plugins' settings",

@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -58,7 +57,7 @@ from vical.apps.calibrate_rig import (
     select_cameras,
     topic_list,
 )
-from vical.apps.cli import ArgumentParser, OutputError, argparse_main
+from vical.apps.cli import ArgumentParser, OutputError, argparse_main, check_creatable
 from vical.apps.entry import run as run_command
 from vical.calib.detection.aprilgrid import detect_aprilgrid, make_aprilgrid_detector
 from vical.calib.detection.board_size import MAX_SAMPLE, board_size_hint
@@ -424,11 +423,7 @@ def check_out(out: Path, overwrite: bool, inputs: list[str | None]) -> None:
     inside = [p for p in inputs if p and out.resolve() in (Path(p).resolve(), *Path(p).resolve().parents)]
     if inside:
         raise OutputError(f"--out {out} holds the input {inside[0]}, which the outputs would replace; choose another")
-    existing = next(d for d in (out, *out.parents) if d.exists())
-    if not existing.is_dir():
-        raise OutputError(f"--out {out} cannot be created: {existing} is a file")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise OutputError(f"--out {out} cannot be created: {existing} is not writable; choose another directory")
+    check_creatable("--out", out)
 
 
 def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:

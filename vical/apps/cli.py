@@ -11,12 +11,14 @@ unknown ``policy=`` is one line, not Hydra's traceback).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import importlib.util
 import logging
 import os
 import sys
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
@@ -50,11 +52,76 @@ class OutputError(Exception):
     """An output path that cannot be used or written; the message names the flag or key and the reason."""
 
 
-def cannot_write(flag: str, out: str | os.PathLike, err: OSError) -> str:
-    """``--out X: cannot write it (read-only file system); ...``: an ``OSError`` without Python's ``[Errno N]``."""
-    what = "it" if err.filename is None or Path(err.filename) == Path(out) else str(err.filename)
-    reason = (err.strerror or str(err)).lower()
-    return f"{flag} {out}: cannot write {what} ({reason}); choose another directory"
+# What the file system refuses a writer for: a full disk or quota, a read-only or forbidden folder, a file too big.
+WRITE_FAULTS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG})
+
+
+def is_write_fault(err: BaseException) -> bool:
+    return isinstance(err, OSError) and err.errno in WRITE_FAULTS
+
+
+def as_given(flag: str, out: str | os.PathLike) -> str:
+    """An output as the command line gives it: ``--out X`` (argparse) or ``out=X`` (a Hydra override)."""
+    return f"{flag}{out}" if flag.endswith("=") else f"{flag} {out}"
+
+
+def _written_as(err: OSError, out: str | os.PathLike) -> str:
+    """The file a writer could not write, or ``it`` (the output itself, or one of the temporary siblings the
+    atomic writers build it in: a name the user never gave)."""
+    if err.filename is None or Path(err.filename) == Path(out) or ".tmp-" in str(err.filename):
+        return "it"
+    return str(err.filename)
+
+
+def cannot_write(flag: str, out: str | os.PathLike, err: OSError, kept: str = "") -> str:
+    """``--out X: cannot write it (no space left on device); <kept>; free space there or choose another directory``:
+    an ``OSError`` without Python's ``[Errno N]``; ``kept`` says what the command kept (nothing half-written)."""
+    reason = (err.strerror or os.strerror(err.errno or 0)).lower()
+    full = err.errno in (errno.ENOSPC, errno.EDQUOT)
+    remedy = "free space there or choose another directory" if full else "choose another directory"
+    what = f"{as_given(flag, out)}: cannot write {_written_as(err, out)} ({reason})"
+    return "; ".join(part for part in (what, kept, remedy) if part)
+
+
+AS_IT_WAS = "it is as it was: the outputs are written whole or not at all"
+
+
+@contextlib.contextmanager
+def write_faults_in_one_line(app: str, flag: str, out: str | os.PathLike,
+                             kept: str | Callable[[], str] = AS_IT_WAS) -> Iterator[None]:  # fmt: skip
+    """A full disk or a read-only folder met inside the block ends ``app`` with one line (what it could not write,
+    what it kept, what to do) and status 2; raised as ``SystemExit``, which Hydra's job runner lets through."""
+    try:
+        yield
+    except OSError as err:
+        if not is_write_fault(err):
+            raise
+        line = cannot_write(flag, out, err, kept() if callable(kept) else kept)
+        raise SystemExit(report_error(app, line)) from None
+
+
+class RunLogFile(logging.FileHandler):
+    """``vical-train``'s ``train.log``: a record that a full disk or a read-only folder refuses is dropped without
+    logging's ``--- Logging error ---`` traceback; the run's own writers (checkpoints, TensorBoard) meet the same
+    fault and end the command in one line (``write_faults_in_one_line``)."""
+
+    def handleError(self, record: logging.LogRecord) -> None:
+        if not is_write_fault(sys.exc_info()[1]):
+            super().handleError(record)
+
+
+def check_creatable(flag: str, out: str | os.PathLike) -> Path:
+    """``out`` as a Path; ``OutputError`` when it cannot be made or written: below a file, or where this process
+    cannot write (a read-only file system, another user's folder): the folder it is made in and, when it exists,
+    itself. Checked before any work, so that none is lost to it."""
+    path = Path(out)
+    existing = next(d for d in path.absolute().parents if d.exists())
+    if not existing.is_dir():
+        raise OutputError(f"{as_given(flag, out)} cannot be created: {existing} is a file; choose another directory")
+    for folder in (existing, path) if path.is_dir() else (existing,):
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise OutputError(f"{as_given(flag, out)}: {folder} is not writable; choose another directory")
+    return path
 
 
 def argparse_main(
@@ -81,6 +148,8 @@ def argparse_main(
     except errors as exc:
         return report_error(app, exc.with_flags(flags) if isinstance(exc, SettingError) else str(exc))
     except OSError as exc:
+        if is_write_fault(exc) and getattr(args, "out", None):
+            return report_error(app, cannot_write("--out", args.out, exc, AS_IT_WAS))
         return report_error(app, f"{exc.filename}: {(exc.strerror or str(exc)).lower()}")
     return 0
 

@@ -27,7 +27,15 @@ from hydra.errors import InstantiationException
 from omegaconf import DictConfig
 
 from vical.apps import calibrate
-from vical.apps.cli import check_then_run, fail, plain, report_error
+from vical.apps.cli import (
+    OutputError,
+    check_creatable,
+    check_then_run,
+    fail,
+    plain,
+    report_error,
+    write_faults_in_one_line,
+)
 from vical.apps.entry import interrupted_by, interrupted_status
 from vical.apps.entry import run as run_command
 from vical.calib.errors import CalibrationError
@@ -53,7 +61,7 @@ from vical.sim.sampling import SensorSampling
 from vical.sim.settings import SimConfig
 
 APP = "vical-collect"
-USER_ERRORS = (ConfigError, FileExistsError, FileNotFoundError)
+USER_ERRORS = (ConfigError, FileExistsError, FileNotFoundError, OutputError)
 FAULTS = (CollectionStopped, MotionRefused, SensorStreamError, RecordingWriteError)
 EXIT_FAULT = 1
 CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
@@ -123,6 +131,7 @@ def check_output(cfg: DictConfig) -> dict[str, Any]:
     path = Path(out)
     if path.exists() and not overwrite and (not path.is_dir() or any(path.iterdir())):
         raise FileExistsError(f"out={out} already exists; choose another directory or pass overwrite=true")
+    check_creatable("out=", path)
     task = cfg.task.name
     guess = plain(cfg.get("guess")) or {}
     camchain = _readable_file(guess.get("camchain"), "guess.camchain", read_camchain)
@@ -355,11 +364,18 @@ def write_summary(s: CollectionOutput, result: CollectResult | None, outcome: st
     dump_yaml(s.out / "collect.yaml", summary)
 
 
+# What a collection keeps when the disk takes no more outside the recording (whose own writer says how far it got).
+KEPT_WHOLE = (
+    "what it holds is whole (each file is written whole or not at all) and a collection it replaces is as it was"
+)
+
+
 def finish(app: str, work: Callable[[DictConfig], int], cfg: DictConfig) -> None:
     """A collection app's ``work`` under Hydra: a user error is one line and status 2, a failed calibration one line
     and 1, otherwise the work's status (``vical-collect``'s and ``vical-guide``'s)."""
     try:
-        status = work(cfg)
+        with write_faults_in_one_line(app, "out=", cfg.out, KEPT_WHOLE):
+            status = work(cfg)
     except USER_ERRORS as err:
         fail(app, err)
     except CalibrationError as err:

@@ -14,6 +14,10 @@ initialization failed``). A module run with ``python -m`` is its own start-up: `
 handling before the module's imports (``start_up_of_module``). An interrupt that arrives inside a later import, as
 the cause of the error that import raised, ends the command as the interrupt itself.
 
+A full disk or a read-only folder (``vical.apps.cli.write_faults_in_one_line``) is reported once, by the command,
+in one line: a library's writer thread that meets it (TensorBoard's event writer) hands it to the thread that
+writes through it, so the thread's own traceback is not printed (``_write_faults_reported_by_their_owner``).
+
 This module imports nothing heavy: the command's module is imported inside the handling.
 """
 
@@ -23,6 +27,7 @@ import importlib
 import os
 import signal
 import sys
+import threading
 from collections.abc import Callable
 from itertools import pairwise
 from typing import NoReturn
@@ -113,6 +118,18 @@ def start_up_of_module(argv: list[str]) -> None:
         during_start_up("vical-" + module.rsplit(".", 1)[1].replace("_", "-"))
 
 
+def _write_faults_reported_by_their_owner(default: Callable) -> Callable:
+    """A thread hook that leaves a writer thread's full disk or read-only folder to the thread it writes for (which
+    re-raises it: TensorBoard's ``_check_worker_status``) and prints any other thread's error as ``default`` does."""
+    from vical.apps.cli import is_write_fault
+
+    def hook(args) -> None:
+        if not is_write_fault(args.exc_value):
+            default(args)
+
+    return hook
+
+
 def _interrupt_within(err: BaseException) -> KeyboardInterrupt | None:
     """The interrupt that caused ``err`` (an import's ``ImportError``, raised for the interrupt inside it), if any."""
     seen = set()
@@ -130,6 +147,8 @@ def run(app: str, target: str | Callable[[], int | None]) -> NoReturn:
     interrupt that the command did not handle itself ends in one line and 130 / 143."""
     previous = {sig: _python_default(sig, signal.getsignal(sig)) for sig in (signal.SIGTERM, signal.SIGINT)}
     handled = _handled(previous[signal.SIGINT])
+    thread_hook = threading.excepthook
+    threading.excepthook = _write_faults_reported_by_their_owner(thread_hook)
     try:
         if isinstance(target, str):
             during_start_up(app)
@@ -150,6 +169,7 @@ def run(app: str, target: str | Callable[[], int | None]) -> NoReturn:
     finally:
         for sig, handler in previous.items():  # as they were (a test calls this in its own process)
             signal.signal(sig, handler)
+        threading.excepthook = thread_hook
     sys.exit(status)
 
 

@@ -16,7 +16,6 @@ import csv
 import dataclasses
 import io
 import math
-import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -29,13 +28,16 @@ from omegaconf import DictConfig, OmegaConf, open_dict
 from omegaconf.errors import OmegaConfBaseException
 
 from vical.apps.cli import (
+    OutputError,
     check_composes,
+    check_creatable,
     check_launcher,
     fail,
     one_line_warnings,
     override_value,
     plain,
     quiet_library_logs,
+    write_faults_in_one_line,
 )
 from vical.apps.entry import run as run_command
 from vical.calib.tasks import CalibrationTask
@@ -67,7 +69,7 @@ from vical.policies.stopping import StopRule, information_settings, with_stop
 # An absolute path: the console script imports this module from anywhere.
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 POLICY_DIR = CONF_DIR / "policy"
-USER_ERRORS = (ConfigError, FileNotFoundError, FileExistsError, OmegaConfBaseException, WorkerCrashed)
+USER_ERRORS = (ConfigError, FileNotFoundError, FileExistsError, OutputError, OmegaConfBaseException, WorkerCrashed)
 APP = "vical-evaluate"
 RESULTS, SUMMARY, FIGURE = "results.csv", "summary.md", "error_vs_effort.png"
 
@@ -151,12 +153,7 @@ def output_dir(cfg: DictConfig) -> Path:
         raise FileExistsError(f"out={out} exists and is not a directory; choose another directory")
     if not cfg.overwrite and any((out / f).exists() for f in (RESULTS, SUMMARY, FIGURE)):
         raise FileExistsError(f"out={out} already holds results; choose another directory or pass overwrite=true")
-    existing = next((d for d in (out, *out.parents) if d.exists()), Path("."))
-    if not existing.is_dir():
-        raise FileExistsError(f"out={out} cannot be created: {existing} is a file; choose another directory")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise FileExistsError(f"out={out}: {existing} is not writable; choose another directory")
-    return out
+    return check_creatable("out=", out)
 
 
 def _cell(value: Any, fmt: str) -> str:
@@ -412,7 +409,8 @@ def yardstick_fingerprint(task: str, kind: str = "yardstick") -> dict[str, str]:
 def hydra_main(cfg: DictConfig) -> None:
     try:
         hydra_cfg = HydraConfig.get()
-        out, summaries, effort = evaluate(cfg, hydra_cfg.runtime.choices.get("policy"), hydra_cfg.overrides.task)
+        with write_faults_in_one_line(APP, "out=", cfg.out):
+            out, summaries, effort = evaluate(cfg, hydra_cfg.runtime.choices.get("policy"), hydra_cfg.overrides.task)
     except USER_ERRORS as err:
         fail(APP, err)
     print(summary_table(summaries))

@@ -27,7 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from vical.apps.calibrate_outputs import view_overlaps
-from vical.apps.cli import ArgumentParser, cannot_write, one_line_warnings, report_error
+from vical.apps.cli import AS_IT_WAS, ArgumentParser, cannot_write, is_write_fault, one_line_warnings, report_error
 from vical.apps.entry import run as run_command
 from vical.data import DataError, ImuNoise, Recording
 from vical.geometry.transforms import invert_transform
@@ -225,7 +225,10 @@ def main(argv: list[str] | None = None) -> int:
     except (FormatError, DataError) as exc:
         return report_error("vical-export", str(exc))
     except OSError as exc:  # vical's refusals carry their message; the system's name the path and the reason
-        return report_error("vical-export", str(exc) if exc.filename is None else cannot_write("--out", out, exc))
+        if is_write_fault(exc):
+            return report_error("vical-export", cannot_write("--out", out, exc, AS_IT_WAS))
+        reason = str(exc) if exc.filename is None else f"{exc.filename}: {exc.strerror.lower()}"
+        return report_error("vical-export", reason)
     print_summary(rec, out, written, image_topics_of(rec, args.image_topic))
     return 0
 

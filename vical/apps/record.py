@@ -14,7 +14,6 @@ User errors (a bad value, an existing ``out``, Hydra's own override errors) prin
 
 from __future__ import annotations
 
-import os
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -24,7 +23,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
-from vical.apps.cli import check_then_run, fail, plain
+from vical.apps.cli import OutputError, check_creatable, check_then_run, fail, plain, write_faults_in_one_line
 from vical.apps.entry import run as run_command
 from vical.calib.detection.aprilgrid import detect_aprilgrid
 from vical.calib.detection.checkerboard import detect_checkerboard
@@ -45,7 +44,7 @@ from vical.sim.sampling import SensorSampling, draw_product, sample_rig, sample_
 from vical.sim.settings import BoardConfig
 
 APP = "vical-record"
-USER_ERRORS = (ConfigError, FileExistsError)
+USER_ERRORS = (ConfigError, FileExistsError, OutputError)
 
 
 class ClampedStepWarning(UserWarning):
@@ -79,12 +78,7 @@ def check_out(out, overwrite: bool) -> Path:
         raise FileExistsError(f"out={out} is a file; choose a directory path")
     if path.exists() and not overwrite:
         raise FileExistsError(f"out={out} already exists; choose another directory or pass overwrite=true")
-    existing = next(d for d in path.absolute().parents if d.exists())
-    if not existing.is_dir():
-        raise FileExistsError(f"out={out} cannot be created: {existing} is a file")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        raise FileExistsError(f"out={out} cannot be created: {existing} is not writable")
-    return path
+    return check_creatable("out=", path)
 
 
 def _require_bool(cfg: DictConfig, key: str) -> bool:
@@ -267,7 +261,8 @@ CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 @hydra.main(config_path=CONF_DIR, config_name="record", version_base="1.3")
 def hydra_main(cfg: DictConfig) -> None:
     try:
-        out = record(cfg)
+        with write_faults_in_one_line(APP, "out=", cfg.out):
+            out = record(cfg)
     except USER_ERRORS as err:
         fail(APP, err)
     print(f"recording written to {out}")

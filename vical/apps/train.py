@@ -35,12 +35,15 @@ from hydra.errors import InstantiationException
 from omegaconf import DictConfig, OmegaConf
 
 from vical.apps.cli import (
+    OutputError,
     check_composes,
+    check_creatable,
     check_launcher,
     fail,
     one_line_warnings,
     override_value,
     quiet_library_logs,
+    write_faults_in_one_line,
 )
 from vical.apps.entry import interrupted_by, interrupted_status
 from vical.apps.entry import run as run_command
@@ -75,6 +78,7 @@ USER_ERRORS = (
     WorkerDiedError,
     EnvWorkerError,
     InstantiationException,  # the env's _target_ could not be built (bad id, bad arguments)
+    OutputError,
 )
 APP = "vical-train"
 
@@ -159,6 +163,10 @@ def check_command_line(argv: list[str]) -> str | None:
         value = override_value(argv, key)
         if value is not None and Path(value).exists() and not Path(value).is_dir():
             raise ConfigError(f"{key}={value} is a file; give a directory for the run")
+        if value is not None and resume is None:
+            check_creatable(f"{key}=", value)  # Hydra makes it (and its train.log) before the run: a traceback there
+    if resume is None and not any(override_value(argv, key) for key in ("run_dir", "hydra.run.dir")):
+        check_creatable("run_dir=", "runs/<date>_<time>")  # Hydra's default, below the working directory
     cfg = check_composes(CONF_DIR, "train", argv)
     if cfg is None:
         return None  # Hydra flags (-m, --cfg, ...): Hydra and the task function check the rest
@@ -223,12 +231,16 @@ def _remove_unused(run_dir: Path) -> None:
         parent.rmdir()
 
 
+def _last_checkpoint(run_dir: Path) -> int | None:
+    try:
+        return checkpoint_step(run_dir)
+    except UnreadableCheckpointError:
+        return None
+
+
 def interrupted_message(run_dir: Path, by: str = "Ctrl-C") -> str:
     """Where a run stopped ``by`` Ctrl-C or SIGTERM can go on from, and the command that does it."""
-    try:
-        step = checkpoint_step(run_dir)
-    except UnreadableCheckpointError:
-        step = None
+    step = _last_checkpoint(run_dir)
     if step is None:
         return (
             f"{APP}: interrupted ({by}) before the run's first checkpoint; nothing to resume in {run_dir}: start it "
@@ -238,6 +250,14 @@ def interrupted_message(run_dir: Path, by: str = "Ctrl-C") -> str:
         f"{APP}: interrupted ({by}); the last checkpoint (step {step}) is {run_dir / CHECKPOINT}; "
         f"continue with: {APP} resume={run_dir}"
     )
+
+
+def kept_when_unwritable(run_dir: Path) -> str:
+    """What a run that the disk stopped (full, read-only) keeps: its last whole checkpoint, and how to go on."""
+    step = _last_checkpoint(run_dir)
+    if step is None:
+        return "no checkpoint was written yet"
+    return f"its last checkpoint (step {step}) is whole: continue with {APP} resume={run_dir} once there is space"
 
 
 @hydra.main(config_path=CONF_DIR, config_name="train", version_base="1.3")
@@ -252,7 +272,9 @@ def hydra_main(cfg: DictConfig) -> None:
                 return
         elif cfg.run_dir is None:
             cfg.run_dir = str(output_dir)
-        result = train(cfg)
+        run_dir = Path(cfg.run_dir)
+        with write_faults_in_one_line(APP, "run_dir=", run_dir, lambda: kept_when_unwritable(run_dir)):
+            result = train(cfg)
     except USER_ERRORS as err:
         _remove_unused(output_dir)
         fail(APP, err)

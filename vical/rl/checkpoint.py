@@ -3,6 +3,7 @@ a run directory: whether a run can resume, and from where."""
 
 from __future__ import annotations
 
+import io
 import pickle
 from collections.abc import Mapping
 from pathlib import Path
@@ -54,9 +55,14 @@ _UNREADABLE = (RuntimeError, EOFError, KeyError, ValueError, pickle.UnpicklingEr
 
 
 def save_checkpoint(state: dict, path: str | Path) -> None:
-    """``torch.save`` ``state`` to ``path`` atomically: a crash leaves the old file or the complete new one."""
+    """``torch.save`` ``state`` to ``path`` atomically: a crash leaves the old file or the complete new one.
+
+    Serialised in memory first, then written: torch's own file writer turns a full disk into a ``RuntimeError``
+    ("unexpected pos"), where Python's write raises the ``OSError`` (ENOSPC, EROFS) that the commands report."""
+    data = io.BytesIO()
+    torch.save(state, data)
     with atomic_file(path) as tmp:
-        torch.save(state, tmp)
+        tmp.write_bytes(data.getbuffer())
 
 
 def load_checkpoint(path: str | Path, mmap: bool = False) -> dict:
