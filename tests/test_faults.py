@@ -36,10 +36,10 @@ PROGRESS_BAR = re.compile(r"\d+%\|")
 
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory) -> dict[str, Path]:
-    """A recording, one with 300 images (slow to export), and a resting IMU's CSV (slow to analyse)."""
+    """A recording, one with 900 images (slow to export: ~2-3 s), and a resting IMU's CSV (slow to analyse)."""
     folder = tmp_path_factory.mktemp("inputs")
     rec = make_recording(duration=4.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=2)
-    long = make_recording(duration=30.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=3)
+    long = make_recording(duration=90.0, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=3)
     images = np.random.default_rng(0).integers(0, 256, (len(long.frames), 480, 640), dtype=np.uint8)
     long = replace(long, frames=CameraFrames(long.frames.t, long.frames.corners, long.frames.ids, images))
     write_imu_csv(static_stream(1800, 1), folder / "static.csv")
@@ -234,3 +234,105 @@ def test_a_job_started_with_ctrl_c_ignored_keeps_it_ignored_through_the_start_up
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
                           preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))  # fmt: skip
     assert done.stdout.strip() == "True", done.stderr
+
+
+# --- A full disk and a read-only folder: each command's output on a small file system of its own -------------------
+
+# Where each command writes (under the folder command_args is given), and the flag that replaces an earlier output.
+OUTPUTS = {"vical-calibrate": ("calibration", "--overwrite"), "vical-imu-noise": ("noise", "--overwrite"),
+           "vical-record": ("recording", "overwrite=true"), "vical-export": ("export", "--overwrite"),
+           "vical-evaluate": ("evaluation", "overwrite=true"), "vical-train": ("run", "overwrite=true"),
+           "vical-collect": ("collection", "overwrite=true"), "vical-guide": ("guide", "overwrite=true")}  # fmt: skip
+# An earlier output, to be kept as it was: a file each command replaces (evaluate's results, a run's config) and one
+# it knows nothing of.
+PREVIOUS = {"previous.txt": "an earlier output\n", "results.csv": "earlier results\n", "config.yaml": "seed: 1\n"}
+# The disk's free space when the command starts: none at all, and one page (one small file fits: the evaluation's
+# table, a collection's target.yaml, a run's config).
+FREE = {"full": 0, "nearly full": 4096}
+# A fault while vical-collect and vical-guide record is the collection's (status 1: the arm is stopped, the recording
+# so far kept whole); before, or after it, a user's output error (2), as in every other command.
+FAULT_STATUS = {"vical-collect": {1, 2}, "vical-guide": {1, 2}}
+
+
+def _mounts_a_file_system(prefix: list[str], where: Path) -> bool:
+    try:
+        done = subprocess.run([*prefix, "sh", "-c", f"mount -t tmpfs -o size=64k tmpfs {where}"], capture_output=True,
+                              timeout=30)  # fmt: skip
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return done.returncode == 0
+
+
+@pytest.fixture(scope="module")
+def own_mounts(tmp_path_factory) -> list[str]:
+    """How a test mounts a file system that only its command sees: a user and mount namespace of its own (no root
+    needed where the kernel allows it), else a mount namespace with sudo; the tests skip, saying why, elsewhere."""
+    where = tmp_path_factory.mktemp("probe")
+    for prefix in (["unshare", "--user", "--map-root-user", "--mount"], ["sudo", "-n", "-E", "unshare", "--mount"]):
+        if _mounts_a_file_system(prefix, where):
+            return prefix
+    pytest.skip("no file system can be mounted here (neither unshare --user --mount nor sudo unshare --mount works): "
+                "the full-disk and read-only tests need one")  # fmt: skip
+
+
+def run_on_own_file_system(prefix: list[str], cmd: list[str], folder: Path, fault: str, seen: Path) -> tuple[int, str]:
+    """Run ``cmd`` in ``folder``, a fresh tmpfs that holds what ``folder`` held, either full but for ``FREE[fault]``
+    bytes or read-only; what it holds after the command is copied to ``seen``. The command's status and stderr."""
+    if fault == "read-only":
+        fault_it = f"mount -o remount,ro {folder}"
+    else:
+        filler = folder / ".filler"
+        fault_it = f"dd if=/dev/zero of={filler} bs=4096 2>/dev/null || true; truncate -s -{FREE[fault]} {filler}"
+    script = "; ".join([
+        f"set -e; cp -a {folder} {seen}.given; mount -t tmpfs -o size=8m tmpfs {folder}",
+        f"cp -a {seen}.given/. {folder}", fault_it,
+        f'cd {folder}; set +e; timeout 120 "$@"; echo $? > {seen}.status; cd /',
+        f"rm -f {folder}/.filler 2>/dev/null; mkdir -p {seen}; cp -a {folder}/. {seen}; chmod -R a+rwX {seen}",
+    ])  # fmt: skip
+    done = subprocess.run([*prefix, "sh", "-c", script, "sh", *cmd], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                          text=True, timeout=180)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    return int(Path(f"{seen}.status").read_text()), done.stderr
+
+
+def held(folder: Path) -> dict[str, bytes]:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("fault", [*FREE, "read-only"])
+@pytest.mark.parametrize("app", sorted(OUTPUTS))
+def test_a_full_disk_or_a_read_only_folder_ends_the_command_in_one_line_keeping_the_earlier_output(
+    app, fault, inputs, tmp_path, own_mounts
+):
+    folder = tmp_path / "disk"
+    name, overwrite = OUTPUTS[app]
+    (folder / name).mkdir(parents=True)
+    for file, text in PREVIOUS.items():
+        (folder / name / file).write_text(text)
+    earlier = held(folder / name)
+    cmd = [str(BIN / app), *command_args(app, inputs, folder), overwrite]
+    status, stderr = run_on_own_file_system(own_mounts, cmd, folder, fault, tmp_path / "seen")
+    lines = [line for line in stderr.replace("\r", "\n").splitlines() if line.strip() and not PROGRESS_BAR.search(line)]
+    assert "Traceback" not in stderr and status in FAULT_STATUS.get(app, {2}), f"{fault}: status {status}\n{stderr}"
+    own = [line for line in lines if line.startswith(f"{app}: error:")]
+    assert len(own) == 1 and len(lines) == len([ln for ln in lines if ln.startswith(app)]), stderr
+    reason = "read-only file system" if fault == "read-only" else "no space left on device"
+    assert str(folder / name) in own[0] and (reason in own[0].lower() or "not writable" in own[0]), own[0]
+    seen = tmp_path / "seen"
+    assert held(seen / name) == earlier, "the earlier output changed"
+    assert not [p for p in seen.rglob("*") if ".tmp-" in p.name], "a temporary file was left"
+
+
+@pytest.mark.integration
+def test_the_demo_writes_nothing_so_a_read_only_folder_changes_nothing(inputs, tmp_path, own_mounts):
+    folder = tmp_path / "disk"
+    folder.mkdir()
+    cmd = [str(BIN / "vical-sim-demo"), *command_args("vical-sim-demo", inputs, folder)]
+    status, stderr = run_on_own_file_system(own_mounts, cmd, folder, "read-only", tmp_path / "seen")
+    assert status == 0 and "Traceback" not in stderr and held(tmp_path / "seen") == {}, stderr
+
+
+def test_every_writing_command_is_faulted_on_a_full_disk():
+    """Every console script but the demo (which writes nothing: tested above) is run on a full and a read-only disk."""
+    assert set(OUTPUTS) == set(console_scripts()) - {"vical-sim-demo"}
