@@ -337,6 +337,33 @@ def test_a_board_never_seen_stops_the_guide_before_it_records_in_one_line(tmp_pa
     )
 
 
+@pytest.mark.parametrize(
+    ("fault", "stopped"),
+    [
+        ("person.faults.camera_gap=[0.0,1000.0]",
+         "no camera images in the first 1 s while the IMU streams; check that the sensor's camera is enabled and "
+         "publishes (ROS: the image topic)"),
+        ("person.faults.imu_gap=[0.0,1000.0]",
+         "no IMU samples for 1 s while the camera streams (limits.wait_timeout); check that the sensor's IMU is "
+         "enabled and publishes (RealSense: a model with an IMU; ROS: the IMU topic)"),
+    ],
+    ids=["no images", "no IMU"],
+)  # fmt: skip
+def test_a_sensor_that_delivers_no_images_or_no_imu_stops_the_guide_before_it_records_naming_the_stream(
+    tmp_path, capsys, fault, stopped
+):
+    """A camera that sends nothing is not a board out of view: the line names the silent stream and what to check."""
+    out = tmp_path / "out"
+    status = guide(config(f"out={out}", "page.enabled=false", "seed=3", "limits.wait_timeout=1", fault))
+    err = capsys.readouterr().err
+    assert status == 1
+    (line,) = [line for line in err.splitlines() if line.startswith("vical-guide")]
+    assert line == (
+        f"vical-guide: error: stopped: {stopped}; no frame was recorded ({out / 'recording'}): nothing to calibrate"
+    )
+    assert yaml.safe_load((out / "collect.yaml").read_text())["outcome"] == f"stopped: {stopped}"
+
+
 @pytest.mark.integration
 @pytest.mark.parametrize(("sig", "status", "name"), [(signal.SIGINT, 130, "Ctrl-C"), (signal.SIGTERM, 143, "SIGTERM")])
 def test_an_interrupted_guide_says_so_in_one_line_and_keeps_a_calibratable_recording(tmp_path, sig, status, name):

@@ -20,6 +20,8 @@ from stopped_collections import default_sigint, kill_if_running
 from vical.calib.synthetic import make_recording
 from vical.data import CameraFrames, ImuNoise
 from vical.io.csvfiles import write_imu_csv
+from vical.io.euroc import read_euroc
+from vical.io.kalibr import read_target_yaml
 from vical.io.recording import save_recording
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -275,14 +277,16 @@ def own_mounts(tmp_path_factory) -> list[str]:
                 "the full-disk and read-only tests need one")  # fmt: skip
 
 
-def run_on_own_file_system(prefix: list[str], cmd: list[str], folder: Path, fault: str, seen: Path) -> tuple[int, str]:
-    """Run ``cmd`` in ``folder``, a fresh tmpfs that holds what ``folder`` held, either full but for ``FREE[fault]``
-    bytes or read-only; what it holds after the command is copied to ``seen``. The command's status and stderr."""
-    if fault == "read-only":
+def run_on_own_file_system(
+    prefix: list[str], cmd: list[str], folder: Path, free: int | None, seen: Path
+) -> tuple[int, str]:
+    """Run ``cmd`` in ``folder``, a fresh tmpfs that holds what ``folder`` held, either full but for ``free`` bytes or
+    read-only (None); what it holds after the command is copied to ``seen``. The command's status and stderr."""
+    if free is None:
         fault_it = f"mount -o remount,ro {folder}"
     else:
         filler = folder / ".filler"
-        fault_it = f"dd if=/dev/zero of={filler} bs=4096 2>/dev/null || true; truncate -s -{FREE[fault]} {filler}"
+        fault_it = f"dd if=/dev/zero of={filler} bs=4096 2>/dev/null || true; truncate -s -{free} {filler}"
     script = "; ".join([
         f"set -e; cp -a {folder} {seen}.given; mount -t tmpfs -o size=8m tmpfs {folder}",
         f"cp -a {seen}.given/. {folder}", fault_it,
@@ -312,7 +316,7 @@ def test_a_full_disk_or_a_read_only_folder_ends_the_command_in_one_line_keeping_
         (folder / name / file).write_text(text)
     earlier = held(folder / name)
     cmd = [str(BIN / app), *command_args(app, inputs, folder), overwrite]
-    status, stderr = run_on_own_file_system(own_mounts, cmd, folder, fault, tmp_path / "seen")
+    status, stderr = run_on_own_file_system(own_mounts, cmd, folder, FREE.get(fault), tmp_path / "seen")
     lines = [line for line in stderr.replace("\r", "\n").splitlines() if line.strip() and not PROGRESS_BAR.search(line)]
     assert "Traceback" not in stderr and status in FAULT_STATUS.get(app, {2}), f"{fault}: status {status}\n{stderr}"
     own = [line for line in lines if line.startswith(f"{app}: error:")]
@@ -325,11 +329,45 @@ def test_a_full_disk_or_a_read_only_folder_ends_the_command_in_one_line_keeping_
 
 
 @pytest.mark.integration
+@pytest.mark.parametrize("mode", [["images=false"], ["mode=static_imu"]], ids=["without images", "static IMU"])
+def test_a_full_disk_ends_every_kind_of_recording_in_one_line(mode, tmp_path, own_mounts):
+    """vical-record's other writers (the recording without images, the resting IMU's) on a disk with one page free."""
+    folder = tmp_path / "disk"
+    folder.mkdir()
+    cmd = [str(BIN / "vical-record"), f"out={folder / 'recording'}", *mode]
+    status, stderr = run_on_own_file_system(own_mounts, cmd, folder, FREE["nearly full"], tmp_path / "seen")
+    lines = [line for line in stderr.replace("\r", "\n").splitlines() if line.startswith("vical-record: error:")]
+    assert status == 2 and "Traceback" not in stderr and len(lines) == 1, stderr
+    assert lines[0].startswith(f"vical-record: error: out={folder / 'recording'}: cannot write it (no space left on")
+    assert not (tmp_path / "seen" / "recording").exists()
+
+
+@pytest.mark.integration
+def test_a_disk_that_fills_while_the_guide_records_stops_it_in_one_line_with_the_recording_so_far_whole(
+    tmp_path, own_mounts
+):
+    """A real full disk (ENOSPC on a tmpfs with 1 MiB free) a few frames into the guidance: status 1, one line saying
+    the disk took no more and where the recording is; what it holds reads back whole."""
+    folder = tmp_path / "disk"
+    folder.mkdir()
+    cmd = [str(BIN / "vical-guide"), f"out={folder / 'guide'}", "page.enabled=false", "report=false", "seed=3"]
+    status, stderr = run_on_own_file_system(own_mounts, cmd, folder, 1 << 20, tmp_path / "seen")
+    (line,) = [line for line in stderr.splitlines() if line.startswith("vical-guide")]
+    assert status == 1 and "Traceback" not in stderr, stderr
+    recording = folder / "guide" / "recording"
+    assert line.startswith(f"vical-guide: error: stopped: {recording}: the disk took no more (")
+    assert "No space left on device; is it full?)" in line and f"the recording so far is in {recording}" in line
+    seen = tmp_path / "seen" / "guide"
+    frames = read_euroc(seen / "recording", read_target_yaml(seen / "target.yaml")).frames
+    assert 0 < len(frames) == len(frames.images)
+
+
+@pytest.mark.integration
 def test_the_demo_writes_nothing_so_a_read_only_folder_changes_nothing(inputs, tmp_path, own_mounts):
     folder = tmp_path / "disk"
     folder.mkdir()
     cmd = [str(BIN / "vical-sim-demo"), *command_args("vical-sim-demo", inputs, folder)]
-    status, stderr = run_on_own_file_system(own_mounts, cmd, folder, "read-only", tmp_path / "seen")
+    status, stderr = run_on_own_file_system(own_mounts, cmd, folder, None, tmp_path / "seen")
     assert status == 0 and "Traceback" not in stderr and held(tmp_path / "seen") == {}, stderr
 
 

@@ -300,6 +300,11 @@ class Guide(LiveEpisode):
 
     def _last_pose(self) -> np.ndarray:
         """``T_cam_board`` of the latest frame that posed the board."""
+        if self._T_cam_board is None and self.stream.last_stamps()[1] is None:  # a camera that sends nothing
+            raise CollectionStopped(
+                f"no camera images in the first {self.start.start_rest:g} s while the IMU streams; check that the "
+                "sensor's camera is enabled and publishes (ROS: the image topic)"
+            )
         if self._T_cam_board is None:
             raise CollectionStopped(
                 f"the board was not seen in the first {self.start.start_rest:g} s; hold the sensor so that the whole "
