@@ -1,10 +1,7 @@
 """The package dependency direction of docs/architecture.md, checked on the source (static imports).
 
 ``ALLOWED`` names, for every unit of vical (a subpackage, or a top-level module such as ``config_checks``), every
-unit it may import: any pair it does not list is forbidden, and a new unit fails until it is given its row. A
-module kept at an old path for old imports (``test_old_imports.MOVED``) counts as the module it re-exports, and
-the ones that re-export another unit's module are left out of their own unit's row (``test_old_imports`` checks
-that they import nothing else).
+unit it may import: any pair it does not list is forbidden, and a new unit fails until it is given its row.
 """
 
 import ast
@@ -12,7 +9,6 @@ import re
 from pathlib import Path
 
 import pytest
-from test_old_imports import MOVED
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "vical"
@@ -52,8 +48,6 @@ NEVER = {
 LIBRARY = set(ALLOWED) - {"apps"}  # library code never imports the apps
 
 # Old paths of moved modules -> the unit of the module each re-exports.
-OLD_PATHS = {old: {new.split(".")[1] for new in news} for old, news in MOVED.items()}
-OLD_PATH_IMPORTERS: dict[str, set[str]] = {}  # modules that still import a moved module by its old path
 
 
 def module_name(path: Path) -> str:
@@ -62,10 +56,7 @@ def module_name(path: Path) -> str:
 
 
 def unit_of(module: str) -> str:
-    """``vical.sim.panda`` -> ``sim``; ``vical.config_checks`` -> ``config_checks``; old paths -> their new unit."""
-    if module in OLD_PATHS:
-        (unit,) = OLD_PATHS[module]
-        return unit
+    """``vical.sim.panda`` -> ``sim``; ``vical.config_checks`` -> ``config_checks``."""
     return module.split(".")[1]
 
 
@@ -87,19 +78,13 @@ def vical_imports(path: Path) -> set[str]:
     return {unit_of(m) for m in imported_modules(path)}
 
 
-def re_exports_another_unit(path: Path) -> bool:
-    module = module_name(path)
-    return module in OLD_PATHS and OLD_PATHS[module] != {module.split(".")[1]}
-
-
 def units() -> dict[str, list[Path]]:
-    """Every unit of vical with its modules (the old paths that re-export another unit's module left out)."""
+    """Every unit of vical with its modules."""
     out: dict[str, list[Path]] = {}
     for path in sorted(PACKAGE.rglob("*.py")):
         if path.parent == PACKAGE and path.stem == "__init__":
             continue
-        if not re_exports_another_unit(path):
-            out.setdefault(module_name(path).split(".")[1], []).append(path)
+        out.setdefault(module_name(path).split(".")[1], []).append(path)
     return out
 
 
@@ -155,15 +140,6 @@ def test_the_modules_form_no_import_cycle():
         visit(module, ())
 
 
-def test_library_code_imports_moved_modules_at_their_new_paths():
-    found = {}
-    for path in sorted(PACKAGE.rglob("*.py")):
-        old = imported_modules(path) & set(OLD_PATHS)
-        if old and module_name(path) not in OLD_PATHS:
-            found[str(path.relative_to(ROOT))] = old
-    assert found == OLD_PATH_IMPORTERS
-
-
 def test_the_documented_table_is_the_imports():
     """docs/architecture.md's table of direct imports states, for every unit, what its modules import."""
     rows = re.findall(r"^\| ((?:`\w+`(?:, )?)+) \| (.+) \|$", (ROOT / "docs" / "architecture.md").read_text(), re.M)
@@ -177,5 +153,5 @@ def test_the_documented_table_is_the_imports():
 
 def test_checker_sees_imports(tmp_path):
     module = tmp_path / "m.py"
-    module.write_text("import vical.sim.panda\nfrom vical.calib import x\nfrom . import y\nfrom vical.config import z")
+    module.write_text("import vical.sim.panda\nfrom vical.calib import x\nfrom . import y\nfrom vical.config_checks import z")
     assert vical_imports(module) == {"sim", "calib", "config_checks"}

@@ -6,7 +6,6 @@ target in images), ``noise`` (an IMU's noise from a static recording), ``solve``
 (``metrics``), the paper's tasks (``tasks``) and synthetic recordings (``synthetic``) beside them.
 """
 
-from vical.calib import _moved
 from vical.calib.detection.checkerboard import detect_checkerboard
 from vical.calib.errors import CalibrationError
 from vical.calib.metrics import CalibrationErrors, calibration_errors
@@ -15,8 +14,6 @@ from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.solve.nominal import nominal_T_cam_imu
 from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint, calibrate_two_stage
 from vical.calib.solve.visual_inertial import ViOptions
-
-_moved.install()  # the module paths from before the split by stage stay importable
 
 __all__ = [
     "CalibrationError",
