@@ -6,7 +6,8 @@ included), a disk with ``--free`` bytes left (one drawn) or a read-only one unde
 a mount namespace of the case's own, as in ``tests/test_faults.py``, whose commands and arguments it runs). A case
 is right when its stderr holds no traceback, exactly one line of the command's own, and the status is 130 / 143
 (a signal; Python's own -SIGINT counts as 130) or 2 (a disk; 1 for a collection's recording). A signal sent before
-the process handles SIGTERM (the interpreter's first ~50 ms, before any of vical runs) is counted apart, and so is
+the process handles SIGTERM (the interpreter's first ~50 ms, before any of vical runs) is counted apart, as is one
+sent once the command's work was done and its handling given back (``after its work``: its outputs are whole), and
 a command that ended before its signal. Two cases run at once (the machine busy, as under a supervisor).
 
     .venv/bin/python experiments/fault_audit.py --cases 460 --seed 40000
@@ -44,7 +45,7 @@ class Case:
 @dataclass(frozen=True)
 class Outcome:
     case: Case
-    verdict: str  # right, traceback, wrong status, not one line, before vical ran, ended before the signal
+    verdict: str  # right, traceback, wrong status, not one line, before vical ran, after its work, ended before
     status: int
     stderr: str
 
@@ -89,7 +90,10 @@ def run_signal(case: Case, inputs: dict[str, Path], work: Path) -> Outcome:
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=work,
                             preexec_fn=faults.default_sigint)  # fmt: skip
     try:
-        time.sleep(case.moment)
+        handled_once, start = False, time.monotonic()
+        while time.monotonic() - start < case.moment and proc.poll() is None:
+            handled_once = handled_once or faults.catches_sigterm(proc.pid)
+            time.sleep(0.002)
         if proc.poll() is not None:
             return Outcome(case, "ended before the signal", proc.returncode, proc.communicate()[1])
         handled = faults.catches_sigterm(proc.pid)
@@ -100,8 +104,8 @@ def run_signal(case: Case, inputs: dict[str, Path], work: Path) -> Outcome:
         faults.kill_if_running(proc)
     expected = {SIGNAL_STATUS[case.fault]} | ({-signal.SIGINT} if case.fault == "SIGINT" else set())
     verdict = judge(case.app, stderr, proc.returncode, expected)
-    if verdict != "right" and not handled:
-        verdict = "before vical ran"
+    if verdict != "right" and not handled:  # vical's handling not yet in place, or given back once the work was done
+        verdict = "after its work" if handled_once else "before vical ran"
     return Outcome(case, verdict, proc.returncode, stderr)
 
 
@@ -126,8 +130,8 @@ def mount_prefix(root: Path) -> list[str] | None:
 
 
 def table(outcomes: list[Outcome]) -> str:
-    verdicts = ["right", "traceback", "wrong status", "not one line", "before vical ran", "ended before the signal",
-                "fitted"]  # fmt: skip
+    verdicts = ["right", "traceback", "wrong status", "not one line", "before vical ran", "after its work",
+                "ended before the signal", "fitted"]  # fmt: skip
     counts = collections.Counter((o.case.app, o.case.fault, o.verdict) for o in outcomes)
     keys = sorted({(o.case.app, o.case.fault) for o in outcomes})
     rows = ["| command | fault | cases | " + " | ".join(verdicts) + " |", "|---|---|---:|" + "---:|" * len(verdicts)]

@@ -226,6 +226,30 @@ def test_a_signal_during_the_start_up_ends_at_once_with_the_line_and_the_status(
     )
 
 
+@pytest.mark.parametrize("sig", list(SIGNALS))
+def test_an_interrupt_while_hydra_starts_is_held_and_raised_as_the_tasks_own_when_it_begins(sig):
+    """OmegaConf turns an interrupt landing inside it into its own error (Hydra then exits 1 in several lines): from
+    a Hydra app's start until its task begins, Ctrl-C and SIGTERM wait, and the task's first step raises them."""
+    code = (
+        "import os, signal, sys\n"
+        "from vical.apps.entry import _terminate\n"
+        "from vical.apps.cli import hydra_start_up_held, task_begins\n"
+        "signal.signal(signal.SIGTERM, _terminate)\n"
+        "with hydra_start_up_held():\n"
+        f"    os.kill(os.getpid(), {int(sig)})\n"
+        "    print('held', flush=True)\n"
+        "    try:\n"
+        "        task_begins()\n"
+        "    except KeyboardInterrupt as err:\n"
+        "        print('raised', type(err).__name__, flush=True)\n"
+        "    print('once', flush=True)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                          preexec_fn=default_sigint)  # fmt: skip
+    raised = "Terminated" if sig == signal.SIGTERM else "KeyboardInterrupt"
+    assert done.stdout.split("\n")[:3] == ["held", f"raised {raised}", "once"], done.stderr
+
+
 def test_a_job_started_with_ctrl_c_ignored_keeps_it_ignored_through_the_start_up():
     code = (
         "import signal, sys\n"

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from vical.config_checks import ConfigError, SettingError
+from vical.signals import interrupts_held
 
 if TYPE_CHECKING:
     from omegaconf import DictConfig
@@ -251,6 +252,25 @@ def check_launcher(argv: list[str]) -> None:
         raise ConfigError(f"hydra/launcher={choice} needs a Hydra launcher plugin that is not installed: {install}")
 
 
+# Ctrl-C and SIGTERM held from a Hydra app's start until its task begins (``hydra_start_up_held``).
+_HYDRA_START_UP = contextlib.ExitStack()
+
+
+@contextlib.contextmanager
+def hydra_start_up_held() -> Iterator[None]:
+    """Ctrl-C and SIGTERM held while the command line is composed and Hydra starts the job, until the task begins
+    (``task_begins``): OmegaConf turns an interrupt that lands inside it into its own error, which Hydra reports in
+    several lines with status 1 (``vical.signals``). Held at most for the composition, ~1 s."""
+    with _HYDRA_START_UP:
+        _HYDRA_START_UP.enter_context(interrupts_held())
+        yield
+
+
+def task_begins() -> None:
+    """The Hydra task's first step: an interrupt held through the start-up is raised here, as the task's own."""
+    _HYDRA_START_UP.close()
+
+
 def check_then_run(
     app: str,
     conf_dir: str | os.PathLike,
@@ -262,10 +282,11 @@ def check_then_run(
     """Console entry point of a Hydra app: the command line composed and the settings checked first (one
     line ``<app>: error: ...`` and status 2 for ``user_errors`` and Hydra's own override errors), then Hydra."""
     one_line_warnings()
-    try:
-        cfg = check_composes(conf_dir, config_name, sys.argv[1:])
-        if cfg is not None:  # None with Hydra flags (-m, --cfg, ...): the app checks under Hydra
-            check_settings(cfg)
-    except user_errors as err:
-        fail(app, err)
-    hydra_main()
+    with hydra_start_up_held():
+        try:
+            cfg = check_composes(conf_dir, config_name, sys.argv[1:])
+            if cfg is not None:  # None with Hydra flags (-m, --cfg, ...): the app checks under Hydra
+                check_settings(cfg)
+        except user_errors as err:
+            fail(app, err)
+        hydra_main()

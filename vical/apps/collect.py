@@ -34,6 +34,7 @@ from vical.apps.cli import (
     fail,
     plain,
     report_error,
+    task_begins,
     write_faults_in_one_line,
 )
 from vical.apps.entry import interrupted_by, interrupted_status
@@ -373,6 +374,7 @@ KEPT_WHOLE = (
 def finish(app: str, work: Callable[[DictConfig], int], cfg: DictConfig) -> None:
     """A collection app's ``work`` under Hydra: a user error is one line and status 2, a failed calibration one line
     and 1, otherwise the work's status (``vical-collect``'s and ``vical-guide``'s)."""
+    task_begins()
     try:
         with write_faults_in_one_line(app, "out=", cfg.out, KEPT_WHOLE):
             status = work(cfg)

@@ -121,9 +121,10 @@ def start_up_of_module(argv: list[str]) -> None:
 def _write_faults_reported_by_their_owner(default: Callable) -> Callable:
     """A thread hook that leaves a writer thread's full disk or read-only folder to the thread it writes for (which
     re-raises it: TensorBoard's ``_check_worker_status``) and prints any other thread's error as ``default`` does."""
-    from vical.apps.cli import is_write_fault
 
     def hook(args) -> None:
+        from vical.apps.cli import is_write_fault  # here: the start-up imports nothing before its handling is set
+
         if not is_write_fault(args.exc_value):
             default(args)
 
@@ -148,12 +149,12 @@ def run(app: str, target: str | Callable[[], int | None]) -> NoReturn:
     previous = {sig: _python_default(sig, signal.getsignal(sig)) for sig in (signal.SIGTERM, signal.SIGINT)}
     handled = _handled(previous[signal.SIGINT])
     thread_hook = threading.excepthook
-    threading.excepthook = _write_faults_reported_by_their_owner(thread_hook)
     try:
         if isinstance(target, str):
             during_start_up(app)
             module, function = target.split(":")
             target = getattr(importlib.import_module(module), function)
+        threading.excepthook = _write_faults_reported_by_their_owner(thread_hook)
         signal.signal(signal.SIGTERM, _terminate)
         if signal.SIGINT in handled:
             signal.signal(signal.SIGINT, signal.default_int_handler)

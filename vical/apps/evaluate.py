@@ -33,10 +33,12 @@ from vical.apps.cli import (
     check_creatable,
     check_launcher,
     fail,
+    hydra_start_up_held,
     one_line_warnings,
     override_value,
     plain,
     quiet_library_logs,
+    task_begins,
     write_faults_in_one_line,
 )
 from vical.apps.entry import run as run_command
@@ -407,6 +409,7 @@ def yardstick_fingerprint(task: str, kind: str = "yardstick") -> dict[str, str]:
 
 @hydra.main(config_path=str(CONF_DIR), config_name="evaluate", version_base="1.3")
 def hydra_main(cfg: DictConfig) -> None:
+    task_begins()
     try:
         hydra_cfg = HydraConfig.get()
         with write_faults_in_one_line(APP, "out=", cfg.out):
@@ -425,14 +428,15 @@ def main() -> None:
     one_line_warnings()
     quiet_library_logs()
     name = override_value(sys.argv[1:], "policy")
-    try:
-        check_launcher(sys.argv[1:])
-        if name is not None:
-            check_policy_name(name)
-        check_composes(CONF_DIR, "evaluate", sys.argv[1:])
-    except ConfigError as err:
-        fail(APP, err)
-    hydra_main()
+    with hydra_start_up_held():
+        try:
+            check_launcher(sys.argv[1:])
+            if name is not None:
+                check_policy_name(name)
+            check_composes(CONF_DIR, "evaluate", sys.argv[1:])
+        except ConfigError as err:
+            fail(APP, err)
+        hydra_main()
 
 
 if __name__ == "__main__":  # python -m: the console script's handling of Ctrl-C and SIGTERM

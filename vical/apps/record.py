@@ -23,7 +23,15 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
-from vical.apps.cli import OutputError, check_creatable, check_then_run, fail, plain, write_faults_in_one_line
+from vical.apps.cli import (
+    OutputError,
+    check_creatable,
+    check_then_run,
+    fail,
+    plain,
+    task_begins,
+    write_faults_in_one_line,
+)
 from vical.apps.entry import run as run_command
 from vical.calib.detection.aprilgrid import detect_aprilgrid
 from vical.calib.detection.checkerboard import detect_checkerboard
@@ -260,6 +268,7 @@ CONF_DIR = str(Path(__file__).resolve().parents[2] / "conf")
 
 @hydra.main(config_path=CONF_DIR, config_name="record", version_base="1.3")
 def hydra_main(cfg: DictConfig) -> None:
+    task_begins()
     try:
         with write_faults_in_one_line(APP, "out=", cfg.out):
             out = record(cfg)

@@ -40,9 +40,11 @@ from vical.apps.cli import (
     check_creatable,
     check_launcher,
     fail,
+    hydra_start_up_held,
     one_line_warnings,
     override_value,
     quiet_library_logs,
+    task_begins,
     write_faults_in_one_line,
 )
 from vical.apps.entry import interrupted_by, interrupted_status
@@ -262,6 +264,7 @@ def kept_when_unwritable(run_dir: Path) -> str:
 
 @hydra.main(config_path=CONF_DIR, config_name="train", version_base="1.3")
 def hydra_main(cfg: DictConfig) -> None:
+    task_begins()
     output_dir = Path(HydraConfig.get().runtime.output_dir)
     try:
         if cfg.resume:
@@ -288,6 +291,11 @@ def main() -> None:
     """Console entry point: check the command line before Hydra starts, then run."""
     one_line_warnings()
     quiet_library_logs()
+    with hydra_start_up_held():
+        _check_then_train()
+
+
+def _check_then_train() -> None:
     try:
         complete = check_command_line(sys.argv[1:])
     except USER_ERRORS as err:

@@ -22,11 +22,8 @@ The exposure pose is interpolated between the physics steps around the exposure 
 
 from __future__ import annotations
 
-import contextlib
 import itertools
-import signal
-import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -37,6 +34,7 @@ from vical.config_checks import require_range
 from vical.data import Target
 from vical.geometry import CameraModel, interpolate_transform
 from vical.geometry.rolling_shutter import exposed_rows
+from vical.signals import interrupts_held
 
 Detector = Callable[[np.ndarray, Target], tuple[np.ndarray, np.ndarray]]
 """``detector(image (H, W) uint8, target) -> (corners (K, 2) float64 [px], ids (K,) int64)``."""
@@ -394,35 +392,6 @@ def set_gl_camera(gl_camera: mujoco.MjvGLCamera, T_world_cam: np.ndarray, pinhol
     gl_camera.orthographic = 0
 
 
-INTERRUPTS = (signal.SIGINT, signal.SIGTERM)  # Ctrl-C, and how launchers stop a job (``vical.apps.entry``)
-
-
-@contextlib.contextmanager
-def interrupts_held() -> Iterator[None]:
-    """Ctrl-C and SIGTERM held until the block ends, then raised as they would have been.
-
-    The GL context's calls (made current at every render, created and freed with the renderer) go through PyOpenGL's
-    ctypes functions, whose argument converters run Python code; ctypes turns an exception raised there into
-    ``ctypes.ArgumentError``, so a Ctrl-C landing inside one would end a command as an error (status 1) instead of
-    as an interrupt (status 130 and its one line). Only the main thread runs Python's signal handlers: elsewhere the
-    block runs as it is.
-    """
-    handlers = {sig: signal.getsignal(sig) for sig in INTERRUPTS}
-    if threading.current_thread() is not threading.main_thread() or None in handlers.values():
-        yield  # (None: a handler not installed from Python, which this could not put back)
-        return
-    held: list[int] = []
-    for sig in INTERRUPTS:
-        signal.signal(sig, lambda signum, frame: held.append(signum))
-    try:
-        yield
-    finally:
-        for sig, handler in handlers.items():
-            signal.signal(sig, handler)
-        for sig in dict.fromkeys(held):  # each once, in the order they came; the handler raises in this thread
-            signal.raise_signal(sig)
-
-
 class RenderBackend:
     """Rendered observations: MuJoCo image -> lens-distortion warp -> detector.
 
@@ -518,7 +487,7 @@ class RenderBackend:
             T_world_view[:3, :3] = T_world_cam[:3, :3] @ R_cam_view
             for gl_camera in self._renderer.scene.camera:
                 set_gl_camera(gl_camera, T_world_view, views.pinhole)
-            with interrupts_held():  # the GL context's calls (interrupts_held)
+            with interrupts_held():  # the GL context's calls (vical.signals)
                 rendered = self._renderer.render()
             renders.append(cv2.cvtColor(rendered, cv2.COLOR_RGB2GRAY))
         return renders[0] if len(renders) == 1 else np.vstack(renders)
