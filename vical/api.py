@@ -69,7 +69,14 @@ def collect_in_simulation(
     (``sensor=paper``, ``stop.horizon_s=60``, ``policy.run_dir=<a vical-train run>``, ...)."""
     from hydra import compose, initialize_config_dir  # only a collection composes the configs
 
-    defaults = ["sensor=practitioner", "workspace=practitioner", "stop=information", "task.camera_model=sensor"]
+    defaults = [
+        "sensor=practitioner",
+        "workspace=practitioner",
+        "stop=information",
+        "stop.max_steps=200",
+        "stop.horizon_s=45",
+        "task.camera_model=sensor",
+    ]  # the yardstick's (time_to_tolerance_<task>)
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose("evaluate", [*defaults, f"policy={policy}", f"task={task}", *overrides])
     spec = PolicySpec.from_config(OmegaConf.to_container(cfg.policy, resolve=True))
