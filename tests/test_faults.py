@@ -64,6 +64,7 @@ def command_args(app: str, inputs: dict[str, Path], out: Path) -> list[str]:
         "vical-sim-demo": ["--steps", "200"],
         "vical-collect": [f"out={out / 'collection'}", "policy=random_moving", "calibrate=false"],
         "vical-guide": [f"out={out / 'guide'}", "page.port=0", "page.linger=0"],
+        "vical-target": ["--out", str(out / "target"), "--size", "0.088", "--paper", "A0"],  # ~5 s: an A0 sheet
     }[app]
 
 
@@ -268,7 +269,8 @@ def test_a_job_started_with_ctrl_c_ignored_keeps_it_ignored_through_the_start_up
 OUTPUTS = {"vical-calibrate": ("calibration", "--overwrite"), "vical-imu-noise": ("noise", "--overwrite"),
            "vical-record": ("recording", "overwrite=true"), "vical-export": ("export", "--overwrite"),
            "vical-evaluate": ("evaluation", "overwrite=true"), "vical-train": ("run", "overwrite=true"),
-           "vical-collect": ("collection", "overwrite=true"), "vical-guide": ("guide", "overwrite=true")}  # fmt: skip
+           "vical-collect": ("collection", "overwrite=true"), "vical-guide": ("guide", "overwrite=true"),
+           "vical-target": ("target", "--overwrite")}  # fmt: skip
 # An earlier output, to be kept as it was: a file each command replaces (evaluate's results, a run's config) and one
 # it knows nothing of.
 PREVIOUS = {"previous.txt": "an earlier output\n", "results.csv": "earlier results\n", "config.yaml": "seed: 1\n"}

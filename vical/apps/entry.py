@@ -53,8 +53,8 @@ def _terminate(signum, frame) -> NoReturn:
 # What each command keeps when stopped, by its output flag (--out or out=): they write their outputs whole (a
 # directory at once, or vical-evaluate's files together once all are made), so it is as it was.
 AS_IT_WAS = "{where} is as it was: the outputs are written whole or not at all"
-OUT_FLAGS = {"vical-calibrate": "--out", "vical-imu-noise": "--out", "vical-export": "--out", "vical-record": "out=",
-             "vical-evaluate": "out="}  # fmt: skip
+OUT_FLAGS = {"vical-calibrate": "--out", "vical-imu-noise": "--out", "vical-export": "--out", "vical-target": "--out",
+             "vical-record": "out=", "vical-evaluate": "out="}  # fmt: skip
 
 
 def _kept(app: str, argv: list[str]) -> str:
@@ -208,3 +208,7 @@ def guide() -> NoReturn:
 
 def imu_noise() -> NoReturn:
     run("vical-imu-noise", "vical.apps.imu_noise:main")
+
+
+def target() -> NoReturn:
+    run("vical-target", "vical.apps.target:main")
