@@ -122,13 +122,6 @@ def run_disk(case: Case, inputs: dict[str, Path], work: Path, mounts: list[str])
     return Outcome(case, judge(case.app, stderr, status, faults.FAULT_STATUS.get(case.app, {2})), status, stderr)
 
 
-def mount_prefix(root: Path) -> list[str] | None:
-    for prefix in (["unshare", "--user", "--map-root-user", "--mount"], ["sudo", "-n", "-E", "unshare", "--mount"]):
-        if faults._mounts_a_file_system(prefix, root):
-            return prefix
-    return None
-
-
 def table(outcomes: list[Outcome]) -> str:
     verdicts = ["right", "traceback", "wrong status", "not one line", "before vical ran", "after its work",
                 "ended before the signal", "fitted"]  # fmt: skip
@@ -154,7 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     root = Path(tempfile.mkdtemp(prefix="vical-fault-audit-"))
     (root / "inputs-root").mkdir()
     inputs = faults.inputs.__wrapped__(_Inputs(root / "inputs-root"))
-    mounts = mount_prefix(root / "inputs-root")
+    mounts = faults.mount_namespace(root / "inputs-root")
     cases = draw_cases(args.cases, args.seed, args.within, args.free)
     if mounts is None:
         print("no file system can be mounted here: the disk cases are left out", file=sys.stderr)

@@ -291,16 +291,23 @@ def _mounts_a_file_system(prefix: list[str], where: Path) -> bool:
     return done.returncode == 0
 
 
-@pytest.fixture(scope="module")
-def own_mounts(tmp_path_factory) -> list[str]:
-    """How a test mounts a file system that only its command sees: a user and mount namespace of its own (no root
-    needed where the kernel allows it), else a mount namespace with sudo; the tests skip, saying why, elsewhere."""
-    where = tmp_path_factory.mktemp("probe")
+def mount_namespace(where: Path) -> list[str] | None:
+    """How to run a command with a file system mounted that only it sees: a user and mount namespace of its own (no
+    root needed where the kernel allows it), else a mount namespace with sudo; None where neither mounts one."""
     for prefix in (["unshare", "--user", "--map-root-user", "--mount"], ["sudo", "-n", "-E", "unshare", "--mount"]):
         if _mounts_a_file_system(prefix, where):
             return prefix
-    pytest.skip("no file system can be mounted here (neither unshare --user --mount nor sudo unshare --mount works): "
-                "the full-disk and read-only tests need one")  # fmt: skip
+    return None
+
+
+@pytest.fixture(scope="module")
+def own_mounts(tmp_path_factory) -> list[str]:
+    """``mount_namespace``'s prefix; the tests skip, saying why, where there is none."""
+    prefix = mount_namespace(tmp_path_factory.mktemp("probe"))
+    if prefix is None:
+        pytest.skip("no file system can be mounted here (neither unshare --user --mount nor sudo unshare --mount "
+                    "works): the full-disk and read-only tests need one")  # fmt: skip
+    return prefix
 
 
 def run_on_own_file_system(

@@ -22,6 +22,8 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
+from vical.apps import entry
+from vical.apps.entry import is_write_fault
 from vical.config_checks import ConfigError, SettingError
 from vical.signals import interrupts_held
 
@@ -53,14 +55,6 @@ class OutputError(Exception):
     """An output path that cannot be used or written; the message names the flag or key and the reason."""
 
 
-# What the file system refuses a writer for: a full disk or quota, a read-only or forbidden folder, a file too big.
-WRITE_FAULTS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG})
-
-
-def is_write_fault(err: BaseException) -> bool:
-    return isinstance(err, OSError) and err.errno in WRITE_FAULTS
-
-
 def as_given(flag: str, out: str | os.PathLike) -> str:
     """An output as the command line gives it: ``--out X`` (argparse) or ``out=X`` (a Hydra override)."""
     return f"{flag}{out}" if flag.endswith("=") else f"{flag} {out}"
@@ -84,7 +78,8 @@ def cannot_write(flag: str, out: str | os.PathLike, err: OSError, kept: str = ""
     return "; ".join(part for part in (what, kept, remedy) if part)
 
 
-AS_IT_WAS = "it is as it was: the outputs are written whole or not at all"
+# What a command that met a full disk kept: the line that an interrupted one ends with (vical.apps.entry).
+AS_IT_WAS = entry.AS_IT_WAS.format(where="it")
 
 
 @contextlib.contextmanager

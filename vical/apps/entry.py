@@ -14,15 +14,17 @@ initialization failed``). A module run with ``python -m`` is its own start-up: `
 handling before the module's imports (``start_up_of_module``). An interrupt that arrives inside a later import, as
 the cause of the error that import raised, ends the command as the interrupt itself.
 
-A full disk or a read-only folder (``vical.apps.cli.write_faults_in_one_line``) is reported once, by the command,
-in one line: a library's writer thread that meets it (TensorBoard's event writer) hands it to the thread that
-writes through it, so the thread's own traceback is not printed (``_write_faults_reported_by_their_owner``).
+A full disk or a read-only folder (``is_write_fault``) is reported once, by the command, in one line
+(``vical.apps.cli.write_faults_in_one_line``): a library's writer thread that meets it (TensorBoard's event
+writer) hands it to the thread that writes through it, so the thread's own traceback is not printed
+(``_write_faults_reported_by_their_owner``).
 
 This module imports nothing heavy: the command's module is imported inside the handling.
 """
 
 from __future__ import annotations
 
+import errno
 import importlib
 import os
 import signal
@@ -118,13 +120,19 @@ def start_up_of_module(argv: list[str]) -> None:
         during_start_up("vical-" + module.rsplit(".", 1)[1].replace("_", "-"))
 
 
+# What the file system refuses a writer for: a full disk or quota, a read-only or forbidden folder, a file too big.
+WRITE_FAULTS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EROFS, errno.EACCES, errno.EPERM, errno.EFBIG})
+
+
+def is_write_fault(err: BaseException) -> bool:
+    return isinstance(err, OSError) and err.errno in WRITE_FAULTS
+
+
 def _write_faults_reported_by_their_owner(default: Callable) -> Callable:
     """A thread hook that leaves a writer thread's full disk or read-only folder to the thread it writes for (which
     re-raises it: TensorBoard's ``_check_worker_status``) and prints any other thread's error as ``default`` does."""
 
     def hook(args) -> None:
-        from vical.apps.cli import is_write_fault  # here: the start-up imports nothing before its handling is set
-
         if not is_write_fault(args.exc_value):
             default(args)
 

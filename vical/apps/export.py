@@ -27,7 +27,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from vical.apps.calibrate_outputs import view_overlaps
-from vical.apps.cli import AS_IT_WAS, ArgumentParser, cannot_write, is_write_fault, one_line_warnings, report_error
+from vical.apps.cli import AS_IT_WAS, ArgumentParser, cannot_write, one_line_warnings, report_error
+from vical.apps.entry import is_write_fault
 from vical.apps.entry import run as run_command
 from vical.data import DataError, ImuNoise, Recording
 from vical.geometry.transforms import invert_transform
