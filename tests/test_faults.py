@@ -156,24 +156,134 @@ def test_a_signal_during_a_start_up_slowed_by_another_job_ends_in_one_line(app, 
     signals_through_start_up(app, "script", inputs, tmp_path)
 
 
-def test_an_interrupt_that_an_import_turned_into_its_error_ends_the_command_as_the_interrupt(monkeypatch, capsys):
+def run_command_in_child(body: str, tmp_path: Path, argv=("vical-sim-demo",)) -> subprocess.CompletedProcess:
+    """``body`` (the source of a function ``command``) run as the command ``vical-sim-demo`` by ``entry.run`` in a
+    child whose working directory (on its module path) is ``tmp_path``: its status, stdout and stderr."""
+    code = (
+        "import os, signal, sys, threading, time\n"
+        f"sys.argv = {list(argv)!r}\n"
+        "sys.path.insert(0, '.')\n"
+        "import vical.apps.entry as entry\n"
+        f"{body}\n"
+        "entry.run('vical-sim-demo', command)\n"
+    )
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=tmp_path,
+                          preexec_fn=default_sigint)  # fmt: skip
+
+
+@pytest.mark.parametrize("sig", list(SIGNALS))
+def test_an_interrupt_that_an_import_turned_into_its_error_ends_the_command_as_the_interrupt(sig, tmp_path):
     """GTSAM's initialisation, interrupted, raises ``ImportError: initialization failed`` from the interrupt: the
     command ends as interrupted (130 / 143, one line), not with the ImportError."""
-    import vical.apps.entry as entry
+    interrupt = "entry.Terminated" if sig == signal.SIGTERM else "KeyboardInterrupt"
+    body = (
+        "def command():\n"
+        "    try:\n"
+        f"        raise {interrupt}()\n"
+        "    except KeyboardInterrupt as err:\n"
+        "        raise ImportError('initialization failed') from err\n"
+    )
+    done = run_command_in_child(body, tmp_path)
+    status, name = SIGNALS[sig]
+    assert done.returncode == status, done.stderr
+    assert done.stderr.strip() == f"vical-sim-demo: interrupted ({name}); nothing was written"
 
-    for interrupt, status, name in [(KeyboardInterrupt, 130, "Ctrl-C"), (entry.Terminated, 143, "SIGTERM")]:
 
-        def initialise(interrupt=interrupt):
-            try:
-                raise interrupt()
-            except KeyboardInterrupt as err:
-                raise ImportError("initialization failed") from err
+def write_module(folder: Path, name: str, body: str) -> None:
+    (folder / f"{name}.py").write_text(body)
 
-        monkeypatch.setattr(sys, "argv", ["vical-sim-demo"])
-        with pytest.raises(SystemExit) as done:
-            entry.run("vical-sim-demo", initialise)
-        assert done.value.code == status
-        assert capsys.readouterr().err.strip() == f"vical-sim-demo: interrupted ({name}); nothing was written"
+
+@pytest.mark.parametrize("sig", list(SIGNALS))
+def test_an_interrupt_during_an_import_waits_for_its_end_and_no_except_around_the_import_swallows_it(sig, tmp_path):
+    """A library imports an optional module inside ``except Exception`` (matplotlib its 3D axes): an interrupt that
+    lands inside that import (in an extension's initialisation it becomes an ``ImportError``) waits for the import's
+    end and is raised at its statement, so the command stops as interrupted, not with status 0."""
+    write_module(tmp_path, "optional", f"import os, time\nos.kill(os.getpid(), {int(sig)})\ntime.sleep(0.2)\n"
+                                       "import json\nprint('imported whole', flush=True)\n")  # fmt: skip
+    body = (
+        "def command():\n"
+        "    try:\n"
+        "        import optional\n"
+        "    except Exception:\n"
+        "        print('swallowed')\n"
+        "    print('went on')\n"
+        "    return 0\n"
+    )
+    done = run_command_in_child(body, tmp_path)
+    status, name = SIGNALS[sig]
+    assert done.stdout.split("\n") == ["imported whole", ""], done.stderr
+    assert (
+        done.returncode == status
+        and done.stderr.strip() == f"vical-sim-demo: interrupted ({name}); nothing was written"
+    )
+
+
+def test_a_second_interrupt_during_an_import_stops_it_at_once(tmp_path):
+    """An import that hangs can still be stopped: the second Ctrl-C raises inside it."""
+    ctrl_c = "os.kill(os.getpid(), signal.SIGINT)\n"
+    write_module(
+        tmp_path,
+        "hangs",
+        f"import os, signal, time\n{ctrl_c}time.sleep(0.1)\n{ctrl_c}time.sleep(30)\nprint('imported')\n",
+    )
+    done = run_command_in_child("def command():\n    import hangs\n", tmp_path)
+    assert done.returncode == 130 and done.stdout == "", done.stderr
+    assert done.stderr.strip() == "vical-sim-demo: interrupted (Ctrl-C); nothing was written"
+
+
+def test_an_import_in_another_thread_does_not_hold_the_main_threads_interrupt(tmp_path):
+    """Only the main thread's imports hold an interrupt: a writer thread importing meanwhile does not delay it."""
+    write_module(tmp_path, "slow", "import time\ntime.sleep(20)\n")
+    body = (
+        "def command():\n"
+        "    threading.Thread(target=lambda: __import__('slow'), daemon=True).start()\n"
+        "    time.sleep(0.3)\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "    time.sleep(20)\n"
+    )
+    began = time.monotonic()
+    done = run_command_in_child(body, tmp_path)
+    assert done.returncode == 143 and time.monotonic() - began < 10, done.stderr
+    assert done.stderr.strip() == "vical-sim-demo: interrupted (SIGTERM); nothing was written"
+
+
+def test_the_command_leaves_the_import_statement_as_it_found_it(tmp_path):
+    body = "import builtins\nfound = builtins.__import__\ndef command():\n    return 0\n"
+    code = body.replace("def command", "import atexit\natexit.register(lambda: print(builtins.__import__ is found))\n"
+                                       "def command")  # fmt: skip
+    done = run_command_in_child(code, tmp_path)
+    assert done.returncode == 0 and done.stdout.strip() == "True", done.stderr
+
+
+MATPLOTLIB_IMPORT = "def command():\n    print('importing', flush=True)\n    from matplotlib.figure import Figure\n"
+
+
+@pytest.mark.integration
+def test_a_signal_at_random_moments_of_a_real_extensions_import_ends_in_one_line(tmp_path):
+    """matplotlib's import (pybind11 extensions: ``ft2font`` became ``ImportError: initialization failed``, and the
+    interpreter then aborted at its end with status -6; its 3D axes' optional import swallowed the interrupt, status
+    0): a real signal at 24 uniform moments of it, each ends in the interrupt's status and one line."""
+    rng = np.random.default_rng(40000)
+    script = tmp_path / "command.py"
+    script.write_text(
+        "import sys\nsys.argv = ['vical-sim-demo']\nimport vical.apps.entry as entry\n"
+        f"{MATPLOTLIB_IMPORT}\nentry.run('vical-sim-demo', command)\n"
+    )
+    for k, seconds in enumerate(rng.uniform(0.0, 0.5, 24)):
+        sig = (signal.SIGINT, signal.SIGTERM)[k % 2]
+        proc = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                text=True, preexec_fn=default_sigint)  # fmt: skip
+        try:
+            assert proc.stdout.readline() == "importing\n"
+            time.sleep(seconds)
+            proc.send_signal(sig)
+            _, stderr = proc.communicate(timeout=60)
+        finally:
+            kill_if_running(proc)
+        status, name = SIGNALS[sig]
+        when = f"{signal.Signals(sig).name} {seconds:.3f} s into the import"
+        assert proc.returncode == status, f"{when}: status {proc.returncode}\n{stderr}"
+        assert stderr.strip() == f"vical-sim-demo: interrupted ({name}); nothing was written", f"{when}:\n{stderr}"
 
 
 def test_an_error_not_caused_by_an_interrupt_is_raised_as_it_is():

@@ -7,11 +7,12 @@ for SIGTERM (128 + the signal's number, as a shell reports them). ``vical-train`
 themselves what they kept (the checkpoint to resume from, the recording so far) and return
 ``interrupted_status``.
 
-Until the command's module is imported (its start-up: torch, GTSAM, MuJoCo, ~0.3-2 s) a signal ends the process
-at once with the same line and status (``during_start_up``): nothing has been written yet, and an exception raised
-inside an extension module's initialisation does not arrive as itself (GTSAM's becomes ``ImportError:
-initialization failed``). A module run with ``python -m`` is its own start-up: ``vical.apps`` sets the same
-handling before the module's imports (``start_up_of_module``). An interrupt that arrives inside a later import, as
+Until the command's module is imported (its start-up: torch, GTSAM, MuJoCo, ~0.3-2 s) a signal ends the process at
+once with the same line and status (``during_start_up``): nothing has been written yet, and an exception raised
+inside an extension module's initialisation does not arrive as itself (GTSAM's becomes ``ImportError: initialization
+failed``). A module run with ``python -m`` is its own start-up: ``vical.apps`` sets the same handling before the
+module's imports (``start_up_of_module``). Then an interrupt that arrives during an import statement waits for its
+end (``vical.signals.imports_run_whole``); one that arrives inside another import (``importlib.import_module``), as
 the cause of the error that import raised, ends the command as the interrupt itself.
 
 A full disk or a read-only folder (``is_write_fault``) is reported once, by the command, in one line
@@ -33,6 +34,8 @@ import threading
 from collections.abc import Callable
 from itertools import pairwise
 from typing import NoReturn
+
+from vical.signals import after_imports, imports_run_whole
 
 
 class Terminated(KeyboardInterrupt):
@@ -163,10 +166,11 @@ def run(app: str, target: str | Callable[[], int | None]) -> NoReturn:
             module, function = target.split(":")
             target = getattr(importlib.import_module(module), function)
         threading.excepthook = _write_faults_reported_by_their_owner(thread_hook)
-        signal.signal(signal.SIGTERM, _terminate)
+        signal.signal(signal.SIGTERM, after_imports(_terminate))
         if signal.SIGINT in handled:
-            signal.signal(signal.SIGINT, signal.default_int_handler)
-        status = target()
+            signal.signal(signal.SIGINT, after_imports(signal.default_int_handler))
+        with imports_run_whole():
+            status = target()
     except KeyboardInterrupt as err:
         print(_interrupted_line(app, err), file=sys.stderr)
         status = interrupted_status(err)
@@ -174,12 +178,20 @@ def run(app: str, target: str | Callable[[], int | None]) -> NoReturn:
         if (interrupt := _interrupt_within(err)) is None:
             raise
         print(_interrupted_line(app, interrupt), file=sys.stderr)
-        status = interrupted_status(interrupt)
+        _exit_unfinalised(interrupted_status(interrupt))
     finally:
         for sig, handler in previous.items():  # as they were (a test calls this in its own process)
             signal.signal(sig, handler)
         threading.excepthook = thread_hook
     sys.exit(status)
+
+
+def _exit_unfinalised(status: int) -> NoReturn:
+    """End the process without the interpreter's finalisation: an extension whose initialisation an interrupt cut
+    short (pybind11's) can abort it (``Fatal Python error``, status -6) where the command has said its line."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(status)
 
 
 def train() -> NoReturn:
