@@ -1,6 +1,7 @@
 """vical-calibrate end to end on saved synthetic recordings: files written, numbers right, errors clear; a result
 the data do not support (a gyro logged in deg/s) fails with its cause; --out is never overwritten silently."""
 
+import json
 import re
 from dataclasses import replace
 
@@ -381,3 +382,42 @@ def test_a_lens_model_that_does_not_fit_is_named_with_the_one_that_does_in_the_f
              r"intrinsics with --task intrinsic --model ([\w-]+) and give them as --intrinsics")  # fmt: skip
     found = re.search(cause, lines[0])
     assert found and found[1] == found[2] and found[1] != "ds", lines[0]
+
+
+def test_export_writes_what_vins_fusion_and_basalt_read_from_the_calibration(tmp_path, capsys):
+    """``--export``: the calibration's own numbers (camchain-imucam.yaml's) in VINS-Fusion's and basalt's files, read
+    as they read them (``tests/test_io_vio_exports.py`` checks the formats themselves)."""
+    import cv2
+
+    from vical.calib.synthetic import default_camera
+
+    rec = make_recording(duration=8.0, camera=default_camera("equidistant"), time_offset=0.012,
+                         imu_noise=ImuNoise(), pixel_sigma=0.3, seed=22)  # fmt: skip
+    save_recording(rec, tmp_path / "rec")
+    out = tmp_path / "out"
+    argv = [str(tmp_path / "rec"), "--model", "equidistant", "--export", "vins-fusion", "basalt", "--no-report"]
+    assert main([*argv, "--out", str(out)]) == 0
+    camera, T_cam_imu, shift = read_camchain(out / "camchain-imucam.yaml")
+    config = cv2.FileStorage(str(out / "vins-fusion" / "config.yaml"), cv2.FILE_STORAGE_READ)
+    np.testing.assert_allclose(config.getNode("body_T_cam0").mat(), np.linalg.inv(T_cam_imu), atol=1e-9)
+    assert abs(config.getNode("td").real() - shift) < 1e-12 and abs(shift - 0.012) < 0.001
+    camodocal = cv2.FileStorage(str(out / "vins-fusion" / "cam0.yaml"), cv2.FILE_STORAGE_READ)  # kept: its nodes
+    lens = camodocal.getNode("projection_parameters")
+    np.testing.assert_allclose([lens.getNode(k).real() for k in ("mu", "mv", "u0", "v0", "k2", "k3", "k4", "k5")],
+                               [*camera.intrinsics, *camera.dist], rtol=1e-9)  # fmt: skip
+    basalt = json.loads((out / "basalt" / "calibration.json").read_text())["value0"]
+    assert basalt["intrinsics"][0]["camera_type"] == "kb4"
+    assert abs(basalt["intrinsics"][0]["intrinsics"]["fx"] - camera.fx) < 1e-6 * camera.fx
+    assert basalt["cam_time_offset_ns"] == round(shift * 1e9)
+    assert f"for VIO systems: {out / 'vins-fusion' / 'config.yaml'}" in capsys.readouterr().out
+
+
+def test_an_export_the_format_cannot_hold_is_refused_before_the_solve(recording_dir, tmp_path, capsys):
+    path, _ = recording_dir
+    out = tmp_path / "out"
+    assert main([str(path), "--export", "basalt", "--out", str(out)]) == 2  # the default radtan lens
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("vical-calibrate: error: --export basalt: basalt has no radtan model: calibrate with --model")
+    assert len(err.splitlines()) == 1 and not out.exists()
+    assert main([str(path), "--task", "intrinsic", "--export", "vins-fusion", "--out", str(out)]) == 2
+    assert "vins-fusion needs the camera-IMU calibration" in capsys.readouterr().err and not out.exists()

@@ -1,10 +1,10 @@
-"""vical-calibrate on exported real-recording formats: EuRoC folder, ROS1 bag, image folder, corner CSV.
+"""vical-calibrate on exported real-recording formats: EuRoC folder, ROS1 and ROS 2 bags, image folder, corner CSV.
 
 One rendered simulator recording (MuJoCo images, lens warp, ``detect_checkerboard``; about 5 s,
 49 frames) is exported with vical's writers and calibrated from each export by ``main([...])``,
 which detects the corners in the exported images itself. PNG and ``mono8`` are lossless and the
 detector is deterministic, so the detections must be bit-identical to those made while recording,
-and the IMU round-trips exactly (shortest-repr decimal text in the CSV, float64 in the bag): the
+and the IMU round-trips exactly (shortest-repr decimal text in the CSV, float64 in the bags): the
 results came out equal to the last bit. The tolerance is a hundredth of each parameter's 1-sigma
 (fx 1.9 px, t_x 2.2 mm, time offset 0.085 ms here), room for a different summation order on
 another platform, far below the detection noise that would show if a reader altered the images.
@@ -61,6 +61,8 @@ def exports(tmp_path_factory):
     root = tmp_path_factory.mktemp("exports")
     write_euroc(rec, root / "euroc")
     write_bag(rec, root / "data.bag")
+    write_bag(rec, root / "ros2_db3", bag_format="db3")
+    write_bag(rec, root / "ros2_mcap", bag_format="mcap")
     save_recording(rec, root / "rec")
     write_target_yaml(root / "target.yaml", rec.target)
     write_imu_yaml(root / "imu.yaml", rec.truth.imu_noise)
@@ -94,7 +96,7 @@ def assert_same_joint_result(camchain: tuple, reference) -> None:
     assert abs(shift - reference.time_offset) < 0.01 * sig["time_offset"]
 
 
-@pytest.mark.parametrize("source", ["euroc", "data.bag"])
+@pytest.mark.parametrize("source", ["euroc", "data.bag", "ros2_db3", "ros2_mcap/ros2_mcap.mcap"])
 def test_joint_from_euroc_and_bag_equals_in_memory_calibration(exports, in_memory, source, tmp_path, capsys):
     rec, root = exports
     opened = open_recording(root / source, rec.target, detector=lambda im: detect_checkerboard(im, rec.target))

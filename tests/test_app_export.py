@@ -46,6 +46,26 @@ def test_export_writes_kalibr_inputs_that_read_back(tmp_path, capsys):
     assert not (out / "imu-truth.yaml").exists()  # an exact IMU: nothing more to compare
 
 
+@pytest.mark.parametrize("bags", [["db3", "mcap"], ["ros1", "mcap"]])
+def test_export_writes_ros2_bags_that_read_back(bags, tmp_path, capsys):
+    """``--bag``: ROS 2 bags (SQLite, MCAP) instead of or beside the ROS1 one; Kalibr's commands need the ROS1 one."""
+    rec = make_recording(seed=2)
+    save_recording(rec, tmp_path / "rec")
+    out = tmp_path / "out"
+    assert main([str(tmp_path / "rec"), "--out", str(out), "--bag", *bags]) == 0
+    names = {"ros1": "data.bag", "db3": "ros2_db3", "mcap": "ros2_mcap"}
+    assert sorted(p.name for p in out.iterdir() if "bag" in p.name or "ros2" in p.name) == sorted(
+        names[b] for b in bags
+    )
+    for bag in bags:
+        back = open_recording(out / names[bag], rec.target, keep_images=True)
+        assert np.array_equal(back.frames.t, rec.frames.t) and np.array_equal(back.frames.images, rec.frames.images)
+        assert np.array_equal(back.imu.t, rec.imu.t) and np.array_equal(back.imu.accel, rec.imu.accel)
+    printed = capsys.readouterr().out
+    assert ("kalibr_calibrate_cameras --bag" in printed) == ("ros1" in bags)
+    assert ("Kalibr reads ROS1 bags only: add --bag ros1" in printed) == ("ros1" not in bags)
+
+
 def test_an_imu_with_intrinsics_exports_their_truth_and_has_kalibr_estimate_them(tmp_path, capsys):
     rec = make_recording()
     intrinsics = ImuIntrinsics.from_vector(np.r_[0.01, -0.005, 0.002, np.radians([0.3, -0.2, 0.1]), np.zeros(9)])

@@ -8,10 +8,10 @@ Examples::
     vical-calibrate stereo.bag --image-topic /left/image_raw,/right/image_raw --target target.yaml --out rig/
     vical-calibrate euroc/ --cameras cam1 --target target.yaml --out cam1/
 
-Sources: a vical recording directory, an EuRoC folder or a ROS1 bag (corners detected in the
-images with the detector of the target's kind, with a progress bar), a folder of images
-(intrinsic task only) or a corner CSV (+ ``--imu-csv``). Every source except a recording
-directory needs ``--target`` (Kalibr target YAML).
+Sources: a vical recording directory, an EuRoC folder, a ROS1 bag or a ROS 2 bag (its folder, or its
+``.db3`` / ``.mcap`` file; corners detected in the images with the detector of the target's kind, with a
+progress bar), a folder of images (intrinsic task only) or a corner CSV (+ ``--imu-csv``). Every source
+except a recording directory needs ``--target`` (Kalibr target YAML).
 
 Camera rigs: every camera the recording has (EuRoC ``camN`` folders, one bag image topic per
 camera, a recording directory's other cameras) is calibrated, all in one graph with the IMU, or
@@ -96,6 +96,7 @@ from vical.io.kalibr import (
 )
 from vical.io.kalibr_chain import CAMERA_SECTION, CameraChain, check_chain_fits, read_chain
 from vical.io.sources import detect_source, open_recording
+from vical.io.vio_exports import VIO_FORMATS, check_exportable
 from vical.io.yamlfile import load_mapping
 
 APP = "vical-calibrate"
@@ -137,7 +138,7 @@ def _number(low: float, kind: type = float, closed: bool = True):
 
 def build_parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog=APP, description=__doc__.split("\n\n")[0])
-    p.add_argument("recording", help="recording directory, EuRoC folder, ROS1 bag, image folder or corner CSV")
+    p.add_argument("recording", help="recording directory, EuRoC folder, ROS1 or ROS 2 bag, image folder or corner CSV")
     p.add_argument("--task", choices=TASKS, default="joint", help="what to calibrate (default: joint)")
     p.add_argument(
         "--model",
@@ -210,6 +211,14 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--duration", type=_number(0, closed=False), help="[s] calibrate this much of the recording (default: all)"
+    )
+    p.add_argument(
+        "--export",
+        nargs="+",
+        choices=VIO_FORMATS,
+        default=[],
+        help="also write the calibration as these VIO systems read it: vins-fusion (vins-fusion/config.yaml, "
+        "cam0.yaml) and basalt (basalt/calibration.json); OpenVINS reads camchain-imucam.yaml and imu.yaml as they are",
     )
     p.add_argument("--out", default="calibration", help="output directory (default: ./calibration)")
     p.add_argument("--overwrite", action="store_true", help="replace an --out that holds files (as a whole)")
@@ -455,6 +464,11 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
     one = one_camera_layout(names, chain)
     setup = _one_camera_setup(args, rec, detector) if one else _rig_setup(args, rec, names, chain)
     _check_known_intrinsics(args, names, chain, setup, one)
+    sizes = {s.size for s in setup.values() if s.size is not None}
+    for vio_format in args.export:  # before the solve: a format that cannot hold the result
+        for s in setup.values():
+            lens = s.camera if s.camera is not None else args.model
+            check_exportable(vio_format, lens, len(names), args.task, sizes)
     noise = None if args.task == "intrinsic" else _imu_noise(args, rec)
     noise, rate_note = (None, None) if noise is None else _at_data_rate(args, noise, rec)
     known = {n: s.camera for n, s in setup.items() if s.camera is not None}

@@ -5,7 +5,8 @@ written). A one-camera calibration (``cam0`` of a one-camera recording, or ``--c
 camchain) writes its files side by side: ``camchain.yaml`` (intrinsic task) or ``camchain-imucam.yaml`` +
 ``imu.yaml``, ``results.txt``, ``frames.csv`` and the report. A rig writes one camchain with a section per camera,
 ``results.txt`` with a section per camera and the relative poses, and a folder per camera (its ``frames.csv``
-and report). A failed calibration's files are kept for diagnosis, marked as failed.
+and report). ``--export`` adds the files VIO systems read (``vins-fusion/``, ``basalt/``: ``vical.io.vio_exports``).
+A failed calibration's files are kept for diagnosis, marked as failed, and nothing is exported from it.
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from vical.geometry import invert_transform, matrix_to_euler, transform_error
 from vical.io.atomic import atomic_directory, write_text_atomic
 from vical.io.kalibr import write_camchain_imucam, write_imu_yaml
 from vical.io.kalibr_chain import CameraChain, ChainCamera, imu_file_with, read_imu_file, write_chain, write_imu_file
+from vical.io.vio_exports import write_vio_files
 
 FRAMES_CSV = "frames.csv"  # each camera's, in its folder of a rig's outputs
 
@@ -95,6 +97,7 @@ def _write_one_camera(
             write_frames_csv(tmp / "frames.csv", result.frame_log)
             if not args.no_report:
                 write_report(tmp, result, errors, failure)
+            exported = write_exports(tmp, args, {"cam0": result}, rec, given, noise, failure)
     except OSError as err:
         raise OutputError(cannot_write("--out", out, err)) from None
     print(summary_table(result, errors))
@@ -103,6 +106,7 @@ def _write_one_camera(
         print(f"warning: {w}")
     for w in result.weak_parameters[:3]:
         print(f"weak: {w.name} ({weak_sigma_text(w)}): {w.hint}")
+    print_exports(exported, out)
     print(f"outputs written to {out}")
 
 
@@ -132,10 +136,40 @@ def _write_rig(
                     write_frames_csv(tmp / camera / FRAMES_CSV, result.frame_log)
                 if not args.no_report:
                     write_report(tmp / camera, result, errors[camera], failure)
+            exported = write_exports(tmp, args, results, rec, given, noise, failure)
     except OSError as err:
         raise OutputError(cannot_write("--out", out, err)) from None
     print("\n".join(rig_summary(results, errors, chain, out)))
+    print_exports(exported, out)
     print(f"outputs written to {out}")
+
+
+def write_exports(
+    tmp: Path,
+    args,
+    results: dict[str, CalibrationResult],
+    rec: Recording,
+    given: CameraChain | None,
+    noise: ImuNoise | None,
+    failure: str | None,
+) -> list[Path]:
+    """The ``--export`` formats' files of a camera-IMU calibration into ``tmp``, each in its folder (a failed one:
+    none); the paths written, relative to ``tmp``."""
+    if failure or noise is None or not args.export:
+        return []
+    chain = rig_chain(results, rec, given)
+    gravity = next(iter(results.values())).gravity_target
+    magnitude = None if gravity is None else float(np.linalg.norm(gravity))
+    written = []
+    for vio_format in args.export:
+        paths = write_vio_files(tmp / vio_format, vio_format, chain, noise, args.imu_topic, magnitude)
+        written += [path.relative_to(tmp) for path in paths]
+    return written
+
+
+def print_exports(exported: list[Path], out: Path) -> None:
+    if exported:
+        print(f"for VIO systems: {', '.join(str(out / path) for path in exported)} (conventions: docs/formats.md)")
 
 
 def write_imu_output(path: Path, imu_yaml: str | None, noise: ImuNoise, intrinsics: ImuIntrinsics | None) -> None:

@@ -1,10 +1,12 @@
 """``vical-export``: write a recording with images as Kalibr's inputs (EuRoC folder, ROS1 bag, YAML files).
 
-Example::
+Examples::
 
     vical-export recordings/demo --out kalibr_in
+    vical-export recordings/demo --out ros2_in --bag mcap        # a ROS 2 bag instead of the ROS1 one
 
-Writes into ``--out``: ``euroc/mav0/...`` (EuRoC/ASL folder), ``data.bag`` (ROS1, Kalibr's topics),
+Writes into ``--out``: ``euroc/mav0/...`` (EuRoC/ASL folder), ``data.bag`` (ROS1, Kalibr's topics; with ``--bag
+db3`` / ``mcap`` a ROS 2 bag folder ``ros2_db3/`` / ``ros2_mcap/`` with the same topics instead or beside it),
 ``target.yaml`` (Kalibr target), ``imu.yaml`` (Kalibr IMU noise) and, when the recording carries
 its truth (simulator), ``camchain.yaml`` (the true intrinsics, the input of
 ``kalibr_calibrate_imu_camera --cams``) and ``camchain-imucam-truth.yaml`` (the true extrinsic and
@@ -33,7 +35,7 @@ from vical.apps.entry import run as run_command
 from vical.data import DataError, ImuNoise, Recording
 from vical.geometry.transforms import invert_transform
 from vical.io.atomic import files_together, remove_stale_temporaries
-from vical.io.bag import camera_topics, write_bag
+from vical.io.bag import BAG_FORMATS, camera_topics, write_bag
 from vical.io.errors import FormatError
 from vical.io.euroc import write_euroc
 from vical.io.kalibr import write_imu_yaml, write_target_yaml
@@ -52,6 +54,13 @@ def build_parser() -> ArgumentParser:
         help="bag image topic of each camera, cam0's first (default: /cam0/image_raw; cam1 ... /camN/image_raw)",
     )
     p.add_argument("--imu-topic", default="/imu0", help="bag IMU topic (default: /imu0)")
+    p.add_argument(
+        "--bag",
+        nargs="+",
+        choices=tuple(BAG_FORMATS),
+        default=["ros1"],
+        help="the bags to write: ros1 (data.bag, which Kalibr reads; the default), db3 or mcap (a ROS 2 bag folder)",
+    )
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs in --out")
     return p
 
@@ -154,18 +163,32 @@ def check_out(out: Path, overwrite: bool) -> None:
         raise FileExistsError(f"--out {out} exists and is not empty; pass --overwrite to replace its files")
 
 
-def export(rec: Recording, out: Path, image_topics: Sequence[str], imu_topic: str, overwrite: bool) -> list[Path]:
-    """Write the Kalibr inputs of every camera of ``rec`` into ``out``; return the written paths.
+def bag_name(bag_format: str) -> str:
+    """The name in ``--out`` of the bag of ``bag_format``: ``data.bag`` (ROS1), ``ros2_db3`` / ``ros2_mcap``."""
+    return "data.bag" if bag_format == "ros1" else f"ros2_{bag_format}"
+
+
+def export(
+    rec: Recording,
+    out: Path,
+    image_topics: Sequence[str],
+    imu_topic: str,
+    overwrite: bool,
+    bags: Sequence[str] = ("ros1",),
+) -> list[Path]:
+    """Write the Kalibr inputs of every camera of ``rec`` into ``out``, with a bag of each of ``bags``
+    (``BAG_FORMATS``); return the written paths.
 
     Refuses (before writing anything) a camera without images and topics that do not name each camera once.
     """
     check_images(rec)
     topics = image_topics_of(rec, image_topics)
     check_out(out, overwrite)
-    names = ["euroc", "data.bag", "target.yaml", "imu.yaml"]
+    names = ["euroc", *(bag_name(b) for b in dict.fromkeys(bags)), "target.yaml", "imu.yaml"]
     with files_together(out) as path_of:  # every output or none: the old ones stay until the new ones are whole
         write_euroc(rec, path_of("euroc"))
-        write_bag(rec, path_of("data.bag"), topics, imu_topic)
+        for bag_format in dict.fromkeys(bags):
+            write_bag(rec, path_of(bag_name(bag_format)), topics, imu_topic, bag_format=bag_format)
         write_target_yaml(path_of("target.yaml"), rec.target)
         noise = rec.truth.imu_noise if rec.truth is not None else ImuNoise()
         write_imu_yaml(path_of("imu.yaml"), noise, rostopic=imu_topic)
@@ -200,6 +223,9 @@ def print_summary(rec: Recording, out: Path, written: list[Path], topics: list[s
         print(f"note: {note}")
     for path in written:
         print(f"wrote {path}")
+    if out / "data.bag" not in written:
+        print("Kalibr reads ROS1 bags only: add --bag ros1 for its data.bag and commands")
+        return
     print("Kalibr, on a machine with Kalibr installed:")
     truths = [rec.truth_of(name) for name in rec.camera_names]
     distortions = [truth.camera.distortion if truth is not None else "radtan" for truth in truths]
@@ -222,7 +248,7 @@ def main(argv: list[str] | None = None) -> int:
         if not is_recording_dir(args.recording):
             raise FormatError(f"{args.recording} is not a vical recording directory (no recording.yaml)")
         rec = load_recording(args.recording)
-        written = export(rec, out, args.image_topic, args.imu_topic, args.overwrite)
+        written = export(rec, out, args.image_topic, args.imu_topic, args.overwrite, args.bag)
     except (FormatError, DataError) as exc:
         return report_error("vical-export", str(exc))
     except OSError as exc:  # vical's refusals carry their message; the system's name the path and the reason

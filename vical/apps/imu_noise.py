@@ -68,7 +68,7 @@ UNIT_NOTE = (
 
 def build_parser() -> argparse.ArgumentParser:
     p = ArgumentParser(prog=APP, description=__doc__.split("\n\n")[0])
-    p.add_argument("recording", help="static IMU recording: EuRoC folder, EuRoC IMU CSV or ROS1 bag")
+    p.add_argument("recording", help="static IMU recording: EuRoC folder, EuRoC IMU CSV, ROS1 or ROS 2 bag")
     p.add_argument("--imu-topic", default="/imu0", help="bag IMU topic, also written as rostopic (default: /imu0)")
     p.add_argument("--gyro-unit", choices=("rad/s", "deg/s"), default="rad/s", help="gyro unit in the file")
     p.add_argument("--accel-unit", choices=("m/s^2", "g"), default="m/s^2", help="accelerometer unit in the file")

@@ -1,4 +1,4 @@
-"""File formats: vical recordings, Kalibr YAML, EuRoC folders, ROS1 bags, corner CSV, image folders.
+"""File formats: vical recordings, Kalibr YAML, EuRoC folders, ROS1 and ROS 2 bags, corner CSV, image folders.
 
 See ``docs/formats.md``. This package depends only on ``vical.geometry`` and ``vical.data``.
 """

@@ -1,6 +1,9 @@
-"""ROS1 bags through the pure-Python ``rosbags`` package, with Kalibr's topic conventions.
+"""ROS1 and ROS 2 bags through the pure-Python ``rosbags`` package (no ROS install), with Kalibr's topic conventions.
 
-Writes ``sensor_msgs/Image`` (``mono8``) on ``/cam0/image_raw`` and ``sensor_msgs/Imu`` on
+A ROS1 bag is a file (``#ROSBAG V2.0``); a ROS 2 bag a folder with ``metadata.yaml`` and its storage file, SQLite
+(``.db3``) or MCAP (``.mcap``), or that storage file alone; both are read and written with the same topics and
+messages (ROS 2's are CDR-serialised, with ROS 2 Jazzy's message definitions, in rosbag2's format version 9). Writes
+``sensor_msgs/Image`` (``mono8``) on ``/cam0/image_raw`` and ``sensor_msgs/Imu`` on
 ``/imu0`` (gyro in ``angular_velocity`` [rad/s], specific force in ``linear_acceleration``
 [m/s^2], ``orientation_covariance[0] = -1``: no orientation), stamped in ``header.stamp`` and the
 bag time with the exact ns timestamps, which ``kalibr_calibrate_imu_camera`` reads. Reading
@@ -11,23 +14,24 @@ cameras are several image topics: ``cam0``'s first (``/cam0/image_raw``, ``/cam1
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import shutil
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
-from rosbags.rosbag1 import Reader, ReaderError, Writer
+from rosbags import rosbag1, rosbag2
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 from tqdm import tqdm
 
 from vical.data import NS_PER_S, CameraFrames, DataError, ImuSamples, Recording, Target
-from vical.io.atomic import remove_stale_temporaries, temporary_prefix
+from vical.io.atomic import remove_stale_temporaries, replace_directory, temporary_prefix
 from vical.io.errors import BagFormatError, BagTopicError, FormatError, UnitError
 from vical.io.images import ImageDetector, check_size, run_detector, to_gray
 from vical.io.sample_checks import check_camera_rates, check_sampling, scale_imu, sort_and_dedupe
@@ -41,10 +45,64 @@ COLOR_CODES = {"rgb8": cv2.COLOR_RGB2GRAY, "bgr8": cv2.COLOR_BGR2GRAY, "rgba8": 
 COLOR_CODES["bgra8"] = cv2.COLOR_BGRA2GRAY
 
 
+ROS1, ROS2 = "rosbag1", "rosbag2"
+ROS1_MAGIC = b"#ROSBAG V2.0"
+ROS2_STORAGES = {".db3": b"SQLite format 3\x00", ".mcap": b"\x89MCAP0\r\n"}  # a storage file's suffix and start
+# What write_bag writes: a ROS1 bag, or a ROS 2 bag in SQLite or MCAP storage.
+BAG_FORMATS = {"ros1": None, "db3": rosbag2.StoragePlugin.SQLITE3, "mcap": rosbag2.StoragePlugin.MCAP}
+LABELS = {ROS1: "ROS1 bag", ROS2: "ROS 2 bag"}
+NOT_A_BAG = "neither a ROS1 bag (#ROSBAG V2.0) nor a ROS 2 bag (a folder with metadata.yaml, a .db3 or .mcap file)"
+
+
 @functools.cache
 def ros1_typestore() -> Typestore:
     """ROS1 Noetic message types (built on first use: it takes about 0.1 s)."""
     return get_typestore(Stores.ROS1_NOETIC)
+
+
+@functools.cache
+def ros2_typestore() -> Typestore:
+    """ROS 2 Jazzy message types (sensor_msgs' Image, CompressedImage and Imu as in every ROS 2 since Foxy)."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _starts_with(path: Path, magic: bytes) -> bool:
+    with open(path, "rb") as f:
+        return f.read(len(magic)) == magic
+
+
+def bag_generation(path: str | os.PathLike) -> str | None:
+    """``ROS1`` or ``ROS2`` for the bag ``path`` holds (by its first bytes, or a ROS 2 folder's metadata.yaml), or
+    None for anything else."""
+    path = Path(path)
+    if path.is_dir():
+        metadata = path / "metadata.yaml"
+        holds = metadata.is_file() and "rosbag2_bagfile_information" in metadata.read_text(errors="replace")
+        return ROS2 if holds else None
+    if not path.is_file():
+        return None
+    if _starts_with(path, ROS1_MAGIC):
+        return ROS1
+    magic = ROS2_STORAGES.get(path.suffix.lower())
+    return ROS2 if magic is not None and _starts_with(path, magic) else None
+
+
+@contextlib.contextmanager
+def _opened(path: Path) -> Iterator[tuple[Any, Callable[[bytes, str], Any]]]:
+    """The bag at ``path``, open, and the deserialiser of its messages; its faults as ``BagFormatError``."""
+    generation = bag_generation(path)
+    if generation is None:
+        raise BagFormatError(f"{path} is {NOT_A_BAG}" if path.exists() else f"{path} does not exist")
+    try:
+        if generation == ROS1:
+            with rosbag1.Reader(path) as reader:
+                yield reader, ros1_typestore().deserialize_ros1
+        else:
+            with rosbag2.Reader(path) as reader:
+                yield reader, ros2_typestore().deserialize_cdr
+    except (rosbag1.ReaderError, rosbag2.ReaderError) as exc:
+        label = LABELS[generation]
+        raise BagFormatError(f"{path} cannot be read as a {label} (corrupt or truncated?): {exc}") from exc
 
 
 def camera_topics(image_topic: str | Sequence[str], count: int) -> list[str]:
@@ -57,12 +115,9 @@ def camera_topics(image_topic: str | Sequence[str], count: int) -> list[str]:
 
 
 def bag_image_topics(path: str | os.PathLike) -> list[str]:
-    """The topics of the ROS1 bag ``path`` that hold images (raw or compressed), in the bag's order."""
-    try:
-        with Reader(Path(path)) as reader:
-            return [c.topic for c in reader.connections if c.msgtype in (IMAGE_TYPE, COMPRESSED_TYPE)]
-    except ReaderError as exc:
-        raise BagFormatError(f"{path} cannot be read as a ROS1 bag (corrupt or truncated?): {exc}") from exc
+    """The topics of the bag ``path`` that hold images (raw or compressed), in the bag's order."""
+    with _opened(Path(path)) as (reader, _):
+        return [c.topic for c in reader.connections if c.msgtype in (IMAGE_TYPE, COMPRESSED_TYPE)]
 
 
 # ------------------------------------------------------------------------------------ write
@@ -72,11 +127,16 @@ def write_bag(
     image_topic: str | Sequence[str] = "/cam0/image_raw",
     imu_topic: str = "/imu0",
     overwrite: bool = False,
+    bag_format: str = "ros1",
 ) -> Path:
-    """Write ``recording`` (its cameras must carry images) as a ROS1 bag Kalibr can read, atomically.
+    """Write ``recording`` (its cameras must carry images) as a bag, whole or not at all: a ROS1 bag Kalibr can read
+    (``bag_format="ros1"``: the file ``path``) or a ROS 2 bag (``"db3"`` or ``"mcap"``: the folder ``path``, its
+    ``metadata.yaml`` and ``<name>.db3`` / ``<name>.mcap``).
 
     ``image_topic``: cam0's topic, or one per camera (the other cameras default to ``/camN/image_raw``).
     """
+    if bag_format not in BAG_FORMATS:
+        raise FormatError(f"bag format {bag_format!r}: choose one of {', '.join(BAG_FORMATS)}")
     for name in recording.camera_names:
         if recording.frames_of(name).images is None:
             raise FormatError(
@@ -84,47 +144,65 @@ def write_bag(
             )
     topics = camera_topics(image_topic, len(recording.camera_names))
     final = Path(path)
-    if final.exists() and (not overwrite or final.is_dir()):
+    is_folder = bag_format != "ros1"
+    if final.exists() and (not overwrite or final.is_dir() != is_folder):
         raise FileExistsError(f"{final} already exists; pass overwrite=True to replace it")
     final.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(final.parent, final.name)
     tmp_dir = Path(tempfile.mkdtemp(prefix=temporary_prefix(final), dir=final.parent))
     try:
-        _write_messages(recording, tmp_dir / final.name, topics, imu_topic)
-        os.replace(tmp_dir / final.name, final)
+        written = tmp_dir / final.name
+        if is_folder:
+            writer = rosbag2.Writer(written, version=9, storage_plugin=BAG_FORMATS[bag_format])
+            _write_messages(recording, writer, ros2_typestore(), ros2_typestore().serialize_cdr, topics, imu_topic)
+            replace_directory(written, final)
+        else:
+            writer = rosbag1.Writer(written)
+            _write_messages(recording, writer, ros1_typestore(), ros1_typestore().serialize_ros1, topics, imu_topic)
+            os.replace(written, final)
     finally:
         shutil.rmtree(tmp_dir, ignore_errors=True)
     return final
 
 
-def _write_messages(rec: Recording, path: Path, image_topics: list[str], imu_topic: str) -> None:
+def _write_messages(
+    rec: Recording,
+    writer: Any,
+    store: Typestore,
+    serialize: Callable[[Any, str], bytes],
+    image_topics: list[str],
+    imu_topic: str,
+) -> None:
     events = [(int(t), 0, -1, k) for k, t in enumerate(rec.imu.t)]
     for c, name in enumerate(rec.camera_names):
         events += [(int(t), 1, c, k) for k, t in enumerate(rec.frames_of(name).t)]
     events.sort()
-    with Writer(path) as writer:
-        cams = [writer.add_connection(topic, IMAGE_TYPE, typestore=ros1_typestore()) for topic in image_topics]
-        imu = writer.add_connection(imu_topic, IMU_TYPE, typestore=ros1_typestore())
-        for t, is_image, c, k in tqdm(events, desc=f"writing {path.name}", unit="msg", leave=False):
+    with writer:
+        cams = [writer.add_connection(topic, IMAGE_TYPE, typestore=store) for topic in image_topics]
+        imu = writer.add_connection(imu_topic, IMU_TYPE, typestore=store)
+        for t, is_image, c, k in tqdm(events, desc=f"writing {writer.path.name}", unit="msg", leave=False):
             if not is_image:
-                msg = _imu_msg(t, k, rec.imu.gyro[k], rec.imu.accel[k])
-                writer.write(imu, t, ros1_typestore().serialize_ros1(msg, IMU_TYPE))
+                msg = _imu_msg(t, k, rec.imu.gyro[k], rec.imu.accel[k], store)
+                writer.write(imu, t, serialize(msg, IMU_TYPE))
             else:
                 name = rec.camera_names[c]
-                msg = _image_msg(t, k, rec.frames_of(name).images[k], name)
-                writer.write(cams[c], t, ros1_typestore().serialize_ros1(msg, IMAGE_TYPE))
+                msg = _image_msg(t, k, rec.frames_of(name).images[k], name, store)
+                writer.write(cams[c], t, serialize(msg, IMAGE_TYPE))
 
 
-def _header(t_ns: int, seq: int, frame_id: str) -> Any:
+def _header(t_ns: int, seq: int, frame_id: str, store: Typestore) -> Any:
     sec, nsec = divmod(t_ns, NS_PER_S)
-    stamp = ros1_typestore().types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
-    return ros1_typestore().types["std_msgs/msg/Header"](seq=seq, stamp=stamp, frame_id=frame_id)
+    stamp = store.types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nsec)
+    header = store.types["std_msgs/msg/Header"]
+    numbered = {"seq": seq} if "seq" in header.__dataclass_fields__ else {}  # ROS 2's header has no number
+    return header(**numbered, stamp=stamp, frame_id=frame_id)
 
 
-def _image_msg(t_ns: int, seq: int, image: np.ndarray, frame_id: str = "cam0") -> Any:
+def _image_msg(t_ns: int, seq: int, image: np.ndarray, frame_id: str = "cam0", store: Typestore | None = None) -> Any:
+    store = store or ros1_typestore()
     h, w = image.shape
-    return ros1_typestore().types[IMAGE_TYPE](
-        header=_header(t_ns, seq, frame_id),
+    return store.types[IMAGE_TYPE](
+        header=_header(t_ns, seq, frame_id, store),
         height=h,
         width=w,
         encoding="mono8",
@@ -134,14 +212,15 @@ def _image_msg(t_ns: int, seq: int, image: np.ndarray, frame_id: str = "cam0") -
     )
 
 
-def _imu_msg(t_ns: int, seq: int, gyro: np.ndarray, accel: np.ndarray) -> Any:
-    types = ros1_typestore().types
+def _imu_msg(t_ns: int, seq: int, gyro: np.ndarray, accel: np.ndarray, store: Typestore | None = None) -> Any:
+    store = store or ros1_typestore()
+    types = store.types
     vec = types["geometry_msgs/msg/Vector3"]
     cov = np.zeros(9)
     orientation_cov = cov.copy()
     orientation_cov[0] = -1.0  # ROS convention: the orientation field is not provided
     return types[IMU_TYPE](
-        header=_header(t_ns, seq, "imu0"),
+        header=_header(t_ns, seq, "imu0", store),
         orientation=types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
         orientation_covariance=orientation_cov,
         angular_velocity=vec(x=float(gyro[0]), y=float(gyro[1]), z=float(gyro[2])),
@@ -162,7 +241,7 @@ def read_bag(
     gyro_unit: str = "rad/s",
     accel_unit: str = "m/s^2",
 ) -> Recording:
-    """Recording from a ROS1 bag: images on ``image_topic`` (corners by ``detector``), IMU on ``imu_topic``.
+    """Recording from a ROS1 or ROS 2 bag: images on ``image_topic`` (corners by ``detector``), IMU on ``imu_topic``.
 
     ``image_topic`` may list several topics, one per camera of a rig (``cam0``, ``cam1``, ... in that
     order; ``metadata["image_topics"]`` names them, ``metadata["image_sizes"]`` gives each one's
@@ -173,14 +252,9 @@ def read_bag(
     """
     path = Path(path)
     topics = camera_topics(image_topic, 1)
-    if not path.is_file():
-        raise BagFormatError(f"{path} does not exist or is not a file")
-    try:
-        with Reader(path) as reader:
-            connections = _connections(reader, path, topics, imu_topic)
-            frames, imu = _read_streams(reader, connections, path, target, detector, keep_images)
-    except ReaderError as exc:
-        raise BagFormatError(f"{path} cannot be read as a ROS1 bag (corrupt or truncated?): {exc}") from exc
+    with _opened(path) as (reader, deserialize):
+        connections = _connections(reader, path, topics, imu_topic)
+        frames, imu = _read_streams(reader, deserialize, connections, path, target, detector, keep_images)
     try:
         imu_samples = _imu_samples(imu, f"{path} topic {imu_topic}", gyro_unit, accel_unit)
         cameras = [_camera_frames(frames[topic], f"{path} topic {topic}", keep_images) for topic in topics]
@@ -190,7 +264,8 @@ def read_bag(
         raise BagFormatError(str(exc)) from exc
     names = [f"cam{n}" for n in range(len(topics))]
     check_camera_rates(f"{path} (topics {', '.join(topics)})", {n: c[0].t for n, c in zip(names, cameras, strict=True)})
-    metadata = {"source": "rosbag1", "path": str(path.resolve()), "image_topics": dict(zip(names, topics, strict=True))}
+    metadata = {"source": bag_generation(path), "path": str(path.resolve())}
+    metadata["image_topics"] = dict(zip(names, topics, strict=True))
     metadata["image_sizes"] = {n: c[1] for n, c in zip(names, cameras, strict=True)}
     other = {n: c[0] for n, c in zip(names[1:], cameras[1:], strict=True)}
     return Recording(imu_samples, cameras[0][0], target, metadata=metadata, other_frames=other)
@@ -199,19 +274,14 @@ def read_bag(
 def read_bag_imu(
     path: str | os.PathLike, imu_topic: str = "/imu0", gyro_unit: str = "rad/s", accel_unit: str = "m/s^2"
 ) -> ImuSamples:
-    """The IMU samples on ``imu_topic`` of a ROS1 bag (no images needed: a static IMU recording).
+    """The IMU samples on ``imu_topic`` of a ROS1 or ROS 2 bag (no images needed: a static IMU recording).
 
     Raises ``BagFormatError`` naming the bag and topic as ``read_bag`` does.
     """
     path = Path(path)
-    if not path.is_file():
-        raise BagFormatError(f"{path} does not exist or is not a file")
-    try:
-        with Reader(path) as reader:
-            connections = _connections(reader, path, [], imu_topic)
-            _, imu = _read_streams(reader, connections, path, None, None, False)
-    except ReaderError as exc:
-        raise BagFormatError(f"{path} cannot be read as a ROS1 bag (corrupt or truncated?): {exc}") from exc
+    with _opened(path) as (reader, deserialize):
+        connections = _connections(reader, path, [], imu_topic)
+        _, imu = _read_streams(reader, deserialize, connections, path, None, None, False)
     if not imu:
         raise BagFormatError(f"{path} topic {imu_topic}: no IMU messages")
     try:
@@ -222,7 +292,7 @@ def read_bag_imu(
         raise BagFormatError(str(exc)) from exc
 
 
-def _connections(reader: Reader, path: Path, image_topics: list[str], imu_topic: str | None) -> dict[str, Any]:
+def _connections(reader: Any, path: Path, image_topics: list[str], imu_topic: str | None) -> dict[str, Any]:
     topics = {c.topic: c for c in reader.connections}
     wanted = [(topic, (IMAGE_TYPE, COMPRESSED_TYPE), "image_topic") for topic in image_topics]
     if imu_topic is not None:
@@ -242,7 +312,8 @@ def _connections(reader: Reader, path: Path, image_topics: list[str], imu_topic:
 
 
 def _read_streams(
-    reader: Reader,
+    reader: Any,
+    deserialize: Callable[[bytes, str], Any],
     connections: dict[str, Any],
     path: Path,
     target: Target | None,
@@ -255,7 +326,7 @@ def _read_streams(
     total = sum(c.msgcount for c in connections.values())
     messages = reader.messages(connections=list(connections.values()))
     for index, (conn, _, raw) in enumerate(tqdm(messages, total=total, desc=path.name, unit="msg", leave=False)):
-        msg = ros1_typestore().deserialize_ros1(raw, conn.msgtype)
+        msg = deserialize(raw, conn.msgtype)
         t = int(msg.header.stamp.sec) * NS_PER_S + int(msg.header.stamp.nanosec)
         where = f"{path} topic {conn.topic} message {index}"
         if conn.msgtype == IMU_TYPE:

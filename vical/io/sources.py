@@ -4,7 +4,8 @@ Recognised, in this order:
 
 1. a vical recording directory (``recording.yaml``),
 2. an EuRoC/ASL folder (``cam0/data.csv`` in it or in its ``mav0/``),
-3. a ROS1 bag (a file starting with ``#ROSBAG V2.0``),
+3. a ROS1 bag (a file starting with ``#ROSBAG V2.0``) or a ROS 2 bag (a folder with rosbag2's ``metadata.yaml``, or
+   its ``.db3`` / ``.mcap`` storage file: ``vical.io.bag.bag_generation``),
 4. a corner folder (``camN/<timestamp ns>.csv`` per frame with board coordinates and ``imu0.csv``:
    ``vical.io.board_points``),
 5. a corner CSV (``*.csv``: vical's point ids, or named columns with board coordinates), with the IMU
@@ -12,7 +13,7 @@ Recognised, in this order:
 6. a folder of images (intrinsic-only: no IMU; timestamps from file order at ``rate_hz``).
 
 ``open_imu`` reads an IMU-only recording (a static one, for ``vical-imu-noise``): an EuRoC folder or
-IMU CSV, or a bag's IMU topic.
+IMU CSV, or a ROS1 or ROS 2 bag's IMU topic.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from vical.data import ImuSamples, Recording, Target
-from vical.io.bag import read_bag, read_bag_imu
+from vical.io.bag import bag_generation, read_bag, read_bag_imu
 from vical.io.board_points import (
     camera_folders,
     chosen_cameras,
@@ -41,8 +42,6 @@ from vical.io.images import ImageDetector, list_images, read_image_folder
 from vical.io.recording import is_recording_dir, load_recording
 from vical.io.sample_checks import GYRO_UNITS
 
-BAG_MAGIC = b"#ROSBAG V2.0"
-
 
 def detect_source(path: str | os.PathLike) -> str:
     """``"recording"``, ``"euroc"``, ``"bag"``, ``"corner_folder"``, ``"corners_csv"`` or ``"image_folder"``; raise
@@ -55,19 +54,18 @@ def detect_source(path: str | os.PathLike) -> str:
             return "recording"
         if find_euroc_root(path) is not None:
             return "euroc"
+    if bag_generation(path) is not None:
+        return "bag"
+    if path.is_dir():
         if is_corner_folder(path):
             return "corner_folder"
         if list_images(path):
             return "image_folder"
-    else:
-        with open(path, "rb") as f:
-            if f.read(len(BAG_MAGIC)) == BAG_MAGIC:
-                return "bag"
-        if path.suffix.lower() == ".csv":
-            return "corners_csv"
+    elif path.suffix.lower() == ".csv":
+        return "corners_csv"
     raise FormatError(
         f"{path} is none of: a vical recording directory (recording.yaml), an EuRoC folder (cam0/data.csv), "
-        "a corner folder (cam0/<timestamp>.csv), a ROS1 bag, a corner CSV (.csv) or a folder of images"
+        "a corner folder (cam0/<timestamp>.csv), a ROS1 or ROS 2 bag, a corner CSV (.csv) or a folder of images"
     )
 
 
@@ -153,7 +151,7 @@ def open_imu(
     path: str | os.PathLike, imu_topic: str = "/imu0", gyro_unit: str = "rad/s", accel_unit: str = "m/s^2"
 ) -> ImuSamples:
     """The IMU samples of an IMU-only recording: an EuRoC folder (``imu0/data.csv`` in it or in its
-    ``mav0/``), an EuRoC IMU CSV, or a ROS1 bag's ``imu_topic``; no camera needed.
+    ``mav0/``), an EuRoC IMU CSV, or a ROS1 or ROS 2 bag's ``imu_topic``; no camera needed.
 
     The gyro is read as rad/s and converted afterwards: the readers' unit check expects a calibration
     motion, which would take a resting gyro logged in deg/s for one logged in rad/s.
@@ -163,15 +161,18 @@ def open_imu(
         raise FormatError(f"gyro_unit must be one of {list(GYRO_UNITS)}, got {gyro_unit!r}")
     if not path.exists():
         raise FormatError(f"{path} does not exist")
-    if path.is_dir():
+    if bag_generation(path) is not None:
+        imu = read_bag_imu(path, imu_topic, "rad/s", accel_unit)
+    elif path.is_dir():
         csv = next((c for c in (path / "mav0" / "imu0" / "data.csv", path / "imu0" / "data.csv") if c.is_file()), None)
         if csv is None:
             raise FormatError(f"{path} holds no IMU CSV: neither {path}/imu0/data.csv nor {path}/mav0/imu0/data.csv")
         imu = read_imu_csv(csv, "rad/s", accel_unit)
+    elif path.suffix.lower() == ".csv":
+        imu = read_imu_csv(path, "rad/s", accel_unit)
     else:
-        with open(path, "rb") as f:
-            is_bag = f.read(len(BAG_MAGIC)) == BAG_MAGIC
-        if not is_bag and path.suffix.lower() != ".csv":
-            raise FormatError(f"{path} is neither an EuRoC IMU CSV (.csv), a ROS1 bag nor an EuRoC folder")
-        imu = read_bag_imu(path, imu_topic, "rad/s", accel_unit) if is_bag else read_imu_csv(path, "rad/s", accel_unit)
+        raise FormatError(
+            f"{path} is none of: an EuRoC IMU CSV (.csv), an EuRoC folder, a ROS1 bag or a ROS 2 bag (a folder with "
+            "metadata.yaml, a .db3 or .mcap file)"
+        )
     return ImuSamples(imu.t, imu.gyro * GYRO_UNITS[gyro_unit], imu.accel)
