@@ -450,6 +450,7 @@ def test_the_step_lines_tell_the_same_story_as_the_summary(tmp_path):
 OUT_OF_REACH_ARGS = ["sensor=practitioner", "seed=40000", "calibrate=false", "progress=false"]
 
 
+@pytest.mark.integration
 def test_a_tolerance_out_of_reach_stops_the_collection_at_once_saying_which_group_and_what_would_change_it(
     tmp_path, capsys
 ):

@@ -258,6 +258,7 @@ def test_while_the_planner_decides_a_viewed_sensor_streams_on_and_an_unviewed_si
     assert result.decision_s >= sum(ended - started for started, ended, _, _ in decisions)
 
 
+@pytest.mark.integration
 def test_the_guide_runs_headless_records_and_calibrates(tmp_path, capsys):
     """A simulated person guided by the default policy for 6 poses, without the page: the instructions as lines, the
     recording as EuRoC (images and IMU), the summary, and the calibration of the recording."""

@@ -52,6 +52,7 @@ def calibrate(seed: int, joint: bool, **effect):
     return calibrate_extrinsics(rec.frames, rec.imu, rec.target, rec.truth.camera, declared), rec.truth
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("effect", list(EFFECTS))
 def test_errors_stay_within_three_reported_sigma_despite_unmodelled_effects(effect):
     z = []
@@ -62,6 +63,7 @@ def test_errors_stay_within_three_reported_sigma_despite_unmodelled_effects(effe
     assert np.mean(z <= 3.0) >= 0.95, np.round(z, 1)
 
 
+@pytest.mark.integration
 def test_the_widened_parameters_are_named():
     result, _ = calibrate(0, False, line_delay=0.015 / 480)
     note = next(w for w in result.warnings if "widened" in w)

@@ -188,6 +188,7 @@ def test_the_starting_corner_noise_is_not_inflated_by_the_readout(line_delay_us)
         assert rolling_noise == pytest.approx(global_noise, rel=0.005)
 
 
+@pytest.mark.integration
 def test_a_strong_rolling_shutter_is_solved_without_reweighting_its_corners():
     """The joint solve of a 40 us/row recording starts from the right corner noise, so it is not solved again with
     the corners reweighted: at most one iteration (the readout's) more than the global-shutter solve of the same
@@ -210,6 +211,7 @@ def test_a_strong_rolling_shutter_is_solved_without_reweighting_its_corners():
     assert solves[False].pixel_sigma > 0.4
 
 
+@pytest.mark.integration
 def test_a_rigs_cameras_get_their_own_line_delays_in_the_joint_task():
     T_cam1_cam0 = make_transform(np.eye(3), [-0.11, 0.0, 0.0])
     cam1 = RigCamera(default_camera(), T_cam1_cam0 @ nominal_T_cam_imu(), 0.0, 20 * US)
@@ -240,6 +242,7 @@ def test_a_line_delay_the_motion_does_not_tell_stays_at_its_prior_with_a_warning
     assert result.line_delay is None and "line_delay" not in result.parameter_names
 
 
+@pytest.mark.integration
 def test_a_known_line_delay_is_used_with_a_held_time_offset():
     rec = recording(30 * US, seed=7)
     result = calibrate_rig(

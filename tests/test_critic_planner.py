@@ -62,6 +62,7 @@ def test_the_observation_of_the_states_own_ratios_is_the_envs_observation():
         env.close()
 
 
+@pytest.mark.integration
 def test_with_no_value_after_the_step_it_decides_as_the_planner_and_with_its_value_otherwise():
     """The backup r + gamma d V(s'): V = 0 leaves the planner's own choices, step for step; the trained V changes
     some of them (the value is read, not ignored)."""

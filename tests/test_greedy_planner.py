@@ -75,6 +75,7 @@ def test_the_planner_reads_only_the_episodes_state_never_the_simulator_or_the_tr
     assert np.all(np.abs(first) <= env.action_space.high + 1e-9)
 
 
+@pytest.mark.integration
 def test_the_planner_reaches_the_goal_sooner_than_random_motion_with_the_same_stop():
     env_cfg = env_config("joint", "practitioner")
     planner = greedy_information_policy()

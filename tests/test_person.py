@@ -121,6 +121,7 @@ def test_bad_hand_settings_are_refused_by_key(setting, value, message):
         HandModel(**{setting: value})
 
 
+@pytest.mark.integration
 def test_the_hand_held_sim_moves_as_the_arm_does_for_the_env_the_person_reaching_each_goal():
     """``HandHeldSim.move_to`` (the env's person): a still, exact hand ends where it is sent, its path the straight
     distance and its rotation the geodesic angle (the minimum-jerk reach), the reach's duration plus the rest

@@ -29,6 +29,7 @@ def test_the_score_is_the_excess_shed_per_second_of_recording():
     np.testing.assert_allclose(planner.scores(steps, env), [1.0, 0.75, 2.0 / 3.0, 0.5])
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("seed", [3, 4])
 def test_on_the_papers_sensors_it_reaches_the_joint_goal_sooner_than_the_greedy_planner(seed):
     """The paper's sensors, joint task: both planners reach the goal; the rate planner in less recording time, on a

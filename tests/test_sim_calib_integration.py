@@ -102,6 +102,7 @@ def test_joint_calibration_of_rendered_images_within_reported_uncertainty():
         assert abs(result.T_cam_imu[k, 3] - truth.T_cam_imu[k, 3]) < 4 * sig[name], name
 
 
+@pytest.mark.integration
 def test_rendered_images_errors_within_three_reported_sigma():
     """The detector's noise on rendered images is no simulated Gaussian: the reported 1-sigma must still hold.
 
