@@ -418,3 +418,28 @@ def test_a_flaw_the_reader_fixes_is_one_warning_line_and_the_calibration_goes_on
         f"warning: {path}: timestamps are not sorted (line 22 is earlier than line 21); sorted",
         f"warning: {path}: 1 duplicated rows (same timestamp and data, e.g. line {len(rows) + 1}) dropped",
     ]
+
+
+@pytest.mark.parametrize(
+    ("err", "line"),
+    [
+        (FileNotFoundError(2, "No such file or directory", "imu.yaml"), "imu.yaml: no such file or directory"),
+        (
+            FileExistsError("--out board holds target.pdf; pass --overwrite"),
+            "--out board holds target.pdf; pass --overwrite",
+        ),
+        (IsADirectoryError(21, "Is a directory"), "[Errno 21] Is a directory"),  # no path to name: the system's line
+    ],
+)
+def test_a_file_the_command_cannot_open_is_one_line_naming_the_path_or_vicals_own_message(err, line, capsys):
+    """``argparse_main``: an ``OSError`` with a path gives the path and the reason; one vical raised with its own
+    message (no path) gives the message, never ``None: ...``."""
+    import argparse
+
+    from vical.apps.cli import argparse_main
+
+    def run(args):
+        raise err
+
+    assert argparse_main("vical-x", argparse.ArgumentParser(), run, (), {}, []) == 2
+    assert capsys.readouterr().err.strip() == f"vical-x: error: {line}"

@@ -39,6 +39,14 @@ def report_error(app: str, message: object) -> int:
     return EXIT_USER_ERROR
 
 
+def os_error_reason(err: OSError) -> str:
+    """An ``OSError`` as a user reads it: the path and the system's reason without Python's ``[Errno N]``, or, for
+    one vical raised with its own message, that message."""
+    if err.filename is None or err.strerror is None:
+        return str(err)
+    return f"{err.filename}: {err.strerror.lower()}"
+
+
 def fail(app: str, err: BaseException) -> NoReturn:
     """Print ``<app>: error: <message>`` on one line to stderr and exit with status 2."""
     raise SystemExit(report_error(app, err))
@@ -146,7 +154,7 @@ def argparse_main(
     except OSError as exc:
         if is_write_fault(exc) and getattr(args, "out", None):
             return report_error(app, cannot_write("--out", args.out, exc, AS_IT_WAS))
-        return report_error(app, f"{exc.filename}: {(exc.strerror or str(exc)).lower()}")
+        return report_error(app, os_error_reason(exc))
     return 0
 
 

@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from vical.apps.calibrate_outputs import view_overlaps
-from vical.apps.cli import AS_IT_WAS, ArgumentParser, cannot_write, one_line_warnings, report_error
+from vical.apps.cli import AS_IT_WAS, ArgumentParser, cannot_write, one_line_warnings, os_error_reason, report_error
 from vical.apps.entry import is_write_fault
 from vical.apps.entry import run as run_command
 from vical.data import DataError, ImuNoise, Recording
@@ -254,8 +254,7 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:  # vical's refusals carry their message; the system's name the path and the reason
         if is_write_fault(exc):
             return report_error("vical-export", cannot_write("--out", out, exc, AS_IT_WAS))
-        reason = str(exc) if exc.filename is None else f"{exc.filename}: {exc.strerror.lower()}"
-        return report_error("vical-export", reason)
+        return report_error("vical-export", os_error_reason(exc))
     print_summary(rec, out, written, image_topics_of(rec, args.image_topic))
     return 0
 
