@@ -49,6 +49,8 @@ def test_joint_writes_kalibr_files_results_and_report(recording_dir, tmp_path, c
     assert read_imu_yaml(out / "imu.yaml") == rec.truth.imu_noise
     text = (out / "results.txt").read_text()
     assert "time offset" in text and "errors against the truth" in text
+    kalibr = (out / "results-imucam.txt").read_text()  # Kalibr's layout (tests/test_calib_kalibr_results.py)
+    assert kalibr.startswith("Calibration results") and "[ok] IMU noise measured from its residuals" in kalibr
     for name in ("reprojection.png", "imu.png", "report.pdf"):
         assert (out / name).stat().st_size > 1000
     assert (out / "report.pdf").read_bytes().startswith(b"%PDF")
@@ -60,7 +62,7 @@ def test_intrinsic_then_extrinsic_with_the_written_camchain(recording_dir, tmp_p
     path, rec = recording_dir
     assert main([str(path), "--task", "intrinsic", "--out", str(tmp_path / "a"), "--no-report"]) == 0
     camera, T, shift = read_camchain(tmp_path / "a" / "camchain.yaml")
-    assert T is None and shift is None
+    assert T is None and shift is None and not (tmp_path / "a" / "results-imucam.txt").exists()  # no IMU
     assert np.abs(camera.intrinsics - rec.truth.camera.intrinsics).max() < 3.0
     known = tmp_path / "known.yaml"
     write_camchain_imucam(known, rec.truth.camera, None, None)

@@ -1,12 +1,13 @@
 """The outputs of ``vical-calibrate``: one writer for every task, one camera or a rig.
 
-Everything goes into ``--out`` at once (``vical.io.atomic.atomic_directory``: replaced whole, never half
-written). A one-camera calibration (``cam0`` of a one-camera recording, or ``--cameras cam0`` without a rig
-camchain) writes its files side by side: ``camchain.yaml`` (intrinsic task) or ``camchain-imucam.yaml`` +
-``imu.yaml``, ``results.txt``, ``frames.csv`` and the report. A rig writes one camchain with a section per camera,
-``results.txt`` with a section per camera and the relative poses, and a folder per camera (its ``frames.csv``
-and report). ``--export`` adds the files VIO systems read (``vins-fusion/``, ``basalt/``: ``vical.io.vio_exports``).
-A failed calibration's files are kept for diagnosis, marked as failed, and nothing is exported from it.
+Everything goes into ``--out`` at once (``vical.io.atomic.atomic_directory``: replaced whole, never half written). A
+one-camera calibration (``cam0`` of a one-camera recording, or ``--cameras cam0`` without a rig camchain) writes its
+files side by side: ``camchain.yaml`` (intrinsic task) or ``camchain-imucam.yaml`` + ``imu.yaml``, ``results.txt``,
+``frames.csv`` and the report. A rig writes one camchain with a section per camera, ``results.txt`` with a section
+per camera and the relative poses, and a folder per camera (its ``frames.csv`` and report). A camera-IMU calibration
+adds ``results-imucam.txt`` in Kalibr's layout with "Is this a good result" (``vical.calib.report.kalibr_results``).
+``--export`` adds the files VIO systems read (``vins-fusion/``, ``basalt/``: ``vical.io.vio_exports``). A failed
+calibration's files are kept for diagnosis, marked as failed, and nothing is exported from it.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 from vical.apps.calibrate_rig import camera_index
 from vical.apps.cli import OutputError, cannot_write
 from vical.calib.metrics import CalibrationErrors, calibration_errors
+from vical.calib.report.kalibr_results import kalibr_results_text
 from vical.calib.report.writers import (
     results_text,
     summary_table,
@@ -97,6 +99,7 @@ def _write_one_camera(
             write_frames_csv(tmp / "frames.csv", result.frame_log)
             if not args.no_report:
                 write_report(tmp, result, errors, failure)
+            write_kalibr_results(tmp, {"cam0": result}, rec, args, noise, failure)
             exported = write_exports(tmp, args, {"cam0": result}, rec, given, noise, failure)
     except OSError as err:
         raise OutputError(cannot_write("--out", out, err)) from None
@@ -136,12 +139,22 @@ def _write_rig(
                     write_frames_csv(tmp / camera / FRAMES_CSV, result.frame_log)
                 if not args.no_report:
                     write_report(tmp / camera, result, errors[camera], failure)
+            write_kalibr_results(tmp, results, rec, args, noise, failure)
             exported = write_exports(tmp, args, results, rec, given, noise, failure)
     except OSError as err:
         raise OutputError(cannot_write("--out", out, err)) from None
     print("\n".join(rig_summary(results, errors, chain, out)))
     print_exports(exported, out)
     print(f"outputs written to {out}")
+
+
+def write_kalibr_results(
+    tmp: Path, results: dict[str, CalibrationResult], rec: Recording, args, noise: ImuNoise | None, failure: str | None
+) -> None:
+    """``results-imucam.txt``, Kalibr's results layout with "Is this a good result", for a camera-IMU calibration
+    that did not fail (results.txt says why one failed)."""
+    if failure is None and noise is not None and all(r.imu_residuals is not None for r in results.values()):
+        write_text_atomic(tmp / "results-imucam.txt", kalibr_results_text(results, noise, rec.target, args.imu_model))
 
 
 def write_exports(

@@ -90,6 +90,7 @@ class ImuResiduals:
             gyro (bias-corrected) and from the estimated states.
         accel_measured, accel_predicted: (S, 3) [m/s^2] mean specific-force change expressed as the
             velocity change per second from the accelerometer and from the estimated states.
+        dt: (S,) [s] each interval's length: white noise of density ``d`` gives its means a sigma ``d / sqrt(dt)``.
     """
 
     t: np.ndarray
@@ -97,6 +98,7 @@ class ImuResiduals:
     gyro_predicted: np.ndarray
     accel_measured: np.ndarray
     accel_predicted: np.ndarray
+    dt: np.ndarray
 
     @property
     def gyro_stats(self) -> ResidualStats:

@@ -103,9 +103,9 @@ def _imu_residuals(g: ViGraph, values: gtsam.Values, gravity_magnitude: float) -
         gyro_pred = gtsam.Rot3.Logmap(X0.rotation().between(X1.rotation())) / dt
         accel_meas = np.asarray(pim.deltaVij()) / dt - d_ba
         accel_pred = R0.T @ (v1 - v0 - gravity * dt) / dt
-        rows.append(np.concatenate([[g.state_times[n] + 0.5 * dt], gyro_meas, gyro_pred, accel_meas, accel_pred]))
-    a = np.array(rows).reshape(-1, 13)
-    return ImuResiduals(a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13])
+        rows.append(np.concatenate([[g.state_times[n] + 0.5 * dt], gyro_meas, gyro_pred, accel_meas, accel_pred, [dt]]))
+    a = np.array(rows).reshape(-1, 14)
+    return ImuResiduals(a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13], a[:, 13])
 
 
 def first_camera_result(

@@ -1,0 +1,77 @@
+"""``results-imucam.txt``: Kalibr's results layout from a real solve, its numbers the result's own, and its verdicts
+("Is this a good result") right on an IMU exactly as declared and on one five times noisier than declared."""
+
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from vical.calib.report.kalibr_results import kalibr_results_text
+from vical.calib.solve.pipeline import calibrate_joint
+from vical.calib.synthetic import make_recording
+from vical.data import ImuNoise
+
+DECLARED = ImuNoise()
+HEADINGS = ["Calibration results", "Normalized Residuals", "Residuals", "Transformation (cam0):",
+            "Calibration configuration", "IMU configuration", "Is this a good result"]  # fmt: skip
+
+
+@pytest.fixture(scope="module", params=[1.0, 5.0], ids=["IMU as declared", "IMU 5x noisier"])
+def solved(request):
+    rec = make_recording(duration=10.0, imu_noise=DECLARED.scaled(request.param), pixel_sigma=0.3, seed=40003,
+                         time_offset=0.01)  # fmt: skip
+    result = calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", (640, 480), DECLARED)
+    return request.param, rec, result, kalibr_results_text({"cam0": result}, DECLARED, rec.target)
+
+
+def stats(text: str, label: str) -> tuple[float, float, float]:
+    line = next(line for line in text.splitlines() if line.startswith(label))
+    return tuple(float(v) for v in re.search(r"mean (\S+), median (\S+), std: (\S+)", line).groups())
+
+
+def matrix_after(text: str, heading: str) -> np.ndarray:
+    lines = text.splitlines()
+    start = lines.index(heading) + 1
+    return np.array([[float(v) for v in line.strip(" []").split()] for line in lines[start : start + 4]])
+
+
+def test_the_sections_are_kalibrs_in_its_order(solved):
+    *_, text = solved
+    lines = text.splitlines()
+    assert [lines.index(h) for h in HEADINGS] == sorted(lines.index(h) for h in HEADINGS)
+
+
+def test_the_residuals_transforms_and_time_shift_are_the_results_own(solved):
+    _, _, result, text = solved
+    raw = stats(text, "Reprojection error (cam0) [px]:")
+    norms = np.linalg.norm(result.reprojection_residuals, axis=1)
+    assert raw == pytest.approx((norms.mean(), np.median(norms), norms.std()), rel=1e-5)
+    normalised = stats(text, "Reprojection error (cam0):")
+    assert normalised == pytest.approx(tuple(v / result.pixel_sigma for v in raw), rel=1e-4)
+    # the corner noise is measured from these residuals: their whitened norms average a 2-vector's, sqrt(pi / 2)
+    assert normalised[0] == pytest.approx(math.sqrt(math.pi / 2), rel=0.05)
+    imu = result.imu_residuals
+    gyro = np.linalg.norm(imu.gyro_measured - imu.gyro_predicted, axis=1)
+    assert stats(text, "Gyroscope error (imu0) [rad/s]:")[0] == pytest.approx(gyro.mean(), rel=1e-5)
+    whitened = gyro * np.sqrt(imu.dt) / DECLARED.gyro_noise_density
+    assert stats(text, "Gyroscope error (imu0):")[0] == pytest.approx(whitened.mean(), rel=1e-5)
+    T_ci, T_ic = matrix_after(text, "T_ci:  (imu0 to cam0): "), matrix_after(text, "T_ic:  (cam0 to imu0): ")
+    np.testing.assert_allclose(T_ci, result.T_cam_imu, atol=1e-8)
+    np.testing.assert_allclose(T_ic @ T_ci, np.eye(4), atol=1e-7)
+    shift = float(text.splitlines()[text.splitlines().index("timeshift cam0 to imu0: [s] (t_imu = t_cam + shift)") + 1])
+    assert shift == pytest.approx(result.time_offset, abs=1e-12) and shift == pytest.approx(0.01, abs=5e-4)
+    assert f"Noise density (discrete): {DECLARED.gyro_noise_density * math.sqrt(200):.6g}" in text
+
+
+def test_the_verdict_names_an_imu_noisier_than_declared_and_what_to_do(solved):
+    scale, _, result, text = solved
+    verdicts = text.split("Is this a good result")[1]
+    assert "[ok] reprojection rms of cam0" in verdicts
+    if scale == 1.0:
+        assert "[ok] IMU noise measured from its residuals" in verdicts
+    else:
+        assert result.imu_noise_scale > 2.0
+        assert "[check] IMU noise measured from its residuals" in verdicts and "vical-imu-noise" in verdicts
