@@ -1,11 +1,15 @@
 """vical-guide's page in a real browser (Debian's headless Chromium, driven by Selenium), with a simulated person: the
-page follows the guidance live (the image at >= 5 Hz, each new instruction within 0.5 s of the guide's decision, the
-bars moving) until "done", then shows the result with the calibration's plots, and its Close button ends the app with
-status 0; a closed tab, or a lost sensor, stops the recording with one line and keeps it calibratable.
+page follows the guidance live (new images of the sensor, in order, while each pose is held; every instruction the
+guide shows; the bars moving) until "done", then shows the result with the calibration's plots, and its Close button
+ends the app with status 0; a closed tab, or a lost sensor, stops the recording with one line and keeps it
+calibratable. How fast the page follows (the image's rate and pauses, the instructions' latency) is a speed target,
+measured beside a peer by ``experiments/guide_live_image.py`` and ``experiments/guide_page_latency.py``; here it is
+printed only, as a test on a loaded machine measures the load.
 
 Integration tier: it needs Debian's ``chromium`` and ``chromium-driver`` (``make test-all`` installs them as root, and
 with sudo in CI); without them these tests skip with a line saying so, and fail in CI (``CI`` set)."""
 
+import itertools
 import os
 import re
 import subprocess
@@ -89,11 +93,13 @@ def _guide(out: Path, *settings: str) -> tuple[subprocess.Popen, Output]:
     return proc, output
 
 
-# What the page showed and when (Date.now() [ms]): each loaded live image, each new instruction, each new set of bars.
+# What the page showed and when (Date.now() [ms]): each loaded live image (with its frame count; the first, loaded
+# with the page, has none), each new instruction, each new set of bars.
 WATCH = """
 const log = window.vicalLog = {images: [], words: [], bars: []};
 const keep = (list, text) => { if (!list.length || list[list.length - 1][1] !== text) list.push([Date.now(), text]); };
-document.getElementById("live").addEventListener("load", () => log.images.push(Date.now()));
+const live = document.getElementById("live");  // each image with the sensor's frame count it shows
+live.addEventListener("load", () => log.images.push([Date.now(), +new URL(live.src).searchParams.get("n")]));
 new MutationObserver(() => keep(log.words, document.getElementById("words").textContent))
   .observe(document.getElementById("words"), {childList: true, characterData: true, subtree: true});
 new MutationObserver(() => keep(log.bars, document.getElementById("bars").textContent))
@@ -149,16 +155,22 @@ def test_the_page_guides_a_simulated_person_live_until_done_and_shows_the_result
     finally:
         kill_if_running(proc)
     assert (out / "calibration" / "camchain-imucam.yaml").is_file()
-    # The live image while the person was guided (the first instruction to "done"), decisions included.
+    # The live image while the person was guided (the first instruction to "done"), decisions included: new frames of
+    # the sensor, in order, and several while each pose was sought and held (from its instruction to the next one).
     first, done = log["words"][0][0], next(t for t, w in log["words"] if w.startswith("done"))
-    images = np.array([t for t in log["images"] if first <= t <= done])
-    rate, gap = len(images) / ((done - first) / 1e3), np.diff(images).max() / 1e3
-    assert rate >= 5.0, f"the live image updated at {rate:.1f} Hz (longest pause {gap:.2f} s)"
-    latencies = _instruction_latencies(output, log["words"])
-    assert len(latencies) >= 5 and max(latencies) <= 0.5, latencies
+    images = np.array([(t, n) for t, n in log["images"] if first <= t <= done])
+    assert np.all(np.diff(images[:, 1]) > 0), "the page showed a frame again or out of order"
+    told = {line.removeprefix("next: ").strip() for _, line in output.stamped if line.startswith("next: ")}
+    shown = [t for t, w in log["words"] if first <= t <= done and w in told]
+    per_pose = [np.count_nonzero((images[:, 0] >= a) & (images[:, 0] < b)) for a, b in itertools.pairwise(shown)]
+    assert len(per_pose) >= 5 and min(per_pose) >= 2, f"new images while each pose was held: {per_pose}"
+    latencies = _instruction_latencies(output, log["words"])  # every instruction the guide showed reached the page
+    assert len(latencies) >= 5, latencies
     assert len({text for _, text in log["bars"]}) >= 3  # the predicted errors moved as the data came
-    print(f"live image {rate:.1f} Hz (longest pause {gap:.2f} s); instruction latency median "
-          f"{np.median(latencies):.2f} s, max {max(latencies):.2f} s over {len(latencies)}")  # fmt: skip
+    rate, gap = len(images) / ((done - first) / 1e3), np.diff(images[:, 0]).max() / 1e3
+    print(f"live image {rate:.1f} Hz (longest pause {gap:.2f} s), {min(per_pose)}-{max(per_pose)} images a pose; "
+          f"instruction latency median {np.median(latencies):.2f} s, max {max(latencies):.2f} s over "
+          f"{len(latencies)}")  # fmt: skip
 
 
 def _close_tab(driver) -> None:
