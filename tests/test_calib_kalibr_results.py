@@ -1,5 +1,6 @@
 """``results-imucam.txt``: Kalibr's results layout from a real solve, its numbers the result's own, and its verdicts
-("Is this a good result") right on an IMU exactly as declared and on one five times noisier than declared."""
+("Is this a good result") right on an IMU exactly as declared and on one five times noisier than declared; the
+report's IMU residual page with its 3-sigma bounds of the declared noise, which the noisier IMU's residuals leave."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import re
 import numpy as np
 import pytest
 
+from vical.calib.report.figures import imu_residual_page
 from vical.calib.report.kalibr_results import kalibr_results_text
 from vical.calib.solve.pipeline import calibrate_joint
 from vical.calib.synthetic import make_recording
@@ -24,7 +26,7 @@ def solved(request):
     rec = make_recording(duration=10.0, imu_noise=DECLARED.scaled(request.param), pixel_sigma=0.3, seed=40003,
                          time_offset=0.01)  # fmt: skip
     result = calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", (640, 480), DECLARED)
-    return request.param, rec, result, kalibr_results_text({"cam0": result}, DECLARED, rec.target)
+    return request.param, rec, result, kalibr_results_text({"cam0": result}, rec.target)
 
 
 def stats(text: str, label: str) -> tuple[float, float, float]:
@@ -75,3 +77,27 @@ def test_the_verdict_names_an_imu_noisier_than_declared_and_what_to_do(solved):
     else:
         assert result.imu_noise_scale > 2.0
         assert "[check] IMU noise measured from its residuals" in verdicts and "vical-imu-noise" in verdicts
+
+
+def test_the_residual_page_bounds_each_axis_by_three_sigma_of_the_declared_noise(solved):
+    scale, rec, result, _ = solved
+    imu = result.imu_residuals
+    assert imu.noise == DECLARED and rec.truth.imu_noise == DECLARED.scaled(scale)  # declared, not as reweighted
+    page = imu_residual_page(result)
+    inside = []
+    sensors = [(imu.gyro_measured - imu.gyro_predicted, DECLARED.gyro_noise_density),
+               (imu.accel_measured - imu.accel_predicted, DECLARED.accel_noise_density)]  # fmt: skip
+    for k, ax in enumerate(page.axes):  # rows x, y, z; columns gyro, accel
+        residuals, density = sensors[k % 2]
+        residual = residuals[:, k // 2]
+        data, upper, lower = (line.get_ydata() for line in ax.lines[:3])
+        np.testing.assert_array_equal(data, residual)
+        np.testing.assert_allclose(upper, 3 * density / np.sqrt(imu.dt), rtol=1e-12)  # a mean of white noise over dt
+        np.testing.assert_allclose(lower, -upper, rtol=1e-12)
+        share = 100 * np.mean(np.abs(residual) <= upper)
+        assert f"{share:.1f} % within 3 sigma" in ax.get_title()
+        inside.append(share)
+    if scale == 1.0:  # as declared: every residual within (the fit absorbs part of the noise: 85 intervals, 0 out)
+        assert min(inside) >= 99.0, inside
+    else:  # five times noisier than declared: every axis shows it (measured 79-98 % within, 90 % on average)
+        assert max(inside) < 99.0 and np.mean(inside) < 95.0, inside

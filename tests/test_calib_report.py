@@ -57,9 +57,13 @@ def pdf_pages_and_text(path) -> tuple[int, str]:
     return pages, "\n".join(shown)
 
 
+GYRO_BIAS, ACCEL_BIAS = np.array([0.01, -0.02, 0.015]), np.array([0.1, -0.05, 0.08])  # [rad/s], [m/s^2]
+
+
 @pytest.fixture(scope="module")
 def joint():
-    rec = make_recording(duration=8.0, time_offset=0.012, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=21)
+    rec = make_recording(duration=8.0, time_offset=0.012, imu_noise=ImuNoise(), pixel_sigma=0.3, seed=21,
+                         gyro_bias=GYRO_BIAS, accel_bias=ACCEL_BIAS)  # fmt: skip
     return rec, calibrate_joint(rec.frames, rec.imu, rec.target, "radtan", SIZE, rec.truth.imu_noise)
 
 
@@ -70,8 +74,9 @@ def test_the_pdf_report_has_a_page_per_topic_with_the_parameters_first(joint, tm
     pages, text = pdf_pages_and_text(tmp_path / "report.pdf")
     titles = ["vical calibration report: joint", "Reprojection residuals", "Coverage: where the board's corners",
               "Frames: detected, used and not used", "IMU: mean rates per state interval", "IMU residuals: measured",
+              "IMU biases over time", "IMU sample spacing",
               "the camera's rotation rate (in the IMU frame) against the gyro", "Notes"]  # fmt: skip
-    assert pages == len(titles) == 8
+    assert pages == len(titles) == 10
     positions = [text.index(title) for title in titles]
     assert positions == sorted(positions)  # in this order
     first_page = " ".join(text[: positions[1]].split())  # spaces squashed
@@ -103,6 +108,46 @@ def test_the_time_offset_page_shows_the_camera_rates_matching_the_gyro_at_the_of
     rms_rate = np.sqrt(np.mean(np.sum(gyro**2, axis=1)))
     rms_difference = np.sqrt(np.mean(np.sum((trace.omega_camera - gyro) ** 2, axis=1)))
     assert rms_rate > 0.5 and rms_difference < 0.05 * rms_rate
+
+
+def test_the_bias_page_shows_each_states_biases_around_the_truth_within_the_declared_walk(joint):
+    rec, result = joint
+    imu, noise = result.imu_residuals, rec.truth.imu_noise
+    page = figures.imu_bias_page(result)
+    since = imu.t - imu.t[0]
+    sensors = [(imu.gyro_bias, GYRO_BIAS, noise.gyro_random_walk, "bg"),
+               (imu.accel_bias, ACCEL_BIAS, noise.accel_random_walk, "ba")]  # fmt: skip
+    for k, ax in enumerate(page.axes):  # rows x, y, z; columns gyro, accel
+        (estimate, truth, walk, name), i = sensors[k % 2], k // 2
+        line, upper, lower = (line.get_ydata() for line in ax.lines[:3])
+        np.testing.assert_array_equal(line, estimate[:, i])
+        np.testing.assert_allclose(upper - estimate[0, i], 3 * walk * np.sqrt(since), rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose(lower - estimate[0, i], -3 * walk * np.sqrt(since), rtol=1e-9, atol=1e-15)
+        # the truth recovered at every state: within 3 sigma of the first state's estimate and the walk since
+        sigma = result.sigma(f"{name}_{'xyz'[i]}")
+        assert np.all(np.abs(line - truth[i]) <= 3 * sigma + 3 * walk * np.sqrt(since)), (name, i)
+    assert imu.gyro_bias[0] == pytest.approx(result.gyro_bias, abs=1e-12)
+    assert imu.accel_bias[0] == pytest.approx(result.accel_bias, abs=1e-12)
+
+
+def _spacing_title(t: np.ndarray) -> str:
+    return figures.imu_spacing_page(t)._suptitle.get_text()
+
+
+def test_the_spacing_page_shows_the_solves_imu_samples_a_dropped_run_and_jitter(joint):
+    rec, result = joint
+    t = result.time_offset_trace.t_imu
+    np.testing.assert_allclose(np.diff(t), np.diff(rec.imu.t) / 1e9, atol=1e-9)  # the recording's samples, each
+    title = _spacing_title(t)
+    assert f"{len(t)} samples at 200 Hz (the median), jitter 0.0 us, gaps over 1.5 x the median: 0," in title, title
+    assert title.endswith("the longest spacing 5 ms"), title
+    title = _spacing_title(np.delete(t, np.arange(500, 520)))  # 20 samples lost: one gap of 21 periods
+    assert f"{len(t) - 20} samples at 200 Hz (the median), jitter 0.0 us, gaps over 1.5 x the median: 1," in title
+    assert title.endswith("the longest spacing 105 ms"), title
+    # stamps with white jitter of 100 us: their spacing spreads by sqrt(2) x 100 us
+    jittered = t + np.random.default_rng(0).normal(0.0, 100e-6, len(t))
+    jitter = float(re.search(r"jitter ([\d.]+) us", _spacing_title(jittered)).group(1))
+    assert jitter == pytest.approx(np.sqrt(2) * 100, rel=0.1)
 
 
 def test_weak_parameters_are_named_in_the_units_of_the_first_page_and_the_plots_are_labelled(tmp_path):

@@ -99,7 +99,7 @@ def _write_one_camera(
             write_frames_csv(tmp / "frames.csv", result.frame_log)
             if not args.no_report:
                 write_report(tmp, result, errors, failure)
-            write_kalibr_results(tmp, {"cam0": result}, rec, args, noise, failure)
+            write_kalibr_results(tmp, {"cam0": result}, rec, args, failure)
             exported = write_exports(tmp, args, {"cam0": result}, rec, given, noise, failure)
     except OSError as err:
         raise OutputError(cannot_write("--out", out, err)) from None
@@ -139,7 +139,7 @@ def _write_rig(
                     write_frames_csv(tmp / camera / FRAMES_CSV, result.frame_log)
                 if not args.no_report:
                     write_report(tmp / camera, result, errors[camera], failure)
-            write_kalibr_results(tmp, results, rec, args, noise, failure)
+            write_kalibr_results(tmp, results, rec, args, failure)
             exported = write_exports(tmp, args, results, rec, given, noise, failure)
     except OSError as err:
         raise OutputError(cannot_write("--out", out, err)) from None
@@ -148,13 +148,11 @@ def _write_rig(
     print(f"outputs written to {out}")
 
 
-def write_kalibr_results(
-    tmp: Path, results: dict[str, CalibrationResult], rec: Recording, args, noise: ImuNoise | None, failure: str | None
-) -> None:
+def write_kalibr_results(tmp: Path, results: dict[str, CalibrationResult], rec: Recording, args, failure: str | None):
     """``results-imucam.txt``, Kalibr's results layout with "Is this a good result", for a camera-IMU calibration
     that did not fail (results.txt says why one failed)."""
-    if failure is None and noise is not None and all(r.imu_residuals is not None for r in results.values()):
-        write_text_atomic(tmp / "results-imucam.txt", kalibr_results_text(results, noise, rec.target, args.imu_model))
+    if failure is None and all(r.imu_residuals is not None for r in results.values()):
+        write_text_atomic(tmp / "results-imucam.txt", kalibr_results_text(results, rec.target, args.imu_model))
 
 
 def write_exports(

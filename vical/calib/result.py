@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vical.calib.frame_log import FrameLog
+from vical.data.imu import ImuNoise
 from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel
 
@@ -91,6 +92,8 @@ class ImuResiduals:
         accel_measured, accel_predicted: (S, 3) [m/s^2] mean specific-force change expressed as the
             velocity change per second from the accelerometer and from the estimated states.
         dt: (S,) [s] each interval's length: white noise of density ``d`` gives its means a sigma ``d / sqrt(dt)``.
+        gyro_bias, accel_bias: (S, 3) [rad/s], [m/s^2] the estimated biases at each interval's first state.
+        noise: the IMU's noise as declared (not as the solve reweighted it): the report's bounds.
     """
 
     t: np.ndarray
@@ -99,6 +102,19 @@ class ImuResiduals:
     accel_measured: np.ndarray
     accel_predicted: np.ndarray
     dt: np.ndarray
+    gyro_bias: np.ndarray
+    accel_bias: np.ndarray
+    noise: ImuNoise
+
+    @property
+    def gyro_sigma(self) -> np.ndarray:
+        """(S,) [rad/s] each interval's mean-rate sigma per axis from the declared white noise."""
+        return self.noise.gyro_noise_density / np.sqrt(self.dt)
+
+    @property
+    def accel_sigma(self) -> np.ndarray:
+        """(S,) [m/s^2] each interval's mean specific-force sigma per axis from the declared white noise."""
+        return self.noise.accel_noise_density / np.sqrt(self.dt)
 
     @property
     def gyro_stats(self) -> ResidualStats:

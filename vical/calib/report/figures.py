@@ -217,26 +217,103 @@ def imu_page(result: CalibrationResult) -> Figure:
     return fig
 
 
+BOUND_SIGMAS = 3.0  # the residual and bias pages' bounds: 3 sigma of the declared noise, as Kalibr plots them
+
+
+def _within(values: np.ndarray, bound: np.ndarray) -> float:
+    """[%] of ``values`` within +-``bound``."""
+    return 100.0 * float(np.mean(np.abs(values) <= bound))
+
+
 def imu_residual_page(result: CalibrationResult) -> Figure:
-    """Gyro and accelerometer residuals (measured - predicted) per axis over time, with their rms."""
+    """Gyro and accelerometer residuals (measured - predicted) per axis over time, with their rms and the 3-sigma
+    bounds of each interval's mean from the declared white noise (an IMU noisier than declared leaves them)."""
     imu = result.imu_residuals
     fig = Figure(figsize=PAGE)
     axes = fig.subplots(3, 2, sharex=True)
     pairs = [
-        (imu.gyro_measured - imu.gyro_predicted, "gyro", "rad/s"),
-        (imu.accel_measured - imu.accel_predicted, "accel", "m/s^2"),
+        (imu.gyro_measured - imu.gyro_predicted, BOUND_SIGMAS * imu.gyro_sigma, "gyro", "rad/s"),
+        (imu.accel_measured - imu.accel_predicted, BOUND_SIGMAS * imu.accel_sigma, "accel", "m/s^2"),
     ]
-    for col, (res, name, unit) in enumerate(pairs):
+    for col, (res, bound, name, unit) in enumerate(pairs):
         for i, axis in enumerate("xyz"):
             ax = axes[i, col]
             ax.plot(imu.t, res[:, i], lw=0.7, color="tab:blue")
+            for sign in (1, -1):
+                ax.plot(imu.t, sign * bound, lw=0.8, ls="--", color="tab:red",
+                        label=f"+-{BOUND_SIGMAS:g} sigma, declared noise" if sign > 0 else None)  # fmt: skip
             ax.axhline(0.0, color="0.5", lw=0.5)
             rms = float(np.sqrt(np.mean(res[:, i] ** 2)))
-            ax.set_title(f"{name} {axis}: rms {rms:.3g} {unit}", fontsize=9)
+            inside = f"{_within(res[:, i], bound):.1f} % within {BOUND_SIGMAS:g} sigma"
+            ax.set_title(f"{name} {axis}: rms {rms:.3g} {unit}, {inside}", fontsize=9)
             ax.set_ylabel(f"[{unit}]")
         axes[-1, col].set_xlabel("time [s]")
+    axes[0, 0].legend(loc="upper right", fontsize=7)
     scale = "" if result.imu_noise_scale is None else f" (noise {result.imu_noise_scale:.2g} x the declared densities)"
     fig.suptitle(f"IMU residuals: measured - predicted per state interval{scale}", fontsize=13)
+    fig.tight_layout()
+    return fig
+
+
+def imu_bias_page(result: CalibrationResult) -> Figure:
+    """The estimated gyro and accelerometer biases over time (each state's), with the declared random walk's 3-sigma
+    envelope around the first: a bias that leaves it drifts faster than declared."""
+    imu = result.imu_residuals
+    since = imu.t - imu.t[0]
+    fig = Figure(figsize=PAGE)
+    axes = fig.subplots(3, 2, sharex=True)
+    pairs = [
+        (imu.gyro_bias, imu.noise.gyro_random_walk, "gyro bias", "rad/s"),
+        (imu.accel_bias, imu.noise.accel_random_walk, "accel bias", "m/s^2"),
+    ]
+    for col, (bias, walk, name, unit) in enumerate(pairs):
+        envelope = BOUND_SIGMAS * walk * np.sqrt(since)
+        for i, axis in enumerate("xyz"):
+            ax = axes[i, col]
+            ax.plot(imu.t, bias[:, i], lw=1.0, color="tab:blue", label="estimate")
+            label = f"+-{BOUND_SIGMAS:g} sigma of the declared random walk"
+            for sign in (1, -1):
+                ax.plot(imu.t, bias[0, i] + sign * envelope, lw=0.8, ls="--", color="tab:red",
+                        label=label if sign > 0 else None)  # fmt: skip
+            drift = bias[:, i] - bias[0, i]
+            ax.set_title(f"{name} {axis}: {bias[0, i]:.4g} at the start, moving over {np.ptp(bias[:, i]):.3g} {unit}, "
+                         f"{_within(drift, envelope):.0f} % within", fontsize=9)  # fmt: skip
+            ax.set_ylabel(f"[{unit}]")
+        axes[-1, col].set_xlabel("time [s]")
+    axes[0, 0].legend(loc="upper right", fontsize=7)
+    fig.suptitle("IMU biases over time: the estimate at each state", fontsize=13)
+    fig.tight_layout()
+    return fig
+
+
+GAP_FACTOR = 1.5  # an IMU sample spacing over this times the median is a gap (a dropped sample or more)
+
+
+def imu_spacing_page(t_imu: np.ndarray) -> Figure:
+    """The spacing of consecutive IMU samples over time and its histogram: dropped samples, jitter, a wrong rate."""
+    spacing = np.diff(np.asarray(t_imu, dtype=float)) * 1e3  # [ms]
+    median = float(np.median(spacing))
+    gaps = spacing > GAP_FACTOR * median
+    fig = Figure(figsize=PAGE)
+    over_time, histogram = fig.subplots(2, 1, height_ratios=[1.4, 1])
+    mid = 0.5 * (t_imu[1:] + t_imu[:-1])
+    over_time.plot(mid, spacing, ".", ms=1.5, color="tab:blue")
+    over_time.plot(mid[gaps], spacing[gaps], "o", ms=4, mfc="none", color="tab:red",
+                   label=f"gaps: over {GAP_FACTOR:g} x the median")  # fmt: skip
+    over_time.axhline(median, color="0.4", lw=0.8, ls="--", label=f"median {median:.3g} ms")
+    over_time.set_xlabel("time [s]")
+    over_time.set_ylabel("spacing [ms]")
+    over_time.legend(loc="upper right", fontsize=8)
+    over_time.ticklabel_format(axis="y", useOffset=False)  # stamps a few ns apart: the spacing itself, not +5
+    histogram.hist(spacing, bins=60, color="tab:blue")
+    histogram.ticklabel_format(axis="x", useOffset=False)
+    histogram.set_yscale("log")
+    histogram.set_xlabel("spacing [ms]")
+    histogram.set_ylabel("intervals")
+    jitter = float(np.std(spacing[~gaps])) * 1e3  # [us] the spacing's spread, gaps left out
+    fig.suptitle(f"IMU sample spacing: {len(t_imu)} samples at {1e3 / median:.4g} Hz (the median), jitter "
+                 f"{jitter:.1f} us, gaps over {GAP_FACTOR:g} x the median: {int(np.count_nonzero(gaps))}, the longest "
+                 f"spacing {spacing.max():.3g} ms", fontsize=11)  # fmt: skip
     fig.tight_layout()
     return fig
 

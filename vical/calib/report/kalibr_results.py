@@ -36,14 +36,13 @@ def _stats(norms: np.ndarray) -> str:
     return f"mean {norms.mean():.6g}, median {np.median(norms):.6g}, std: {norms.std():.6g}"
 
 
-def normalised_residuals(result: CalibrationResult, noise: ImuNoise) -> dict[str, np.ndarray]:
-    """The norms of the whitened reprojection, gyroscope and accelerometer residuals."""
+def normalised_residuals(result: CalibrationResult) -> dict[str, np.ndarray]:
+    """The norms of the reprojection, gyroscope and accelerometer residuals whitened by the declared noise."""
     imu = result.imu_residuals
-    root_dt = np.sqrt(imu.dt)[:, None]
     return {
         "reprojection": _norms(result.reprojection_residuals) / result.pixel_sigma,
-        "gyroscope": _norms((imu.gyro_measured - imu.gyro_predicted) * root_dt) / noise.gyro_noise_density,
-        "accelerometer": _norms((imu.accel_measured - imu.accel_predicted) * root_dt) / noise.accel_noise_density,
+        "gyroscope": _norms((imu.gyro_measured - imu.gyro_predicted) / imu.gyro_sigma[:, None]),
+        "accelerometer": _norms((imu.accel_measured - imu.accel_predicted) / imu.accel_sigma[:, None]),
     }
 
 
@@ -61,9 +60,9 @@ def _matrix(T: np.ndarray) -> list[str]:
     return ["[[" + rows[0] + "]", *(" [" + r + "]" for r in rows[1:-1]), " [" + rows[-1] + "]]"]
 
 
-def _residual_sections(results: dict[str, CalibrationResult], noise: ImuNoise) -> list[str]:
+def _residual_sections(results: dict[str, CalibrationResult]) -> list[str]:
     imu_result = next(iter(results.values()))  # the IMU's residuals: one IMU, the same in every camera's result
-    normalised = {n: normalised_residuals(r, noise) for n, r in results.items()}
+    normalised = {n: normalised_residuals(r) for n, r in results.items()}
     raw = {n: raw_residuals(r) for n, r in results.items()}
     lines = ["Normalized Residuals", "----------------------------"]
     lines += [f"Reprojection error ({n}):".ljust(36) + _stats(normalised[n]["reprojection"]) for n in results]
@@ -197,17 +196,16 @@ def good_result_lines(results: dict[str, CalibrationResult]) -> list[str]:
     return lines
 
 
-def kalibr_results_text(
-    results: dict[str, CalibrationResult], noise: ImuNoise, target: Target, imu_model: str = "calibrated"
-) -> str:
-    """``results-imucam.txt`` of a camera-IMU calibration of the cameras ``results`` (by name, cam0 first)."""
+def kalibr_results_text(results: dict[str, CalibrationResult], target: Target, imu_model: str = "calibrated") -> str:
+    """``results-imucam.txt`` of a camera-IMU calibration of the cameras ``results`` (by name, cam0 first), judged
+    by the IMU noise the calibration was given."""
     sections = [
         "Calibration results",
         "===================",
-        *_residual_sections(results, noise),
+        *_residual_sections(results),
         *_transform_sections(results),
         *_camera_configuration(results, target),
-        *_imu_configuration(noise, imu_model),
+        *_imu_configuration(next(iter(results.values())).imu_residuals.noise, imu_model),
         *good_result_lines(results),
     ]
     return "\n".join(sections) + "\n"

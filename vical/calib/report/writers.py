@@ -295,8 +295,8 @@ def _notes_lines(result: CalibrationResult) -> list[str]:
 
 def report_pages(result: CalibrationResult, errors: CalibrationErrors | None = None, failure: str | None = None):
     """The report's pages in order (``matplotlib.figure.Figure``): parameters, reprojection residuals, coverage,
-    frames, then for camera-IMU tasks the IMU's measured and predicted rates, its residuals and the time offset,
-    and last the notes."""
+    frames, then for camera-IMU tasks the IMU's measured and predicted rates, its residuals, its biases, its sample
+    spacing and the time offset, and last the notes."""
     from vical.calib.report import figures
 
     pages = figures.text_pages(f"vical calibration report: {result.task}", _summary_lines(result, errors, failure))
@@ -306,9 +306,9 @@ def report_pages(result: CalibrationResult, errors: CalibrationErrors | None = N
     if result.frame_log is not None:
         pages.append(figures.frames_page(result.frame_log))
     if result.imu_residuals is not None and len(result.imu_residuals.t):
-        pages += [figures.imu_page(result), figures.imu_residual_page(result)]
+        pages += [figures.imu_page(result), figures.imu_residual_page(result), figures.imu_bias_page(result)]
     if result.time_offset_trace is not None:
-        pages.append(figures.time_offset_page(result))
+        pages += [figures.imu_spacing_page(result.time_offset_trace.t_imu), figures.time_offset_page(result)]
     return pages + figures.text_pages("Notes", _notes_lines(result))
 
 

@@ -160,7 +160,8 @@ class ViProblem:
     t_imu: np.ndarray
     gyro: np.ndarray
     accel: np.ndarray
-    noise: ImuNoise
+    noise: ImuNoise  # the densities the IMU is weighted with (the declared ones, scaled as the solve reweights)
+    declared_noise: ImuNoise  # the densities as given: the report's bounds
     options: ViOptions
     t0_ns: int
     sigma_px: float = 1.0
@@ -243,6 +244,7 @@ def prepare_problem(
         gyro=gyro,
         accel=accel,
         noise=noise,
+        declared_noise=noise,
         options=options,
         t0_ns=t0_ns,
         sigma_px=float(sigma),

@@ -87,9 +87,10 @@ def _time_offset_trace(
     )
 
 
-def _imu_residuals(g: ViGraph, values: gtsam.Values, gravity_magnitude: float) -> ImuResiduals:
-    """Mean rates per IMU factor: measured (preintegrated, bias-corrected to first order) vs from the states."""
-    gravity = np.asarray(values.atUnit3(G_KEY).point3()) * gravity_magnitude
+def _imu_residuals(g: ViGraph, values: gtsam.Values, problem: ViProblem) -> ImuResiduals:
+    """Mean rates per IMU factor: measured (preintegrated, bias-corrected to first order) vs from the states, with
+    the biases of each interval's first state."""
+    gravity = np.asarray(values.atUnit3(G_KEY).point3()) * problem.options.gravity_magnitude
     rows = []
     for n, f, dt in g.imu_factors:
         pim = f.measurement(values) if isinstance(f, IntrinsicImuFactor) else f.preintegratedMeasurements()
@@ -103,9 +104,11 @@ def _imu_residuals(g: ViGraph, values: gtsam.Values, gravity_magnitude: float) -
         gyro_pred = gtsam.Rot3.Logmap(X0.rotation().between(X1.rotation())) / dt
         accel_meas = np.asarray(pim.deltaVij()) / dt - d_ba
         accel_pred = R0.T @ (v1 - v0 - gravity * dt) / dt
-        rows.append(np.concatenate([[g.state_times[n] + 0.5 * dt], gyro_meas, gyro_pred, accel_meas, accel_pred, [dt]]))
-    a = np.array(rows).reshape(-1, 14)
-    return ImuResiduals(a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13], a[:, 13])
+        rows.append(np.concatenate([[g.state_times[n] + 0.5 * dt], gyro_meas, gyro_pred, accel_meas, accel_pred, [dt],
+                                    bias.gyroscope(), bias.accelerometer()]))  # fmt: skip
+    a = np.array(rows).reshape(-1, 20)
+    return ImuResiduals(a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13], a[:, 13], a[:, 14:17], a[:, 17:20],
+                        problem.declared_noise)  # fmt: skip
 
 
 def first_camera_result(
@@ -155,7 +158,7 @@ def first_camera_result(
         reprojection=ResidualStats.of(residuals),
         reprojection_residuals=residuals,
         reprojection_frames=frame_index,
-        imu_residuals=_imu_residuals(g, values, problem.options.gravity_magnitude),
+        imu_residuals=_imu_residuals(g, values, problem),
         pixel_sigma=problem.sigma_px,
         iterations=iterations,
         solve_time=time.perf_counter() - start,
