@@ -213,6 +213,8 @@ def test_bad_settings_are_refused_by_key(tmp_path):
         check_settings(config(f"out={tmp_path / 'o'}", "guess.camchain=nope.yaml"))
     with pytest.raises(Exception, match="extrinsic task calibrates with known intrinsics"):
         check_settings(config(f"out={tmp_path / 'o'}", "task=extrinsic"))
+    with pytest.raises(ConfigError, match=r"^bag=ros3: choose false, ros1 \(true; the bag Kalibr reads\), db3 or mcap"):
+        check_settings(config(f"out={tmp_path / 'o'}", "bag=ros3"))
     # Guess files a reader refuses: one line naming the key, before anything connects (was a 32-line traceback).
     (tmp_path / "ds.yaml").write_text(
         "cam0:\n  camera_model: ds\n  intrinsics: [-0.2, 1.4, 300, 300, 320, 240]\n  distortion_model: none\n"
@@ -251,6 +253,20 @@ def test_collect_records_and_calibrates_with_a_random_policy(tmp_path):
     assert (out / "calibration" / "camchain-imucam.yaml").is_file()
     summary = (out / "collect.yaml").read_text()
     assert "steps: 12" in summary and "done: the step limit" in summary
+
+
+def test_a_collection_is_also_written_as_a_ros2_bag(tmp_path):
+    out = tmp_path / "out"
+    cfg = config(f"out={out}", "policy=random_moving", "limits.max_steps=3", "calibrate=false", "seed=5", "bag=mcap")
+    assert collect(cfg) == 0
+    target = read_target_yaml(out / "target.yaml")
+    rec = read_euroc(out / "recording", target)
+    assert not (out / "recording.bag").exists() and (out / "recording_ros2" / "metadata.yaml").is_file()
+    bag = read_bag(out / "recording_ros2", target)
+    np.testing.assert_array_equal(bag.frames.t, rec.frames.t)
+    np.testing.assert_array_equal(bag.frames.images, rec.frames.images)
+    np.testing.assert_array_equal(bag.imu.t, rec.imu.t)
+    np.testing.assert_array_equal(bag.imu.accel, rec.imu.accel)
 
 
 @pytest.mark.integration

@@ -50,7 +50,7 @@ from vical.env.reachability import check_horizon
 from vical.env.settings import MdpConfig
 from vical.evaluation.harness import instantiate_policy, policy_mdp
 from vical.io.atomic import replace_directory, unused_sibling
-from vical.io.bag import write_bag
+from vical.io.bag import BAG_FORMATS, write_bag
 from vical.io.errors import FormatError, RecordingWriteError
 from vical.io.euroc import EurocStreamWriter, read_euroc
 from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_imu_yaml, write_target_yaml
@@ -88,6 +88,22 @@ class CollectSettings(CollectionOutput):
 
     align: Alignment
     limits: Limits
+    bag: str | None  # the bag the recording is also written as (``BAG_FORMATS``), or None
+
+
+# Where ``bag=`` writes each kind of bag in ``out``: Kalibr's ROS1 file, or a ROS 2 bag's folder.
+BAG_NAMES = {kind: "recording.bag" if kind == "ros1" else "recording_ros2" for kind in BAG_FORMATS}
+
+
+def _bag_format(value: Any) -> str | None:
+    """``bag=``'s format: false/null (none), true (ros1, Kalibr's), ros1, db3 or mcap; ``ConfigError`` otherwise."""
+    if value is None or value is False:
+        return None
+    if value is True:
+        return "ros1"
+    if value not in BAG_NAMES:
+        raise ConfigError(f"bag={value}: choose false, ros1 (true; the bag Kalibr reads), db3 or mcap (a ROS 2 bag)")
+    return str(value)
 
 
 def _existing_file(value: Any, key: str) -> Path | None:
@@ -119,7 +135,7 @@ def check_settings(cfg: DictConfig) -> CollectSettings:
         limits = from_mapping(Limits, plain(cfg.limits), "limits")
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    return CollectSettings(align=align, limits=limits, **check_output(cfg))
+    return CollectSettings(align=align, limits=limits, bag=_bag_format(cfg.get("bag")), **check_output(cfg))
 
 
 def check_output(cfg: DictConfig) -> dict[str, Any]:
@@ -281,7 +297,7 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
     except FAULTS as err:
         with contextlib.suppress(OSError):  # a full disk (the fault, maybe) takes neither; the line below says why
             write_summary(s, None, f"stopped: {err}", writer.frames)
-            _write_bag(cfg, s)
+            _write_bag(s)
         report_error(APP, f"stopped: {err}; the arm is stopped and {recording_kept(s, writer)}")
         return None
     except KeyboardInterrupt as err:  # Ctrl-C, or SIGTERM (vical.apps.entry)
@@ -292,21 +308,21 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
     write_summary(s, result, f"done: {result.reason}", writer.frames)
     if result.out_of_reach is not None:  # the reason, whatever the progress lines: what to change, and where
         print(f"{APP}: {result.reason} (collect.yaml: out_of_reach)", file=sys.stderr)
-    _write_bag(cfg, s)
+    _write_bag(s)
     return result
 
 
-def _write_bag(cfg: DictConfig, s: CollectSettings) -> None:
-    """``bag=true``: the recording also as a ROS1 bag with Kalibr's topics (written whole, from the EuRoC folder,
-    which is what survives a kill)."""
-    if not cfg.get("bag") or not (s.out / "recording" / "mav0" / "cam0" / "data.csv").is_file():
+def _write_bag(s: CollectSettings) -> None:
+    """``bag=``: the recording also as a bag with Kalibr's topics, ROS1 or ROS 2 (``BAG_NAMES``; written whole,
+    from the EuRoC folder, which is what survives a kill)."""
+    if s.bag is None or not (s.out / "recording" / "mav0" / "cam0" / "data.csv").is_file():
         return
     try:
         recording = read_euroc(s.out / "recording", read_target_yaml(s.out / "target.yaml"))
     except FormatError as err:  # no frame recorded yet
         print(f"{APP}: no bag written: {err}", file=sys.stderr)
         return
-    print(f"bag written to {write_bag(recording, s.out / 'recording.bag')}")
+    print(f"bag written to {write_bag(recording, s.out / BAG_NAMES[s.bag], bag_format=s.bag)}")
 
 
 def _calibrate_args(s: CollectionOutput) -> list[str]:
