@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -14,7 +15,9 @@ from vical.calib.report.figures import imu_residual_page
 from vical.calib.report.kalibr_results import kalibr_results_text
 from vical.calib.solve.pipeline import calibrate_joint
 from vical.calib.synthetic import make_recording
-from vical.data import ImuNoise
+from vical.data import ImuNoise, Target
+from vical.geometry import make_transform, so3_exp
+from vical.io.kalibr import kalibr_intrinsics
 
 DECLARED = ImuNoise()
 HEADINGS = ["Calibration results", "Normalized Residuals", "Residuals", "Transformation (cam0):",
@@ -101,3 +104,46 @@ def test_the_residual_page_bounds_each_axis_by_three_sigma_of_the_declared_noise
         assert min(inside) >= 99.0, inside
     else:  # five times noisier than declared: every axis shows it (measured 79-98 % within, 90 % on average)
         assert max(inside) < 99.0 and np.mean(inside) < 95.0, inside
+
+
+def field(text: str, label: str, after: str = "") -> str:
+    """The value of the first line ``label ...`` after the line ``after`` (as a script that reads Kalibr's file)."""
+    lines = text.splitlines()
+    start = lines.index(after) if after else 0
+    return next(line.strip().removeprefix(label).strip() for line in lines[start:] if line.strip().startswith(label))
+
+
+def test_the_configuration_names_each_field_as_kalibr_does(solved):
+    _, rec, result, text = solved
+    k = kalibr_intrinsics(result.camera)
+    assert field(text, "Camera model:", "cam0") == "pinhole" == k["camera_model"]
+    assert [float(v) for v in field(text, "Focal length:", "cam0").strip("[]").split(",")] == k["intrinsics"][:2]
+    assert [float(v) for v in field(text, "Principal point:", "cam0").strip("[]").split(",")] == k["intrinsics"][2:]
+    assert field(text, "Distortion model:", "cam0") == "radtan"
+    assert [float(v) for v in field(text, "Distortion coefficients:", "cam0").strip("[]").split(",")] == list(
+        result.camera.dist
+    )
+    board = rec.target  # a checkerboard: its rows and columns of inner corners and their spacing
+    assert field(text, "Type:", "cam0") == "checkerboard"
+    assert field(text, "Count:", "  Rows") == str(board.rows) and field(text, "Count:", "  Cols") == str(board.cols)
+    assert field(text, "Distance:", "  Rows") == f"{board.row_spacing!r} [m]"
+    assert field(text, "Update rate:", "IMU configuration") == "200.0"
+    assert "Baselines:" not in text  # one camera
+
+
+def test_a_rigs_baselines_are_each_camera_to_the_next_with_their_length(solved):
+    _, _, result, _ = solved
+    T_cam1_cam0 = make_transform(so3_exp(np.array([0.0, 0.02, -0.01])), np.array([-0.11, 0.003, 0.001]))
+    cam1 = replace(result, T_cam_imu=T_cam1_cam0 @ result.T_cam_imu)
+    text = kalibr_results_text({"cam0": result, "cam1": cam1}, Target.aprilgrid(6, 6, 0.088, 0.3))
+    lines = text.splitlines()
+    assert lines[lines.index("Baselines:") + 1] == "----------"
+    np.testing.assert_allclose(matrix_after(text, "Baseline (cam0 to cam1): "), T_cam1_cam0, atol=1e-8)
+    assert float(field(text, "baseline norm:").removesuffix("[m]")) == pytest.approx(0.11004, abs=1e-5)
+    assert lines.index("Baselines:") > lines.index("timeshift cam1 to imu0: [s] (t_imu = t_cam + shift)")
+    assert lines.index("Baselines:") < lines.index("Gravity vector in target coords: [m/s^2]")
+    # an aprilgrid under each camera: its tags, their size and the gap between them
+    for camera in ("cam0", "cam1"):
+        assert field(text, "Type:", camera) == "aprilgrid"
+        assert field(text, "Rows:", camera) == "6" and field(text, "Size:", camera) == "0.088 [m]"
+        assert field(text, "Spacing", camera) == f"{0.088 * 0.3!r} [m]"

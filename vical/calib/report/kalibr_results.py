@@ -1,8 +1,9 @@
 """``results-imucam.txt``: a camera-IMU calibration in the layout of Kalibr's results file, and whether it is good.
 
 The sections are Kalibr's: the normalised residuals (each residual whitened by its declared noise, the norm of the
-whitened vector), the raw ones, each camera's two transforms, time shift and the gravity in the target frame, the
-cameras' and the IMU's configuration. vical's IMU residuals are per IMU factor, the mean rate over each interval
+whitened vector), the raw ones, each camera's two transforms and time shift, a rig's baselines, the gravity in the
+target frame, the cameras' (with the target's) and the IMU's configuration, each field named as Kalibr's
+``printResultTxt`` names it. vical's IMU residuals are per IMU factor, the mean rate over each interval
 between two camera states, where Kalibr's are per IMU sample: a mean over ``dt`` has the sigma ``density /
 sqrt(dt)``, so the normalised values read the same, and the raw ones are smaller than Kalibr's by the square root
 of the samples in an interval. "Is this a good result" judges the reprojection rms, the IMU by the noise its residuals
@@ -14,6 +15,7 @@ residuals, so their normalised mean is ~1.25, a whitened 2-vector's, by construc
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -100,31 +102,63 @@ def _transform_sections(results: dict[str, CalibrationResult]) -> list[str]:
             f"timeshift {name} to imu0: [s] (t_imu = t_cam + shift)",
             repr(float(result.time_offset)),
         ]
+    lines += _baseline_section(results)
     gravity = next(iter(results.values())).gravity_target
     if gravity is not None:
         lines += ["", "Gravity vector in target coords: [m/s^2]", "[" + " ".join(f"{g:.8f}" for g in gravity) + "]"]
     return lines
 
 
+# The projection coefficients Kalibr's intrinsics put before [fu, fv, pu, pv], by camera model, as its report
+# names them (Kalibr names omni's and ds's; eucm's follow them).
+PROJECTION_NAMES = {"pinhole": (), "omni": ("Omni xi",), "ds": ("DS xi", "DS alpha"),
+                    "eucm": ("EUCM alpha", "EUCM beta")}  # fmt: skip
+
+
+def _camera_lines(result: CalibrationResult) -> list[str]:
+    """A camera's configuration as Kalibr prints it: model, focal length, principal point, the projection's own
+    coefficients, distortion."""
+    k = kalibr_intrinsics(result.camera)
+    names = PROJECTION_NAMES[k["camera_model"]]
+    coeffs, (fu, fv, pu, pv) = k["intrinsics"][: len(names)], k["intrinsics"][len(names) :]
+    return [
+        f"  Camera model: {k['camera_model']}",
+        f"  Focal length: [{fu!r}, {fv!r}]",
+        f"  Principal point: [{pu!r}, {pv!r}]",
+        *(f"  {name}: {value!r}" for name, value in zip(names, coeffs, strict=True)),
+        f"  Distortion model: {k['distortion_model']}",
+        f"  Distortion coefficients: [{', '.join(repr(v) for v in k['distortion_coeffs'])}]",
+    ]
+
+
+def _target_lines(target: Target) -> list[str]:
+    """The target as Kalibr prints it under each camera."""
+    rows, cols, row_spacing = int(target.rows), int(target.cols), float(target.row_spacing)
+    if target.kind == "aprilgrid":
+        gap = row_spacing * float(target.tag_spacing)
+        return ["  Type: aprilgrid", "  Tags: ", f"    Rows: {rows}", f"    Cols: {cols}",
+                f"    Size: {row_spacing!r} [m]", f"    Spacing {gap!r} [m]"]  # fmt: skip
+    return ["  Type: checkerboard", "  Rows", f"    Count: {rows}", f"    Distance: {row_spacing!r} [m]",
+            "  Cols", f"    Count: {cols}", f"    Distance: {float(target.col_spacing)!r} [m]"]  # fmt: skip
+
+
+def _baseline_section(results: dict[str, CalibrationResult]) -> list[str]:
+    """A rig's baselines as Kalibr prints them: each camera to the next (``T_cn_cnm1``) and its length."""
+    names = list(results)
+    if len(names) < 2:
+        return []
+    lines = ["", "Baselines:", "----------"]
+    for before, name in itertools.pairwise(names):
+        T = results[name].T_cam_imu @ invert_transform(results[before].T_cam_imu)
+        norm = float(np.linalg.norm(T[:3, 3]))
+        lines += [f"Baseline ({before} to {name}): ", *_matrix(T), f"baseline norm:  {norm!r} [m]", ""]
+    return lines
+
+
 def _camera_configuration(results: dict[str, CalibrationResult], target: Target) -> list[str]:
     lines = ["", "", "Calibration configuration", "========================="]
     for name, result in results.items():
-        k = kalibr_intrinsics(result.camera)
-        lines += [
-            "",
-            name,
-            "-----",
-            f"  Camera model: {k['camera_model']}",
-            f"  Intrinsics: {[round(v, 6) for v in k['intrinsics']]}",
-            f"  Distortion model: {k['distortion_model']}",
-            f"  Distortion coefficients: {[round(v, 8) for v in k['distortion_coeffs']]}",
-            f"  Resolution: [{result.camera.width}, {result.camera.height}]",
-        ]
-    lines += ["", "Target", "------", f"  Type: {target.kind}", f"  Rows: {target.rows}", f"  Cols: {target.cols}"]
-    if target.kind == "aprilgrid":
-        lines += [f"  Size: {target.row_spacing} [m]", f"  Spacing {target.row_spacing * target.tag_spacing:.6g} [m]"]
-    else:
-        lines += [f"  Row spacing: {target.row_spacing} [m]", f"  Col spacing: {target.col_spacing} [m]"]
+        lines += ["", name, "-----", *_camera_lines(result), *_target_lines(target)]
     return lines
 
 
