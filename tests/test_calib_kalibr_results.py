@@ -16,7 +16,7 @@ from vical.calib.report.kalibr_results import kalibr_results_text
 from vical.calib.solve.pipeline import calibrate_joint
 from vical.calib.synthetic import make_recording
 from vical.data import ImuNoise, Target
-from vical.geometry import make_transform, so3_exp
+from vical.geometry import CameraModel, make_transform, so3_exp
 from vical.io.kalibr import kalibr_intrinsics
 
 DECLARED = ImuNoise()
@@ -147,3 +147,15 @@ def test_a_rigs_baselines_are_each_camera_to_the_next_with_their_length(solved):
         assert field(text, "Type:", camera) == "aprilgrid"
         assert field(text, "Rows:", camera) == "6" and field(text, "Size:", camera) == "0.088 [m]"
         assert field(text, "Spacing", camera) == f"{0.088 * 0.3!r} [m]"
+
+
+@pytest.mark.parametrize(("model", "coeffs", "names"), [("ds", [-0.2, 0.6], ["DS xi:", "DS alpha:"]),
+                                                        ("eucm", [0.6, 1.1], ["EUCM alpha:", "EUCM beta:"]),
+                                                        ("omni", [0.9], ["Omni xi:"])])  # fmt: skip
+def test_a_wide_angle_camera_names_its_projections_coefficients_as_kalibr_does(solved, model, coeffs, names):
+    _, rec, result, _ = solved
+    camera = CameraModel.from_hfov(2.6, distortion=model, dist=np.array(coeffs))
+    text = kalibr_results_text({"cam0": replace(result, camera=camera)}, rec.target)
+    assert field(text, "Camera model:", "cam0") == model and field(text, "Distortion model:", "cam0") == "none"
+    assert [float(field(text, name, "cam0")) for name in names] == coeffs
+    assert [float(v) for v in field(text, "Focal length:", "cam0").strip("[]").split(",")] == [camera.fx, camera.fy]
