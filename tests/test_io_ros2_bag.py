@@ -5,6 +5,7 @@ rosbag2's tables), and a bag that MCAP's own ROS 2 writer made is read by vical.
 
 from __future__ import annotations
 
+import re
 import sqlite3
 from pathlib import Path
 
@@ -16,8 +17,10 @@ from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as McapRos2Writer
 from test_io_samples import make_recording
 
+from vical.apps.calibrate import main as calibrate_main
 from vical.io.bag import IMAGE_TYPE, IMU_TYPE, bag_generation, bag_image_topics, read_bag, write_bag
 from vical.io.errors import BagFormatError, FormatError
+from vical.io.kalibr import write_target_yaml
 from vical.io.sources import detect_source, open_imu
 
 STORAGES = ["db3", "mcap"]
@@ -196,6 +199,20 @@ def test_a_truncated_or_foreign_ros2_bag_is_named_in_one_line(rec, storage, tmp_
     assert bag_generation(other) is None
     with pytest.raises(BagFormatError, match=r"neither a ROS1 bag .* nor a ROS 2 bag"):
         read_bag(other, rec.target)
+
+
+def test_a_ros2_bag_in_a_storage_vical_does_not_read_is_named_with_how_to_convert_it(rec, tmp_path, capsys):
+    bag = write_bag(rec, tmp_path / "bag", bag_format="db3")
+    metadata = bag / "metadata.yaml"
+    metadata.write_text(metadata.read_text().replace("storage_identifier: sqlite3", "storage_identifier: zstd_db"))
+    line = f"{bag}: its storage 'zstd_db' is not one vical reads (sqlite3 or mcap); convert the bag to one"
+    with pytest.raises(BagFormatError, match=f"^{re.escape(line)}, e.g. with ros2 bag convert"):
+        read_bag(bag, rec.target)
+    write_target_yaml(tmp_path / "target.yaml", rec.target)
+    capsys.readouterr()  # the writer's progress
+    assert calibrate_main([str(bag), "--target", str(tmp_path / "target.yaml"), "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err.strip().startswith(f"vical-calibrate: error: {line}")
+    assert not (tmp_path / "out").exists()
 
 
 def test_writing_a_ros2_bag_refuses_an_existing_one_replaces_it_whole_with_overwrite(rec, tmp_path):

@@ -25,6 +25,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+import yaml
 from rosbags import rosbag1, rosbag2
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
@@ -87,12 +88,32 @@ def bag_generation(path: str | os.PathLike) -> str | None:
     return ROS2 if magic is not None and _starts_with(path, magic) else None
 
 
+def _check_storage(path: Path) -> None:
+    """A ROS 2 bag folder whose ``metadata.yaml`` names a storage rosbags does not read (neither SQLite nor MCAP): a
+    ``BagFormatError`` that says so and how to convert it (before rosbags asks for an issue report)."""
+    if not path.is_dir():
+        return
+    try:
+        info = yaml.safe_load((path / "metadata.yaml").read_text(errors="replace"))["rosbag2_bagfile_information"]
+        storage = info["storage_identifier"]
+    except (yaml.YAMLError, KeyError, TypeError):
+        return  # rosbags' reader names what is wrong with the metadata
+    known = [plugin.name.lower() for plugin in BAG_FORMATS.values() if plugin is not None]  # metadata.yaml's names
+    if storage not in known:
+        raise BagFormatError(
+            f"{path}: its storage {storage!r} is not one vical reads ({' or '.join(known)}); convert the bag to one, "
+            "e.g. with ros2 bag convert, or rosbags-convert --dst-storage mcap"
+        )
+
+
 @contextlib.contextmanager
 def _opened(path: Path) -> Iterator[tuple[Any, Callable[[bytes, str], Any]]]:
     """The bag at ``path``, open, and the deserialiser of its messages; its faults as ``BagFormatError``."""
     generation = bag_generation(path)
     if generation is None:
         raise BagFormatError(f"{path} is {NOT_A_BAG}" if path.exists() else f"{path} does not exist")
+    if generation == ROS2:
+        _check_storage(path)
     try:
         if generation == ROS1:
             with rosbag1.Reader(path) as reader:
