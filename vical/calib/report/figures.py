@@ -195,26 +195,34 @@ def frames_page(log: FrameLog) -> Figure:
     return fig
 
 
+def _per_axis_page(title: str, columns: list[tuple], draw) -> Figure:
+    """A page of 3 x 2 axes over time: a column per sensor (``columns``: gyro, accel), a row per axis; ``draw(ax,
+    column, i, axis)`` draws one; the first axes' legend, the title."""
+    fig = Figure(figsize=PAGE)
+    axes = fig.subplots(3, 2, sharex=True)
+    for col, column in enumerate(columns):
+        for i, axis in enumerate("xyz"):
+            draw(axes[i, col], column, i, axis)
+        axes[-1, col].set_xlabel("time [s]")
+    axes[0, 0].legend(loc="upper right", fontsize=7)
+    fig.suptitle(title, fontsize=13)
+    fig.tight_layout()
+    return fig
+
+
 def imu_page(result: CalibrationResult) -> Figure:
     """Mean gyro rates and specific forces per state interval: measured against predicted from the states."""
     imu = result.imu_residuals
-    fig = Figure(figsize=PAGE)
-    axes = fig.subplots(3, 2, sharex=True)
-    pairs = [
-        (imu.gyro_measured, imu.gyro_predicted, "gyro", "rad/s"),
-        (imu.accel_measured, imu.accel_predicted, "accel", "m/s^2"),
-    ]
-    for col, (meas, pred, name, unit) in enumerate(pairs):
-        for i, axis in enumerate("xyz"):
-            ax = axes[i, col]
-            ax.plot(imu.t, meas[:, i], lw=0.8, label="measured")
-            ax.plot(imu.t, pred[:, i], lw=0.8, ls="--", label="predicted from the states")
-            ax.set_ylabel(f"{name} {axis} [{unit}]")
-        axes[-1, col].set_xlabel("time [s]")
-    axes[0, 0].legend(loc="upper right", fontsize=7)
-    fig.suptitle("IMU: mean rates per state interval, measured vs predicted", fontsize=13)
-    fig.tight_layout()
-    return fig
+
+    def draw(ax, column, i, axis):
+        meas, pred, name, unit = column
+        ax.plot(imu.t, meas[:, i], lw=0.8, label="measured")
+        ax.plot(imu.t, pred[:, i], lw=0.8, ls="--", label="predicted from the states")
+        ax.set_ylabel(f"{name} {axis} [{unit}]")
+
+    columns = [(imu.gyro_measured, imu.gyro_predicted, "gyro", "rad/s"),
+               (imu.accel_measured, imu.accel_predicted, "accel", "m/s^2")]  # fmt: skip
+    return _per_axis_page("IMU: mean rates per state interval, measured vs predicted", columns, draw)
 
 
 BOUND_SIGMAS = 3.0  # the residual and bias pages' bounds: 3 sigma of the declared noise, as Kalibr plots them
@@ -225,65 +233,54 @@ def _within(values: np.ndarray, bound: np.ndarray) -> float:
     return 100.0 * float(np.mean(np.abs(values) <= bound))
 
 
+def _bounds(ax, t: np.ndarray, centre, bound: np.ndarray, label: str) -> None:
+    """Dashed red lines at ``centre`` +- ``bound``, the upper one labelled."""
+    for sign in (1, -1):
+        ax.plot(t, centre + sign * bound, lw=0.8, ls="--", color="tab:red", label=label if sign > 0 else None)
+
+
 def imu_residual_page(result: CalibrationResult) -> Figure:
     """Gyro and accelerometer residuals (measured - predicted) per axis over time, with their rms and the 3-sigma
     bounds of each interval's mean from the declared white noise (an IMU noisier than declared leaves them)."""
     imu = result.imu_residuals
-    fig = Figure(figsize=PAGE)
-    axes = fig.subplots(3, 2, sharex=True)
-    pairs = [
+
+    def draw(ax, column, i, axis):
+        res, bound, name, unit = column
+        ax.plot(imu.t, res[:, i], lw=0.7, color="tab:blue")
+        _bounds(ax, imu.t, 0.0, bound, f"+-{BOUND_SIGMAS:g} sigma, declared noise")
+        ax.axhline(0.0, color="0.5", lw=0.5)
+        rms = float(np.sqrt(np.mean(res[:, i] ** 2)))
+        inside = f"{_within(res[:, i], bound):.1f} % within {BOUND_SIGMAS:g} sigma"
+        ax.set_title(f"{name} {axis}: rms {rms:.3g} {unit}, {inside}", fontsize=9)
+        ax.set_ylabel(f"[{unit}]")
+
+    columns = [
         (imu.gyro_measured - imu.gyro_predicted, BOUND_SIGMAS * imu.gyro_sigma, "gyro", "rad/s"),
         (imu.accel_measured - imu.accel_predicted, BOUND_SIGMAS * imu.accel_sigma, "accel", "m/s^2"),
     ]
-    for col, (res, bound, name, unit) in enumerate(pairs):
-        for i, axis in enumerate("xyz"):
-            ax = axes[i, col]
-            ax.plot(imu.t, res[:, i], lw=0.7, color="tab:blue")
-            for sign in (1, -1):
-                ax.plot(imu.t, sign * bound, lw=0.8, ls="--", color="tab:red",
-                        label=f"+-{BOUND_SIGMAS:g} sigma, declared noise" if sign > 0 else None)  # fmt: skip
-            ax.axhline(0.0, color="0.5", lw=0.5)
-            rms = float(np.sqrt(np.mean(res[:, i] ** 2)))
-            inside = f"{_within(res[:, i], bound):.1f} % within {BOUND_SIGMAS:g} sigma"
-            ax.set_title(f"{name} {axis}: rms {rms:.3g} {unit}, {inside}", fontsize=9)
-            ax.set_ylabel(f"[{unit}]")
-        axes[-1, col].set_xlabel("time [s]")
-    axes[0, 0].legend(loc="upper right", fontsize=7)
     scale = "" if result.imu_noise_scale is None else f" (noise {result.imu_noise_scale:.2g} x the declared densities)"
-    fig.suptitle(f"IMU residuals: measured - predicted per state interval{scale}", fontsize=13)
-    fig.tight_layout()
-    return fig
+    return _per_axis_page(f"IMU residuals: measured - predicted per state interval{scale}", columns, draw)
 
 
 def imu_bias_page(result: CalibrationResult) -> Figure:
     """The estimated gyro and accelerometer biases over time (each state's), with the declared random walk's 3-sigma
     envelope around the first: a bias that leaves it drifts faster than declared."""
     imu = result.imu_residuals
-    since = imu.t - imu.t[0]
-    fig = Figure(figsize=PAGE)
-    axes = fig.subplots(3, 2, sharex=True)
-    pairs = [
-        (imu.gyro_bias, imu.noise.gyro_random_walk, "gyro bias", "rad/s"),
-        (imu.accel_bias, imu.noise.accel_random_walk, "accel bias", "m/s^2"),
-    ]
-    for col, (bias, walk, name, unit) in enumerate(pairs):
-        envelope = BOUND_SIGMAS * walk * np.sqrt(since)
-        for i, axis in enumerate("xyz"):
-            ax = axes[i, col]
-            ax.plot(imu.t, bias[:, i], lw=1.0, color="tab:blue", label="estimate")
-            label = f"+-{BOUND_SIGMAS:g} sigma of the declared random walk"
-            for sign in (1, -1):
-                ax.plot(imu.t, bias[0, i] + sign * envelope, lw=0.8, ls="--", color="tab:red",
-                        label=label if sign > 0 else None)  # fmt: skip
-            drift = bias[:, i] - bias[0, i]
-            ax.set_title(f"{name} {axis}: {bias[0, i]:.4g} at the start, moving over {np.ptp(bias[:, i]):.3g} {unit}, "
-                         f"{_within(drift, envelope):.0f} % within", fontsize=9)  # fmt: skip
-            ax.set_ylabel(f"[{unit}]")
-        axes[-1, col].set_xlabel("time [s]")
-    axes[0, 0].legend(loc="upper right", fontsize=7)
-    fig.suptitle("IMU biases over time: the estimate at each state", fontsize=13)
-    fig.tight_layout()
-    return fig
+    root_since = np.sqrt(imu.t - imu.t[0])
+
+    def draw(ax, column, i, axis):
+        bias, walk, name, unit = column
+        envelope = BOUND_SIGMAS * walk * root_since
+        ax.plot(imu.t, bias[:, i], lw=1.0, color="tab:blue", label="estimate")
+        _bounds(ax, imu.t, bias[0, i], envelope, f"+-{BOUND_SIGMAS:g} sigma of the declared random walk")
+        within = _within(bias[:, i] - bias[0, i], envelope)
+        ax.set_title(f"{name} {axis}: {bias[0, i]:.4g} at the start, moving over {np.ptp(bias[:, i]):.3g} {unit}, "
+                     f"{within:.0f} % within", fontsize=9)  # fmt: skip
+        ax.set_ylabel(f"[{unit}]")
+
+    columns = [(imu.gyro_bias, imu.noise.gyro_random_walk, "gyro bias", "rad/s"),
+               (imu.accel_bias, imu.noise.accel_random_walk, "accel bias", "m/s^2")]  # fmt: skip
+    return _per_axis_page("IMU biases over time: the estimate at each state", columns, draw)
 
 
 GAP_FACTOR = 1.5  # an IMU sample spacing over this times the median is a gap (a dropped sample or more)
