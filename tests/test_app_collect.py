@@ -239,17 +239,23 @@ def test_bad_settings_are_refused_by_key(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+def _assert_bag_holds_the_recording(bag_path, out) -> None:
+    """The bag at ``bag_path`` holds the collection's EuRoC recording: its stamps, images and IMU samples exactly."""
+    target = read_target_yaml(out / "target.yaml")
+    rec, bag = read_euroc(out / "recording", target), read_bag(bag_path, target)
+    np.testing.assert_array_equal(bag.frames.t, rec.frames.t)
+    np.testing.assert_array_equal(bag.frames.images, rec.frames.images)
+    np.testing.assert_array_equal(bag.imu.t, rec.imu.t)
+    np.testing.assert_array_equal(bag.imu.accel, rec.imu.accel)
+
+
 def test_collect_records_and_calibrates_with_a_random_policy(tmp_path):
     out = tmp_path / "out"
     cfg = config(f"out={out}", "policy=random_moving", "limits.max_steps=12", "report=false", "seed=5", "bag=true")
     assert collect(cfg) == 0
-    target = read_target_yaml(out / "target.yaml")
-    rec = read_euroc(out / "recording", target)
+    rec = read_euroc(out / "recording", read_target_yaml(out / "target.yaml"))
     assert len(rec.frames) > 100 and len(rec.imu) > 1000
-    bag = read_bag(out / "recording.bag", target)  # the same data in Kalibr's bag
-    np.testing.assert_array_equal(bag.frames.t, rec.frames.t)
-    np.testing.assert_array_equal(bag.frames.images, rec.frames.images)
-    np.testing.assert_array_equal(bag.imu.t, rec.imu.t)
+    _assert_bag_holds_the_recording(out / "recording.bag", out)  # the same data in Kalibr's bag
     assert (out / "calibration" / "camchain-imucam.yaml").is_file()
     summary = (out / "collect.yaml").read_text()
     assert "steps: 12" in summary and "done: the step limit" in summary
@@ -259,14 +265,8 @@ def test_a_collection_is_also_written_as_a_ros2_bag(tmp_path):
     out = tmp_path / "out"
     cfg = config(f"out={out}", "policy=random_moving", "limits.max_steps=3", "calibrate=false", "seed=5", "bag=mcap")
     assert collect(cfg) == 0
-    target = read_target_yaml(out / "target.yaml")
-    rec = read_euroc(out / "recording", target)
     assert not (out / "recording.bag").exists() and (out / "recording_ros2" / "metadata.yaml").is_file()
-    bag = read_bag(out / "recording_ros2", target)
-    np.testing.assert_array_equal(bag.frames.t, rec.frames.t)
-    np.testing.assert_array_equal(bag.frames.images, rec.frames.images)
-    np.testing.assert_array_equal(bag.imu.t, rec.imu.t)
-    np.testing.assert_array_equal(bag.imu.accel, rec.imu.accel)
+    _assert_bag_holds_the_recording(out / "recording_ros2", out)
 
 
 @pytest.mark.integration
