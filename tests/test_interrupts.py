@@ -7,6 +7,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,8 @@ import pytest
 from imu_streams import static_stream
 from stopped_collections import default_sigint
 
+from vical.apps.cli import write_faults_in_one_line
+from vical.apps.entry import Terminated, interrupts_as_raised
 from vical.calib.synthetic import make_recording
 from vical.data import ImuNoise
 from vical.io.csvfiles import write_imu_csv
@@ -305,3 +308,28 @@ def test_an_interrupt_while_the_command_is_imported_ends_in_one_line(kind, statu
     code, lines = run_entry(entry_point("calibrate"), ["vical-calibrate", "rec", "--out", "out"], monkeypatch, capsys)
     assert code == status
     assert lines == [as_it_was("vical-calibrate", "--out out", name)]
+
+
+def _interrupted_while_a_lock_is_released(interrupt: KeyboardInterrupt) -> None:
+    """What a signal does in the middle of ``threading.Condition``'s release (CI: the guide's ``ThreadPoolExecutor.
+    submit`` at a decision): the lock is released, the interrupt is raised, and the ``with`` then releases it again."""
+    lock = threading.Lock()
+    with lock:
+        lock.release()
+        raise interrupt
+
+
+@pytest.mark.parametrize("interrupt", [KeyboardInterrupt(), Terminated()], ids=["Ctrl-C", "SIGTERM"])
+def test_an_error_an_interrupt_caused_is_raised_as_the_interrupt(interrupt):
+    with pytest.raises(RuntimeError, match="release unlocked lock") as raised:  # the fault, as it comes
+        _interrupted_while_a_lock_is_released(interrupt)
+    assert raised.value.__context__ is interrupt
+    with pytest.raises(KeyboardInterrupt) as raised, interrupts_as_raised():
+        _interrupted_while_a_lock_is_released(interrupt)
+    assert raised.value is interrupt  # Terminated stays SIGTERM's: status 143
+    # the commands' writers' block lets it through as the interrupt (Hydra prints any other error as a traceback)
+    with pytest.raises(KeyboardInterrupt) as raised, write_faults_in_one_line("vical-record", "out=", "x"):
+        _interrupted_while_a_lock_is_released(interrupt)
+    assert raised.value is interrupt
+    with pytest.raises(RuntimeError, match="not an interrupt"), interrupts_as_raised():
+        raise RuntimeError("not an interrupt")

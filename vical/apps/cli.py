@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from vical.apps import entry
-from vical.apps.entry import is_write_fault
+from vical.apps.entry import interrupts_as_raised, is_write_fault
 from vical.config_checks import ConfigError, SettingError
 from vical.signals import interrupts_held
 
@@ -94,9 +94,11 @@ AS_IT_WAS = entry.AS_IT_WAS.format(where="it")
 def write_faults_in_one_line(app: str, flag: str, out: str | os.PathLike,
                              kept: str | Callable[[], str] = AS_IT_WAS) -> Iterator[None]:  # fmt: skip
     """A full disk or a read-only folder met inside the block ends ``app`` with one line (what it could not write,
-    what it kept, what to do) and status 2; raised as ``SystemExit``, which Hydra's job runner lets through."""
+    what it kept, what to do) and status 2; raised as ``SystemExit``, which Hydra's job runner lets through. An error
+    that an interrupt caused is raised as the interrupt (``interrupts_as_raised``), which it lets through too."""
     try:
-        yield
+        with interrupts_as_raised():
+            yield
     except OSError as err:
         if not is_write_fault(err):
             raise

@@ -37,7 +37,7 @@ from vical.apps.cli import (
     task_begins,
     write_faults_in_one_line,
 )
-from vical.apps.entry import interrupted_by, interrupted_status
+from vical.apps.entry import interrupted_by, interrupted_status, interrupts_as_raised
 from vical.apps.entry import run as run_command
 from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask
@@ -292,7 +292,7 @@ def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: Mdp
     collector = build_collector(cfg, s, rig, policy, mdp, nominal, s.out / "recording")
     writer = collector.stream.writer
     try:
-        with rig.arm, rig.sensor:
+        with interrupts_as_raised(), rig.arm, rig.sensor:  # a lock an interrupt left half released: the interrupt
             result = collector.run(int(cfg.seed))
     except FAULTS as err:
         with contextlib.suppress(OSError):  # a full disk (the fault, maybe) takes neither; the line below says why

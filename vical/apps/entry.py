@@ -25,13 +25,14 @@ This module imports nothing heavy: the command's module is imported inside the h
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import importlib
 import os
 import signal
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from itertools import pairwise
 from typing import NoReturn
 
@@ -151,6 +152,20 @@ def _interrupt_within(err: BaseException) -> KeyboardInterrupt | None:
         seen.add(id(err))
         err = err.__cause__ or err.__context__
     return None
+
+
+@contextlib.contextmanager
+def interrupts_as_raised() -> Iterator[None]:
+    """An error that an interrupt caused inside the block is raised as that interrupt: a signal's exception raised in
+    the middle of a lock's release (a ``ThreadPoolExecutor.submit`` in the guide's decisions) leaves the lock half
+    released, and its ``with`` then raises ``RuntimeError: release unlocked lock`` in the interrupt's place, which
+    Hydra would print as a traceback with status 1."""
+    try:
+        yield
+    except Exception as err:
+        if (interrupt := _interrupt_within(err)) is None:
+            raise
+        raise interrupt from None
 
 
 def run(app: str, target: str | Callable[[], int | None]) -> NoReturn:

@@ -47,7 +47,7 @@ from vical.apps.collect import (
     recording_kept,
     write_summary,
 )
-from vical.apps.entry import interrupted_by, interrupted_status
+from vical.apps.entry import interrupted_by, interrupted_status, interrupts_as_raised
 from vical.apps.entry import run as run_command
 from vical.collection.guide import Arrival, Guide, Start
 from vical.collection.page import GuidePage, PageSettings
@@ -205,7 +205,8 @@ def _run(cfg, s: GuideSettings, holder, policy, mdp, nominal, page) -> CollectRe
     guide_ = build_guide(cfg, s, holder, policy, mdp, nominal, page, s.out / "recording")
     writer = guide_.stream.writer
     try:
-        result = guide_.run(int(cfg.seed))
+        with interrupts_as_raised():  # a lock an interrupt left half released: the interrupt
+            result = guide_.run(int(cfg.seed))
     except FAULTS as err:
         with contextlib.suppress(OSError):  # a full disk (the fault, maybe) takes no summary; the line below says why
             write_summary(s, None, f"stopped: {err}", writer.frames)
