@@ -285,6 +285,12 @@ CASES = [
         "+experiment=train_practitioner_from_planner train.demonstrator._target_=vical.nope",
         "train.demonstrator: vical.nope could not be built",
     ),
+    Case("vical-train", "+experiment=train_distill_rate_planner train.distill.beta=2", "train.distill.beta must be"),
+    Case(
+        "vical-train",
+        "+experiment=train_distill_rate_planner train.demonstrator._target_=vical.nope",
+        "train.demonstrator: vical.nope could not be built",
+    ),
     Case("vical-train", "agent=nope", "Could not find 'agent/nope'; the available options in 'agent' are: sac"),
     Case("vical-train", "agent.nope=1", "Could not override 'agent.nope'"),
     Case("vical-train", "run_dir={inputs}/a_file", "run_dir={inputs}/a_file is a file"),

@@ -45,3 +45,29 @@ def rate_planner_policy(
     (``max_steps``; None: the run's)."""
     settings, reward = planner_settings(run_dir, workspace, max_steps)
     return RatePlannerPolicy(settings, reward, samples, name)
+
+
+class TaskRatePlanners:
+    """The rate planner as a teacher on an env that draws its task per episode (``env.task_mix``): each episode
+    planned with its task's number of candidates, as ``conf/policy/rate_planner.yaml`` gives them (the intrinsic
+    task's predictions carry no IMU, so it affords 4x the candidates in less time)."""
+
+    def __init__(self, samples: int, intrinsic_samples: int) -> None:
+        name = "information-rate planner (the env's settings)"
+        self.planners = {"intrinsic": RatePlannerPolicy({}, None, intrinsic_samples, name)}
+        self.default = RatePlannerPolicy({}, None, samples, name)
+        self.current = self.default
+
+    def reset(self, env: CalibrationEnv, rng: np.random.Generator) -> None:
+        self.current = self.planners.get(env.task.name, self.default)
+        self.current.reset(env, rng)
+
+    def act(self, obs: np.ndarray, env: CalibrationEnv) -> np.ndarray:
+        return self.current.act(obs, env)
+
+
+def rate_planner_demonstrator(samples: int = DEFAULT_SAMPLES, intrinsic_samples: int = 48) -> TaskRatePlanners:
+    """The factory a run's ``train.demonstrator`` names: the rate planner on the trained env's own information state,
+    at its own settings, with ``samples`` random candidates a step (``intrinsic_samples`` in the intrinsic task): the
+    teacher a distilled policy learns from (``conf/experiment/train_distill_rate_planner.yaml``)."""
+    return TaskRatePlanners(samples, intrinsic_samples)

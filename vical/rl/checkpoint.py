@@ -97,7 +97,7 @@ def flatten(cfg: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
 
 
 # Settings added after runs were written with the value those runs had: such a run still resumes.
-ADDED_KEYS = {"train.num_envs": 1, "train.policy_lag": 4}
+ADDED_KEYS = {"train.num_envs": 1, "train.policy_lag": 4, "train.distill": None}
 
 
 def config_differences(saved: Mapping[str, Any], current: Mapping[str, Any]) -> list[str]:

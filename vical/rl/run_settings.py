@@ -13,6 +13,7 @@ from typing import Any
 
 from vical.config_checks import from_mapping, require, require_range
 from vical.parallel import MAX_WORKERS, ParallelConfig
+from vical.rl.distill import DistillConfig
 from vical.rl.sac import SACConfig
 
 # A policy version is kept per round of lag (a copy of the policy network): beyond this, memory grows for no gain
@@ -42,9 +43,13 @@ class TrainConfig:
     # collection policy): the warm-up's actions are its instead of uniform random ones (``vical.rl.demonstrations``)
     demonstrator: dict | None = None
     clone_updates: int = 0  # updates after the warm-up that clone the demonstrations before SAC's own updates
+    # DAgger rounds before SAC's steps, the demonstrator labelling the policy's own states (``vical.rl.distill``);
+    # with it ``total_steps`` counts SAC's steps after the distillation (0: the distilled policy is the agent)
+    distill: DistillConfig | None = None
 
     def __post_init__(self) -> None:
-        for name in ("total_steps", "updates_per_step", "buffer_size", "eval_episodes", "eval_max_episode_steps"):
+        _require_int("train.total_steps", self.total_steps, 0 if self.distill is not None else 1)
+        for name in ("updates_per_step", "buffer_size", "eval_episodes", "eval_max_episode_steps"):
             _require_int(f"train.{name}", getattr(self, name), 1)
         n = self.num_envs
         ok = isinstance(n, int) and not isinstance(n, bool) and 1 <= n <= MAX_WORKERS
@@ -70,6 +75,11 @@ class TrainConfig:
             require(self.warmup_steps >= 1, "train.warmup_steps",
                     "at least 1 with train.clone_updates (the demonstrations are the warm-up's steps)",
                     self.warmup_steps)  # fmt: skip
+        if self.distill is not None:
+            teacher = "null without train.demonstrator (the teacher whose actions it learns)"
+            require(self.demonstrator is not None, "train.distill", teacher, asdict(self.distill))
+            itself = "0 with train.distill (the distillation fits the teacher's labels itself)"
+            require(not self.clone_updates, "train.clone_updates", itself, self.clone_updates)
 
 
 def _require_int(key: str, value: Any, low: int) -> None:

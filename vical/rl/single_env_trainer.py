@@ -10,6 +10,7 @@ The env is built from the ``env`` config (``vical.rl.envs.make_env``). Exact res
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Mapping
@@ -24,6 +25,7 @@ from omegaconf import DictConfig, OmegaConf
 from tqdm import tqdm
 
 from vical.io.atomic import write_text_atomic
+from vical.parallel import imap_ordered
 from vical.rl.buffer import ReplayBuffer, transition_discount
 from vical.rl.checkpoint import (
     AGENT,
@@ -36,6 +38,7 @@ from vical.rl.checkpoint import (
     save_checkpoint,
 )
 from vical.rl.demonstrations import demonstrated_action, make_demonstrator, start_demonstration
+from vical.rl.distill import fit_policy, rollout, rollout_jobs
 from vical.rl.envs import BoxActions, make_env
 from vical.rl.logger import TrainLogger
 from vical.rl.run_settings import parse_settings
@@ -90,6 +93,8 @@ class Trainer:
         self.agent = SAC(obs_dim, act_dim, s.agent, seed=s.seed)
         self.buffer = ReplayBuffer(s.train.buffer_size, obs_dim, act_dim)
         self.step = self.episode = self.updates = self.last_checkpoint_step = 0
+        self.distill_round = 0  # DAgger rounds done (train.distill), and every label they gathered
+        self.distill_obs, self.distill_labels = np.zeros((0, obs_dim), np.float32), np.zeros((0, act_dim), np.float32)
         self.last_eval_return: float | None = None
         self.resumed_from: int | None = None
         self._stats: dict[str, torch.Tensor] = {}
@@ -113,6 +118,7 @@ class Trainer:
         self._log_start()
         if self.step == 0:
             self.logger.hyperparameters(flatten(self.config))
+        self._distill()
         self._clock = (time.perf_counter(), self.step, self.updates)
         bar = tqdm(total=t.total_steps, initial=self.step, disable=not t.progress, desc="vical-train", unit="step")
         episode = self._start_episode()
@@ -141,6 +147,52 @@ class Trainer:
             self.last_eval_return,
             self.resumed_from,
         )
+
+    def _distill(self) -> None:
+        """The DAgger rounds of ``train.distill`` not yet done (``vical.rl.distill``), a checkpoint after each: their
+        transitions join the buffer, the policy is fitted to every label so far. SAC's steps follow."""
+        s = self.settings
+        d = s.train.distill
+        if d is None or self.distill_round >= d.rounds:
+            return
+        parallel = dataclasses.replace(s.parallel, workers=s.train.num_envs)
+        while self.distill_round < d.rounds:
+            beta = d.beta**self.distill_round
+            seeds = self.rng.integers(2**31 - 1, size=d.episodes)
+            jobs = rollout_jobs(s.env, s.train.demonstrator, self.agent.policy, seeds, beta)
+            bar = tqdm(total=len(jobs), disable=not s.train.progress, unit="episode",
+                       desc=f"vical-train: distillation round {self.distill_round + 1}/{d.rounds}")  # fmt: skip
+            rollouts = []
+            for r in imap_ordered(rollout, jobs, parallel):
+                rollouts.append(r)
+                bar.update(1)
+            bar.close()
+            for r in rollouts:
+                for k in range(len(r.obs)):
+                    self.buffer.add(r.obs[k], r.actions[k], float(r.rewards[k]), r.next_obs[k], bool(r.terminated[k]),
+                                    float(r.discounts[k]))  # fmt: skip
+            self.distill_obs = np.concatenate([self.distill_obs, *(r.obs for r in rollouts)])
+            self.distill_labels = np.concatenate([self.distill_labels, *(r.labels for r in rollouts)])
+            loss = fit_policy(self.agent.policy, self.distill_obs, self.distill_labels, d, self.agent.generator)
+            self.distill_round += 1
+            self._log_distillation(rollouts, beta, loss)
+            save_checkpoint(self._state(), s.run_dir / CHECKPOINT)
+
+    def _log_distillation(self, rollouts: list, beta: float, loss: float) -> None:
+        values = {
+            "distill/beta": beta,
+            "distill/labels": float(len(self.distill_labels)),
+            "distill/fit_loss": loss,
+            "distill/episodic_return": float(np.mean([r.total_reward for r in rollouts])),
+            "distill/episodic_length": float(np.mean([len(r.obs) for r in rollouts])),
+            "distill/terminated": float(np.mean([r.reached for r in rollouts])),
+        }
+        self.logger.scalars(values, self.distill_round)
+        log.info("distillation round %d of %d: %d labels, fit loss %.4f; episodes (teacher's action with probability "
+                 "%.3g): return %.1f, %.1f steps, %.0f %% terminated", self.distill_round,
+                 self.settings.train.distill.rounds, values["distill/labels"], loss, beta,
+                 values["distill/episodic_return"], values["distill/episodic_length"],
+                 100 * values["distill/terminated"])  # fmt: skip
 
     def _start_episode(self) -> Episode:
         seed = int(self.rng.integers(2**31 - 1))
@@ -273,6 +325,11 @@ class Trainer:
             "agent": self.agent.training_state(),
             "buffer": self.buffer.state_dict(),
             "rng": self.rng.bit_generator.state,
+            "distill": {
+                "round": self.distill_round,
+                "obs": torch.from_numpy(self.distill_obs),
+                "labels": torch.from_numpy(self.distill_labels),
+            },  # tensors: read back with weights_only
             "counters": {
                 "step": self.step,
                 "episode": self.episode,
@@ -287,6 +344,10 @@ class Trainer:
         self.agent.load_training_state(state["agent"])
         self.buffer.load_state_dict(state["buffer"])
         self.rng.bit_generator.state = state["rng"]
+        if "distill" in state:  # a run's checkpoint since train.distill (none before: no rounds done)
+            distill = state["distill"]
+            self.distill_round = int(distill["round"])
+            self.distill_obs, self.distill_labels = distill["obs"].numpy(), distill["labels"].numpy()
         counters = state["counters"]
         self.step, self.episode = counters["step"], counters["episode"]
         self.updates, self.last_checkpoint_step = counters["updates"], counters["last_checkpoint_step"]

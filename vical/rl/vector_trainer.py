@@ -158,6 +158,7 @@ class VectorTrainer(Trainer):
         self._log_start()
         if self.step == 0:
             self.logger.hyperparameters(flatten(self.config))
+        self._distill()
         self._clock = (time.perf_counter(), self.step, self.updates)
         self.bar = tqdm(total=t.total_steps, initial=self.step, disable=not t.progress, desc="vical-train", unit="step")
         try:
