@@ -48,7 +48,11 @@ def spreads(run: Path, seeds: list[int], steps: int, every: int, draws: int) -> 
     out = {}
     for task, values in within.items():
         every_label = np.concatenate(labels[task])
-        out[task] = (float(np.mean(values)), float(((every_label - every_label.mean(0)) ** 2).sum(1).mean()), len(values))
+        out[task] = (
+            float(np.mean(values)),
+            float(((every_label - every_label.mean(0)) ** 2).sum(1).mean()),
+            len(values),
+        )
     return out
 
 
