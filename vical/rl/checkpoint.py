@@ -102,7 +102,10 @@ ADDED_KEYS = {"train.num_envs": 1, "train.policy_lag": 4, "train.distill": None}
 
 def config_differences(saved: Mapping[str, Any], current: Mapping[str, Any]) -> list[str]:
     """Lines ``key: saved -> current`` for every setting outside ``RESUMABLE_KEYS`` that differs."""
-    old, new = {**ADDED_KEYS, **flatten(saved)}, flatten(current)
+    saved_flat, new = flatten(saved), flatten(current)
+    # an added key's value fills in only where the run has neither the key nor settings under it (train.distill.*)
+    added = {k: v for k, v in ADDED_KEYS.items() if not any(s == k or s.startswith(k + ".") for s in saved_flat)}
+    old = {**added, **saved_flat}
     keys = sorted((set(old) | set(new)) - RESUMABLE_KEYS)
     missing = "<absent>"
     return [
