@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from vical.config_checks import require, require_range
+from vical.rl.buffer import transition_discount
 from vical.rl.demonstrations import Demonstrator, demonstrated_action, make_demonstrator, start_demonstration
 from vical.rl.envs import BoxActions, make_env
 from vical.rl.networks import TanhGaussianPolicy
@@ -116,7 +117,7 @@ def rollout(job: RolloutJob) -> Rollout:
         next_obs, reward, terminated, truncated, info = env.step(env_action)
         step = {"obs": obs, "labels": label, "actions": action, "rewards": float(reward),
                 "next_obs": np.asarray(next_obs, np.float32).ravel(), "terminated": bool(terminated),
-                "discounts": float(info.get("discount", 1.0))}  # fmt: skip
+                "discounts": transition_discount(info)}  # fmt: skip
         for key, value in step.items():
             steps[key].append(value)
         obs = next_obs

@@ -153,7 +153,7 @@ class Trainer:
         transitions join the buffer, the policy is fitted to every label so far. SAC's steps follow."""
         s = self.settings
         d = s.train.distill
-        if d is None or self.distill_round >= d.rounds:
+        if d is None:
             return
         parallel = dataclasses.replace(s.parallel, workers=s.train.num_envs)
         while self.distill_round < d.rounds:
