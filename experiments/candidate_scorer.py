@@ -1,0 +1,242 @@
+"""Can a network rank the information-rate planner's candidates without its lookahead? The offline test of a learned
+policy that chooses among moves (a scorer's argmax) instead of averaging them (a distilled mean action).
+
+Runs the rate planner (``rate_planner_demonstrator``'s candidates per task) on the env of a vical-train run (``--run``:
+its config.yaml) on tuning sensors, and keeps at every planned step the policy's observation, the coverage state's
+terms, every candidate (the policy's [-1, 1] units), the excess the lookahead predicts it sheds and its predicted
+recording time (motion + rest). Fits a network ``f(state, action)`` to the candidates of the training sensors
+and ranks the candidates of the other sensors by it, in two forms:
+
+- ``rate``: ``f`` fitted to the planner's own score (excess shed per second), centred per state (its argmax needs
+  the ranking within a state, not the state's level), and argmax of ``f``;
+- ``shed / time``: ``f`` fitted to the excess shed and argmax of ``f / time``: the time of a move is known without
+  the lookahead (the step timing's motion fit), so the network learns only what the views add;
+
+each with the policy's observation alone and with the coverage state's 18 terms beside it (what views the data
+holds, which the 13-number information state does not say). Prints per task the regret of each choice (the best
+candidate's rate less the chosen one's, over the state's range of rates: 0 is the planner's choice, a uniform random
+candidate's is the mean), on the test sensors and on the states it was fitted to (can it even fit them?).
+
+    .venv/bin/python experiments/candidate_scorer.py --run runs/distill_ctx_s0 --workers 2 --cache decisions.pkl
+"""
+
+from __future__ import annotations
+
+import argparse
+import pickle
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from omegaconf import OmegaConf
+
+from vical.env.lookahead import Lookahead
+from vical.io.atomic import atomic_file
+from vical.parallel import ParallelConfig, imap_ordered
+from vical.policies.greedy import candidate_actions, predicted_moves
+from vical.policies.rate_planner import TaskRatePlanners
+from vical.rl.envs import BoxActions, make_env
+
+_ENVS: dict[str, tuple] = {}
+
+
+@dataclass
+class Decision:
+    """One planned step: the state's features, its candidates and what the lookahead predicts of each."""
+
+    task: str
+    obs: np.ndarray  # the policy's observation
+    coverage: np.ndarray  # (18,) the coverage state's terms
+    actions: np.ndarray  # (C, 6) the candidates, policy units
+    shed: np.ndarray  # (C,) predicted e-folds of excess shed
+    seconds: np.ndarray  # (C,) predicted recording time: motion + rest
+
+    @property
+    def rate(self) -> np.ndarray:
+        return self.shed / self.seconds
+
+
+class RecordingPlanners(TaskRatePlanners):
+    """The rate planner per task, keeping every planned step's candidates and predictions."""
+
+    def __init__(self) -> None:
+        super().__init__(12, 48)
+        self.decisions: list[Decision] = []
+        for planner in (*self.planners.values(), self.default):
+            planner._best = self._recorder(planner)
+
+    def _recorder(self, planner):
+        def best(lookahead: Lookahead, env) -> np.ndarray:
+            candidates = candidate_actions(env.action_space.high, planner.samples, planner._rng)
+            actions, predictions = predicted_moves(lookahead, candidates)
+            if not actions:
+                return planner._toward_start(env)
+            box = BoxActions(env.action_space)
+            self.decisions.append(
+                Decision(
+                    env.task.name,
+                    env.state.information_observation(
+                        env.state.ratios, env.pose_offset, env.steps / env.config.max_steps
+                    ),
+                    env.state.coverage.vector().astype(np.float32),
+                    np.array([box.to_policy(a) for a in actions]),
+                    np.array([env.state.excess - p.excess for p in predictions]),
+                    np.array([p.motion_time + env.step_timing.rest for p in predictions]),
+                )
+            )
+            return actions[int(np.argmax(planner.scores(predictions, env)))]
+
+        return best
+
+
+def episode(job: tuple[str, int]) -> list[Decision]:
+    """The planner's decisions over the episode of sensor ``seed`` on the env of the run config at ``path``."""
+    path, seed = job
+    if path not in _ENVS:
+        _ENVS[path] = (make_env(OmegaConf.to_container(OmegaConf.load(path).env, resolve=True)), RecordingPlanners())
+    env, planners = _ENVS[path]
+    planners.decisions = []
+    obs, _ = env.reset(seed=seed)
+    planners.reset(env.unwrapped, np.random.default_rng(seed))
+    while True:
+        obs, _, terminated, truncated, _ = env.step(planners.act(obs, env.unwrapped))
+        if terminated or truncated:
+            return planners.decisions
+
+
+class Scorer(torch.nn.Module):
+    """``f(state, action)``: two hidden layers of 256."""
+
+    def __init__(self, state_dim: int) -> None:
+        super().__init__()
+        self.mlp = torch.nn.Sequential(
+            torch.nn.Linear(state_dim + 6, 256), torch.nn.ReLU(), torch.nn.Linear(256, 256), torch.nn.ReLU(),
+            torch.nn.Linear(256, 1),
+        )  # fmt: skip
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.mlp(x).squeeze(-1)
+
+
+def flat(decisions: list[Decision], coverage: bool, target: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Every candidate's input (state, action), its target and its state's index."""
+    rows, targets, index = [], [], []
+    for k, d in enumerate(decisions):
+        state = np.r_[d.obs, d.coverage] if coverage else d.obs
+        rows.append(np.hstack([np.tile(state, (len(d.actions), 1)), d.actions]))
+        targets.append(d.rate if target == "rate" else d.shed)
+        index.append(np.full(len(d.actions), k))
+    return (
+        torch.tensor(np.vstack(rows), dtype=torch.float32),
+        torch.tensor(np.concatenate(targets), dtype=torch.float32),
+        torch.tensor(np.concatenate(index)),
+    )
+
+
+def centred(values: torch.Tensor, index: torch.Tensor, states: int) -> torch.Tensor:
+    """``values`` less the mean of their state's."""
+    sums = torch.zeros(states).index_add_(0, index, values)
+    counts = torch.zeros(states).index_add_(0, index, torch.ones_like(values))
+    return values - (sums / counts)[index]
+
+
+def fit(decisions: list[Decision], coverage: bool, target: str, epochs: int, seed: int) -> Scorer:
+    """The scorer fitted to the candidates of ``decisions``, each state's spread of the target as its unit; a rate
+    centred per state (its argmax needs the ranking within a state), the excess shed as it is (divided by the
+    time, its level matters)."""
+    x, y, index = flat(decisions, coverage, target)
+    states = len(decisions)
+    spread = torch.zeros(states).index_add_(0, index, centred(y, index, states) ** 2) / torch.bincount(index)
+    unit = spread.sqrt().clamp_min(1e-6)[index]
+    if target == "rate":
+        y = centred(y, index, states)
+    torch.manual_seed(seed)
+    scorer = Scorer(x.shape[1] - 6)
+    optimiser = torch.optim.Adam(scorer.parameters(), lr=1e-3)
+    generator = np.random.default_rng(seed)
+    for _ in range(epochs):
+        for batch in np.array_split(generator.permutation(states), max(states // 32, 1)):
+            rows = torch.isin(index, torch.as_tensor(batch))
+            predicted = scorer(x[rows])
+            if target == "rate":
+                remap = torch.full((states,), -1, dtype=torch.long)
+                remap[torch.as_tensor(batch)] = torch.arange(len(batch))
+                predicted = centred(predicted, remap[index[rows]], len(batch))
+            optimiser.zero_grad()
+            (((predicted - y[rows]) / unit[rows]) ** 2).mean().backward()
+            optimiser.step()
+    return scorer
+
+
+def regret(scorer: Scorer | str, decisions: list[Decision], coverage: bool, target: str) -> float:
+    """The mean over states of the best candidate's rate less the chosen one's, over the state's range of rates, of
+    the scorer's choice, or of ``"random"`` (the mean over the candidates: a uniform random choice) or
+    ``"quickest"`` (the shortest move)."""
+    regrets = []
+    for d in decisions:
+        rate = d.rate
+        if scorer == "random":
+            chosen = float(rate.mean())
+        elif scorer == "quickest":
+            chosen = float(rate[np.argmin(d.seconds)])
+        else:
+            x, _, _ = flat([d], coverage, target)
+            with torch.no_grad():
+                f = scorer(x).numpy()
+            chosen = float(rate[np.argmax(f / d.seconds if target == "shed" else f)])
+        span = rate.max() - rate.min()
+        regrets.append((rate.max() - chosen) / span if span > 0 else 0.0)
+    return float(np.mean(regrets))
+
+
+def of(decisions: list[Decision], task: str) -> list[Decision]:
+    return [d for d in decisions if d.task == task]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--run", type=Path, required=True, help="a vical-train run directory (its env)")
+    parser.add_argument("--train-seeds", type=int, nargs=2, default=[41100, 41140], help="sensor seeds [from, to)")
+    parser.add_argument("--test-seeds", type=int, nargs=2, default=[41140, 41160], help="sensor seeds [from, to)")
+    parser.add_argument("--epochs", type=int, default=40)
+    parser.add_argument("--workers", type=int, default=1)
+    parser.add_argument("--cache", type=Path, help="the planner's decisions kept here, and read from here if it exists")
+    args = parser.parse_args()
+    config = args.run / "config.yaml"
+    if not config.is_file():
+        parser.error(f"--run {args.run}: no config.yaml there; name a vical-train run directory")
+    seeds = [*range(*args.train_seeds), *range(*args.test_seeds)]
+    if args.cache is not None and args.cache.is_file():
+        episodes = pickle.loads(args.cache.read_bytes())
+    else:
+        episodes = list(imap_ordered(episode, [(str(config), s) for s in seeds], ParallelConfig(workers=args.workers)))
+        if args.cache is not None:
+            with atomic_file(args.cache) as tmp:
+                tmp.write_bytes(pickle.dumps(episodes))
+    cut = len(range(*args.train_seeds))
+    train = [d for e in episodes[:cut] for d in e]
+    test = [d for e in episodes[cut:] for d in e]
+    tasks = sorted({d.task for d in test})
+    print(f"{len(train)} planned steps to fit ({cut} sensors), {len(test)} to test ({len(seeds) - cut} sensors)\n")
+    print("| choice | " + " | ".join(f"{t}: regret (test) | {t}: regret (fitted states)" for t in tasks) + " |")
+    print("|---|" + "---|---|" * len(tasks))
+
+    def row(name: str, scorer: Scorer | str, coverage: bool = False, target: str = "rate") -> None:
+        cells = [
+            (regret(scorer, of(test, t), coverage, target), regret(scorer, of(train, t), coverage, target))
+            for t in tasks
+        ]
+        print(f"| {name} | " + " | ".join(f"{a:.2f} | {b:.2f}" for a, b in cells) + " |", flush=True)
+
+    row("a random candidate", "random")
+    row("the quickest candidate", "quickest")
+    for coverage in (False, True):
+        for target in ("rate", "shed"):
+            state = "observation + coverage" if coverage else "observation"
+            scorer = fit(train, coverage, target, args.epochs, seed=0)
+            row(f"{'rate' if target == 'rate' else 'shed / time'}, {state}", scorer, coverage, target)
+
+
+if __name__ == "__main__":
+    main()
