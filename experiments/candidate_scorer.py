@@ -3,19 +3,21 @@ policy that chooses among moves (a scorer's argmax) instead of averaging them (a
 
 Runs the rate planner (``rate_planner_demonstrator``'s candidates per task) on the env of a vical-train run (``--run``:
 its config.yaml) on tuning sensors, and keeps at every planned step the policy's observation, the coverage state's
-terms, every candidate (the policy's [-1, 1] units), the excess the lookahead predicts it sheds and its predicted
-recording time (motion + rest). Fits a network ``f(state, action)`` to the candidates of the training sensors
-and ranks the candidates of the other sensors by it, in two forms:
+terms and the covariance's, every candidate (the policy's [-1, 1] units), the excess the lookahead predicts it sheds
+and its predicted recording time (motion + rest). Fits a network ``f(state, action)`` to the candidates of the
+training sensors and ranks the candidates of the other sensors by it, in two forms:
 
 - ``rate``: ``f`` fitted to the planner's own score (excess shed per second), centred per state (its argmax needs
   the ranking within a state, not the state's level), and argmax of ``f``;
 - ``shed / time``: ``f`` fitted to the excess shed and argmax of ``f / time``: the time of a move is known without
   the lookahead (the step timing's motion fit), so the network learns only what the views add;
 
-each with the policy's observation alone and with the coverage state's 18 terms beside it (what views the data
-holds, which the 13-number information state does not say). Prints per task the regret of each choice (the best
-candidate's rate less the chosen one's, over the state's range of rates: 0 is the planner's choice, a uniform random
-candidate's is the mean), on the test sensors and on the states it was fitted to (can it even fit them?).
+each with the policy's observation alone, with the coverage state's 18 terms beside it (what views the data holds,
+which the 13-number information state does not say) and with those and 17 terms of the predicted covariance (the
+intrinsics' sigmas and correlations, the extrinsic's axes and the time offset: which directions the data pins
+down). Prints per task the regret of each choice (the best candidate's rate less the chosen one's, over the state's
+range of rates: 0 is the planner's choice, a uniform random candidate's is the mean), on the test sensors and on
+the states it was fitted to (can it even fit them?).
 
     .venv/bin/python experiments/candidate_scorer.py --run runs/distill_ctx_s0 --workers 2 --cache decisions.pkl
 """
@@ -39,6 +41,9 @@ from vical.policies.rate_planner import TaskRatePlanners
 from vical.rl.envs import BoxActions, make_env
 
 _ENVS: dict[str, tuple] = {}
+# The scorer's inputs beside the action: the policy's observation, with the coverage state's terms, with those and
+# the predicted covariance's (``covariance_terms``).
+STATES = {"": "observation", "coverage": "observation + coverage", "covariance": "observation + coverage + covariance"}
 
 
 @dataclass
@@ -48,6 +53,7 @@ class Decision:
     task: str
     obs: np.ndarray  # the policy's observation
     coverage: np.ndarray  # (18,) the coverage state's terms
+    covariance: np.ndarray  # (17,) the information's terms (``covariance_terms``)
     actions: np.ndarray  # (C, 6) the candidates, policy units
     shed: np.ndarray  # (C,) predicted e-folds of excess shed
     seconds: np.ndarray  # (C,) predicted recording time: motion + rest
@@ -80,6 +86,7 @@ class RecordingPlanners(TaskRatePlanners):
                         env.state.ratios, env.pose_offset, env.steps / env.config.max_steps
                     ),
                     env.state.coverage.vector().astype(np.float32),
+                    covariance_terms(env.state.information),
                     np.array([box.to_policy(a) for a in actions]),
                     np.array([env.state.excess - p.excess for p in predictions]),
                     np.array([p.motion_time + env.step_timing.rest for p in predictions]),
@@ -88,6 +95,19 @@ class RecordingPlanners(TaskRatePlanners):
             return actions[int(np.argmax(planner.scores(predictions, env)))]
 
         return best
+
+
+def covariance_terms(tracker) -> np.ndarray:
+    """(17,) what the predicted covariance says beyond the groups' ratios: log10 of the 1-sigma of fx, fy, cx, cy
+    [px], their 6 correlations, log10 of the extrinsic's 6 axes' and the time offset's 1-sigma [rad, m, s] (0 where
+    the task estimates none)."""
+    names, cov = tracker.covariance()
+    sigma = np.sqrt(np.diag(cov))
+    k = [i for i, n in enumerate(names) if n == "K"][:4]
+    K = cov[np.ix_(k, k)] / np.outer(sigma[k], sigma[k])
+    e = [i for i, n in enumerate(names) if n in ("E", "D")]
+    inertial = np.log10(sigma[e]) if e else np.zeros(7)
+    return np.r_[np.log10(sigma[k]), K[np.triu_indices(4, 1)], inertial].astype(np.float32)
 
 
 def episode(job: tuple[str, int]) -> list[Decision]:
@@ -119,12 +139,18 @@ class Scorer(torch.nn.Module):
         return self.mlp(x).squeeze(-1)
 
 
-def flat(decisions: list[Decision], coverage: bool, target: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def state_of(d: Decision, state: str) -> np.ndarray:
+    """The scorer's input of ``d``'s state (a key of ``STATES``)."""
+    extra = {"": [], "coverage": [d.coverage], "covariance": [d.coverage, d.covariance]}[state]
+    return np.concatenate([d.obs, *extra])
+
+
+def flat(decisions: list[Decision], state: str, target: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Every candidate's input (state, action), its target and its state's index."""
     rows, targets, index = [], [], []
     for k, d in enumerate(decisions):
-        state = np.r_[d.obs, d.coverage] if coverage else d.obs
-        rows.append(np.hstack([np.tile(state, (len(d.actions), 1)), d.actions]))
+        features = state_of(d, state)
+        rows.append(np.hstack([np.tile(features, (len(d.actions), 1)), d.actions]))
         targets.append(d.rate if target == "rate" else d.shed)
         index.append(np.full(len(d.actions), k))
     return (
@@ -141,11 +167,11 @@ def centred(values: torch.Tensor, index: torch.Tensor, states: int) -> torch.Ten
     return values - (sums / counts)[index]
 
 
-def fit(decisions: list[Decision], coverage: bool, target: str, epochs: int, seed: int) -> Scorer:
+def fit(decisions: list[Decision], state: str, target: str, epochs: int, seed: int) -> Scorer:
     """The scorer fitted to the candidates of ``decisions``, each state's spread of the target as its unit; a rate
     centred per state (its argmax needs the ranking within a state), the excess shed as it is (divided by the
     time, its level matters)."""
-    x, y, index = flat(decisions, coverage, target)
+    x, y, index = flat(decisions, state, target)
     states = len(decisions)
     spread = torch.zeros(states).index_add_(0, index, centred(y, index, states) ** 2) / torch.bincount(index)
     unit = spread.sqrt().clamp_min(1e-6)[index]
@@ -169,7 +195,7 @@ def fit(decisions: list[Decision], coverage: bool, target: str, epochs: int, see
     return scorer
 
 
-def regret(scorer: Scorer | str, decisions: list[Decision], coverage: bool, target: str) -> float:
+def regret(scorer: Scorer | str, decisions: list[Decision], state: str, target: str) -> float:
     """The mean over states of the best candidate's rate less the chosen one's, over the state's range of rates, of
     the scorer's choice, or of ``"random"`` (the mean over the candidates: a uniform random choice) or
     ``"quickest"`` (the shortest move)."""
@@ -181,7 +207,7 @@ def regret(scorer: Scorer | str, decisions: list[Decision], coverage: bool, targ
         elif scorer == "quickest":
             chosen = float(rate[np.argmin(d.seconds)])
         else:
-            x, _, _ = flat([d], coverage, target)
+            x, _, _ = flat([d], state, target)
             with torch.no_grad():
                 f = scorer(x).numpy()
             chosen = float(rate[np.argmax(f / d.seconds if target == "shed" else f)])
@@ -222,20 +248,18 @@ def main() -> None:
     print("| choice | " + " | ".join(f"{t}: regret (test) | {t}: regret (fitted states)" for t in tasks) + " |")
     print("|---|" + "---|---|" * len(tasks))
 
-    def row(name: str, scorer: Scorer | str, coverage: bool = False, target: str = "rate") -> None:
+    def row(name: str, scorer: Scorer | str, state: str = "", target: str = "rate") -> None:
         cells = [
-            (regret(scorer, of(test, t), coverage, target), regret(scorer, of(train, t), coverage, target))
-            for t in tasks
+            (regret(scorer, of(test, t), state, target), regret(scorer, of(train, t), state, target)) for t in tasks
         ]
         print(f"| {name} | " + " | ".join(f"{a:.2f} | {b:.2f}" for a, b in cells) + " |", flush=True)
 
     row("a random candidate", "random")
     row("the quickest candidate", "quickest")
-    for coverage in (False, True):
+    for state, label in STATES.items():
         for target in ("rate", "shed"):
-            state = "observation + coverage" if coverage else "observation"
-            scorer = fit(train, coverage, target, args.epochs, seed=0)
-            row(f"{'rate' if target == 'rate' else 'shed / time'}, {state}", scorer, coverage, target)
+            scorer = fit(train, state, target, args.epochs, seed=0)
+            row(f"{'rate' if target == 'rate' else 'shed / time'}, {label}", scorer, state, target)
 
 
 if __name__ == "__main__":

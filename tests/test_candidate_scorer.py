@@ -25,7 +25,7 @@ def decisions(count: int, seed: int) -> list[Decision]:
         actions = rng.uniform(-1, 1, (24, 6)).astype(np.float32)
         shed = 1.0 + obs[0] * actions[:, 0] + 0.5 * actions[:, 1]
         seconds = 0.5 + 1.5 * np.abs(actions[:, 2])
-        out.append(Decision("joint", obs, np.zeros(18, np.float32), actions, shed, seconds))
+        out.append(Decision("joint", obs, np.zeros(18, np.float32), np.zeros(17, np.float32), actions, shed, seconds))
     return out
 
 
@@ -36,17 +36,19 @@ def test_centred_removes_each_state_mean():
 
 
 def test_regret_of_random_is_the_mean_and_of_the_quickest_its_own():
-    d = Decision("joint", np.zeros(13), np.zeros(18), np.zeros((3, 6)), np.array([1.0, 2.0, 6.0]), np.ones(3))
-    assert regret("random", [d], False, "rate") == pytest.approx((6.0 - 3.0) / 5.0)
+    d = Decision(
+        "joint", np.zeros(13), np.zeros(18), np.zeros(17), np.zeros((3, 6)), np.array([1.0, 2.0, 6.0]), np.ones(3)
+    )
+    assert regret("random", [d], "", "rate") == pytest.approx((6.0 - 3.0) / 5.0)
     d.seconds = np.array([0.5, 1.0, 3.0])  # rates 2, 2, 2: every choice is the best
-    assert regret("quickest", [d], False, "rate") == 0.0
+    assert regret("quickest", [d], "", "rate") == 0.0
 
 
 @pytest.mark.parametrize("target", ["rate", "shed"])
 def test_fit_ranks_what_the_state_determines(target):
-    scorer = fit(decisions(300, 0), coverage=False, target=target, epochs=30, seed=0)
+    scorer = fit(decisions(300, 0), state="", target=target, epochs=30, seed=0)
     test = decisions(100, 1)
-    learned, random = regret(scorer, test, False, target), regret("random", test, False, target)
+    learned, random = regret(scorer, test, "", target), regret("random", test, "", target)
     assert random > 0.3  # the candidates differ
     assert learned < 0.25 * random
 
