@@ -37,7 +37,7 @@ from vical.env.lookahead import Lookahead
 from vical.io.atomic import atomic_file
 from vical.parallel import ParallelConfig, imap_ordered
 from vical.policies.greedy import candidate_actions, predicted_moves
-from vical.policies.rate_planner import TaskRatePlanners
+from vical.policies.rate_planner import RatePlannerPolicy, TaskRatePlanners, rate_planner_demonstrator
 from vical.rl.envs import BoxActions, make_env
 
 _ENVS: dict[str, tuple] = {}
@@ -63,38 +63,39 @@ class Decision:
         return self.shed / self.seconds
 
 
-class RecordingPlanners(TaskRatePlanners):
-    """The rate planner per task, keeping every planned step's candidates and predictions."""
+class RecordingRatePlanner(RatePlannerPolicy):
+    """The rate planner, keeping every planned step's state, candidates and predictions in ``decisions``."""
 
-    def __init__(self) -> None:
-        super().__init__(12, 48)
-        self.decisions: list[Decision] = []
-        for planner in (*self.planners.values(), self.default):
-            planner._best = self._recorder(planner)
+    def __init__(self, samples: int, decisions: list[Decision]) -> None:
+        super().__init__({}, None, samples, "information-rate planner (recording)")
+        self.decisions = decisions
 
-    def _recorder(self, planner):
-        def best(lookahead: Lookahead, env) -> np.ndarray:
-            candidates = candidate_actions(env.action_space.high, planner.samples, planner._rng)
-            actions, predictions = predicted_moves(lookahead, candidates)
-            if not actions:
-                return planner._toward_start(env)
-            box = BoxActions(env.action_space)
-            self.decisions.append(
-                Decision(
-                    env.task.name,
-                    env.state.information_observation(
-                        env.state.ratios, env.pose_offset, env.steps / env.config.max_steps
-                    ),
-                    env.state.coverage.vector().astype(np.float32),
-                    covariance_terms(env.state.information),
-                    np.array([box.to_policy(a) for a in actions]),
-                    np.array([env.state.excess - p.excess for p in predictions]),
-                    np.array([p.motion_time + env.step_timing.rest for p in predictions]),
-                )
+    def _best(self, lookahead: Lookahead, env) -> np.ndarray:
+        candidates = candidate_actions(env.action_space.high, self.samples, self._rng)
+        actions, predictions = predicted_moves(lookahead, candidates)
+        if not actions:
+            return self._toward_start(env)
+        box = BoxActions(env.action_space)
+        self.decisions.append(
+            Decision(
+                env.task.name,
+                env.state.observation(env.pose_offset, env.steps),  # what the policy sees, as the env builds it
+                env.state.coverage.vector().astype(np.float32),
+                covariance_terms(env.state.information),
+                np.array([box.to_policy(a) for a in actions]),
+                np.array([env.state.excess - p.excess for p in predictions]),
+                np.array([p.motion_time + env.step_timing.rest for p in predictions]),
             )
-            return actions[int(np.argmax(planner.scores(predictions, env)))]
+        )
+        return actions[self.choice(lookahead, predictions, env)]
 
-        return best
+
+def recording_planners(decisions: list[Decision]) -> TaskRatePlanners:
+    """The teacher distillation uses (``rate_planner_demonstrator``: its candidates per task), recording."""
+    teacher = rate_planner_demonstrator()
+    teacher.planners = {task: RecordingRatePlanner(p.samples, decisions) for task, p in teacher.planners.items()}
+    teacher.default = RecordingRatePlanner(teacher.default.samples, decisions)
+    return teacher
 
 
 def covariance_terms(tracker) -> np.ndarray:
@@ -114,15 +115,17 @@ def episode(job: tuple[str, int]) -> list[Decision]:
     """The planner's decisions over the episode of sensor ``seed`` on the env of the run config at ``path``."""
     path, seed = job
     if path not in _ENVS:
-        _ENVS[path] = (make_env(OmegaConf.to_container(OmegaConf.load(path).env, resolve=True)), RecordingPlanners())
-    env, planners = _ENVS[path]
-    planners.decisions = []
+        decisions: list[Decision] = []
+        env = make_env(OmegaConf.to_container(OmegaConf.load(path).env, resolve=True))
+        _ENVS[path] = (env, recording_planners(decisions), decisions)
+    env, planners, decisions = _ENVS[path]
+    decisions.clear()
     obs, _ = env.reset(seed=seed)
     planners.reset(env.unwrapped, np.random.default_rng(seed))
     while True:
         obs, _, terminated, truncated, _ = env.step(planners.act(obs, env.unwrapped))
         if terminated or truncated:
-            return planners.decisions
+            return list(decisions)
 
 
 class Scorer(torch.nn.Module):
@@ -217,6 +220,7 @@ def regret(scorer: Scorer | str, decisions: list[Decision], state: str, target: 
 
 
 def of(decisions: list[Decision], task: str) -> list[Decision]:
+    """The decisions of ``task``."""
     return [d for d in decisions if d.task == task]
 
 
