@@ -12,12 +12,13 @@ training sensors and ranks the candidates of the other sensors by it, in two for
 - ``shed / time``: ``f`` fitted to the excess shed and argmax of ``f / time``: the time of a move is known without
   the lookahead (the step timing's motion fit), so the network learns only what the views add;
 
-each with the policy's observation alone, with the coverage state's 18 terms beside it (what views the data holds,
-which the 13-number information state does not say) and with those and 17 terms of the predicted covariance (the
-intrinsics' sigmas and correlations, the extrinsic's axes and the time offset: which directions the data pins
-down). Prints per task the regret of each choice (the best candidate's rate less the chosen one's, over the state's
-range of rates: 0 is the planner's choice, a uniform random candidate's is the mean), on the test sensors and on
-the states it was fitted to (can it even fit them?).
+each with the policy's observation alone, with the coverage state's 18 terms beside it (what views the data holds, which
+the 13-number information state does not say) and with those and 17 terms of the predicted covariance (the intrinsics'
+sigmas and correlations, the extrinsic's axes and the time offset: which directions the data pins down), and with either
+beside each candidate's predicted views (``view_terms``: the board's image footprint halfway along the move and at its
+goal, and how many predicted frames see it; ``--states`` picks the variants). Prints per task the regret of each choice
+(the best candidate's rate less the chosen one's, over the state's range of rates: 0 is the planner's choice, a uniform
+random candidate's is the mean), on the test sensors and on the states it was fitted to (can it even fit them?).
 
     .venv/bin/python experiments/candidate_scorer.py --run runs/distill_ctx_s0 --workers 2 --cache decisions.pkl
 """
@@ -26,14 +27,15 @@ from __future__ import annotations
 
 import argparse
 import pickle
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
 from omegaconf import OmegaConf
 
-from vical.env.lookahead import Lookahead
+from vical.env.coverage import view_features
+from vical.env.lookahead import T_BODY_CAM, Lookahead, Prediction
 from vical.io.atomic import atomic_file
 from vical.parallel import ParallelConfig, imap_ordered
 from vical.policies.greedy import candidate_actions, predicted_moves
@@ -43,7 +45,14 @@ from vical.rl.envs import BoxActions, make_env
 _ENVS: dict[str, tuple] = {}
 # The scorer's inputs beside the action: the policy's observation, with the coverage state's terms, with those and
 # the predicted covariance's (``covariance_terms``).
-STATES = {"": "observation", "coverage": "observation + coverage", "covariance": "observation + coverage + covariance"}
+STATES = {
+    "": "observation",
+    "coverage": "observation + coverage",
+    "covariance": "observation + coverage + covariance",
+    "geometry": "observation + coverage + each candidate's views",
+    "geometry+covariance": "observation + coverage + covariance + each candidate's views",
+}
+FOOTPRINT_TERMS = 9  # ``footprint``'s
 
 
 @dataclass
@@ -57,6 +66,7 @@ class Decision:
     actions: np.ndarray  # (C, 6) the candidates, policy units
     shed: np.ndarray  # (C,) predicted e-folds of excess shed
     seconds: np.ndarray  # (C,) predicted recording time: motion + rest
+    views: np.ndarray = field(default_factory=lambda: np.zeros((0, 2 * FOOTPRINT_TERMS + 1)))  # (C, 19) ``view_terms``
 
     @property
     def rate(self) -> np.ndarray:
@@ -85,6 +95,7 @@ class RecordingRatePlanner(RatePlannerPolicy):
                 np.array([box.to_policy(a) for a in actions]),
                 np.array([env.state.excess - p.excess for p in predictions]),
                 np.array([p.motion_time + env.step_timing.rest for p in predictions]),
+                np.array([view_terms(lookahead, p) for p in predictions], dtype=np.float32),
             )
         )
         return actions[self.choice(lookahead, predictions, env)]
@@ -111,6 +122,33 @@ def covariance_terms(tracker) -> np.ndarray:
     return np.r_[np.log10(sigma[k]), K[np.triu_indices(4, 1)], inertial].astype(np.float32)
 
 
+def footprint(lookahead: Lookahead, offset: np.ndarray) -> np.ndarray:
+    """(9,) the board's predicted image footprint from the workspace ``offset`` (the lookahead's board and guessed
+    camera, the detector's rules): the share of its corners seen, the coverage state's view features (the board's
+    centre in the image, its area, its skew), the corners' mean and largest distance from the image centre over the
+    half diagonal (how far out the lens's distortion is sampled) and their spread in u and v; zeros beside the share
+    when too few are seen."""
+    camera = lookahead.tracker.guess.camera
+    target = lookahead.tracker.target
+    uv, ids = lookahead.board.ideal_observation(camera, lookahead.frame.pose(offset) @ T_BODY_CAM)
+    seen = len(ids) / len(target.points)
+    features = view_features(uv, ids, target, camera.width, camera.height) if len(ids) else None
+    if features is None:
+        return np.r_[seen, np.zeros(FOOTPRINT_TERMS - 1)]
+    size = np.array([camera.width, camera.height], dtype=float)
+    radius = np.linalg.norm(uv - size / 2, axis=1) / (np.linalg.norm(size) / 2)
+    spread = uv.std(axis=0) / size
+    return np.r_[seen, features.vector, radius.mean(), radius.max(), spread]
+
+
+def view_terms(lookahead: Lookahead, prediction: Prediction) -> np.ndarray:
+    """(19,) what a candidate's move would show the camera: the board's footprint halfway along it and at its goal
+    (``footprint``; the straight offset line's midpoint, where the minimum-jerk profile is halfway) and how many
+    predicted frames see the board (over 10)."""
+    halfway = footprint(lookahead, (lookahead.offset + prediction.goal) / 2)
+    return np.r_[halfway, footprint(lookahead, prediction.goal), prediction.views / 10.0]
+
+
 def episode(job: tuple[str, int]) -> list[Decision]:
     """The planner's decisions over the episode of sensor ``seed`` on the env of the run config at ``path``."""
     path, seed = job
@@ -129,12 +167,12 @@ def episode(job: tuple[str, int]) -> list[Decision]:
 
 
 class Scorer(torch.nn.Module):
-    """``f(state, action)``: two hidden layers of 256."""
+    """``f(state, candidate)``: two hidden layers of 256 on ``inputs`` numbers."""
 
-    def __init__(self, state_dim: int) -> None:
+    def __init__(self, inputs: int) -> None:
         super().__init__()
         self.mlp = torch.nn.Sequential(
-            torch.nn.Linear(state_dim + 6, 256), torch.nn.ReLU(), torch.nn.Linear(256, 256), torch.nn.ReLU(),
+            torch.nn.Linear(inputs, 256), torch.nn.ReLU(), torch.nn.Linear(256, 256), torch.nn.ReLU(),
             torch.nn.Linear(256, 1),
         )  # fmt: skip
 
@@ -143,9 +181,15 @@ class Scorer(torch.nn.Module):
 
 
 def state_of(d: Decision, state: str) -> np.ndarray:
-    """The scorer's input of ``d``'s state (a key of ``STATES``)."""
-    extra = {"": [], "coverage": [d.coverage], "covariance": [d.coverage, d.covariance]}[state]
-    return np.concatenate([d.obs, *extra])
+    """The scorer's input of ``d``'s state (a key of ``STATES``; its candidates' views are ``candidate_terms``')."""
+    extra = {"": [], "coverage": [d.coverage], "covariance": [d.coverage, d.covariance]}
+    extra |= {"geometry": extra["coverage"], "geometry+covariance": extra["covariance"]}
+    return np.concatenate([d.obs, *extra[state]])
+
+
+def candidate_terms(d: Decision, state: str) -> np.ndarray:
+    """(C, K) each candidate's input beside the state: its action, with its views where ``state`` includes them."""
+    return np.hstack([d.actions, d.views]) if state.startswith("geometry") else d.actions
 
 
 def flat(decisions: list[Decision], state: str, target: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -153,7 +197,7 @@ def flat(decisions: list[Decision], state: str, target: str) -> tuple[torch.Tens
     rows, targets, index = [], [], []
     for k, d in enumerate(decisions):
         features = state_of(d, state)
-        rows.append(np.hstack([np.tile(features, (len(d.actions), 1)), d.actions]))
+        rows.append(np.hstack([np.tile(features, (len(d.actions), 1)), candidate_terms(d, state)]))
         targets.append(d.rate if target == "rate" else d.shed)
         index.append(np.full(len(d.actions), k))
     return (
@@ -181,7 +225,7 @@ def fit(decisions: list[Decision], state: str, target: str, epochs: int, seed: i
     if target == "rate":
         y = centred(y, index, states)
     torch.manual_seed(seed)
-    scorer = Scorer(x.shape[1] - 6)
+    scorer = Scorer(x.shape[1])
     optimiser = torch.optim.Adam(scorer.parameters(), lr=1e-3)
     generator = np.random.default_rng(seed)
     for _ in range(epochs):
@@ -230,6 +274,7 @@ def main() -> None:
     parser.add_argument("--train-seeds", type=int, nargs=2, default=[41100, 41140], help="sensor seeds [from, to)")
     parser.add_argument("--test-seeds", type=int, nargs=2, default=[41140, 41160], help="sensor seeds [from, to)")
     parser.add_argument("--epochs", type=int, default=40)
+    parser.add_argument("--states", nargs="+", choices=list(STATES), default=list(STATES), help="the inputs to fit on")
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--cache", type=Path, help="the planner's decisions kept here, and read from here if it exists")
     args = parser.parse_args()
@@ -260,7 +305,8 @@ def main() -> None:
 
     row("a random candidate", "random")
     row("the quickest candidate", "quickest")
-    for state, label in STATES.items():
+    for state in args.states:
+        label = STATES[state]
         for target in ("rate", "shed"):
             scorer = fit(train, state, target, args.epochs, seed=0)
             row(f"{'rate' if target == 'rate' else 'shed / time'}, {label}", scorer, state, target)

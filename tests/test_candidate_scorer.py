@@ -12,7 +12,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "experiments"))
 import candidate_scorer  # noqa: E402
-from candidate_scorer import Decision, centred, fit, regret  # noqa: E402
+from candidate_scorer import Decision, candidate_terms, centred, fit, regret, state_of  # noqa: E402
 
 
 def decisions(count: int, seed: int) -> list[Decision]:
@@ -51,6 +51,15 @@ def test_fit_ranks_what_the_state_determines(target):
     learned, random = regret(scorer, test, "", target), regret("random", test, "", target)
     assert random > 0.3  # the candidates differ
     assert learned < 0.25 * random
+
+
+def test_views_enter_only_the_geometry_variants():
+    d = decisions(1, 0)[0]
+    d.views = np.arange(24 * 19, dtype=np.float32).reshape(24, 19)
+    assert candidate_terms(d, "coverage").shape == (24, 6)
+    assert np.array_equal(candidate_terms(d, "geometry")[:, 6:], d.views)
+    assert np.array_equal(state_of(d, "geometry+covariance"), state_of(d, "covariance"))
+    assert np.array_equal(state_of(d, "geometry"), state_of(d, "coverage"))
 
 
 def test_refuses_a_run_without_its_config(tmp_path, monkeypatch, capsys):
