@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import argparse
 import pickle
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +35,7 @@ import torch
 from omegaconf import OmegaConf
 
 from vical.env.coverage import view_features
-from vical.env.lookahead import T_BODY_CAM, Lookahead, Prediction
+from vical.env.lookahead import Lookahead, Prediction
 from vical.io.atomic import atomic_file
 from vical.parallel import ParallelConfig, imap_ordered
 from vical.policies.greedy import candidate_actions, predicted_moves
@@ -43,14 +43,19 @@ from vical.policies.rate_planner import RatePlannerPolicy, TaskRatePlanners, rat
 from vical.rl.envs import BoxActions, make_env
 
 _ENVS: dict[str, tuple] = {}
-# The scorer's inputs beside the action: the policy's observation, with the coverage state's terms, with those and
-# the predicted covariance's (``covariance_terms``).
+# The scorer's inputs, by variant: its label, the Decision's state terms beside the policy's observation (the
+# coverage state's, the predicted covariance's: ``covariance_terms``) and whether each candidate's views
+# (``view_terms``) go beside its action.
 STATES = {
-    "": "observation",
-    "coverage": "observation + coverage",
-    "covariance": "observation + coverage + covariance",
-    "geometry": "observation + coverage + each candidate's views",
-    "geometry+covariance": "observation + coverage + covariance + each candidate's views",
+    "": ("observation", (), False),
+    "coverage": ("observation + coverage", ("coverage",), False),
+    "covariance": ("observation + coverage + covariance", ("coverage", "covariance"), False),
+    "geometry": ("observation + coverage + each candidate's views", ("coverage",), True),
+    "geometry+covariance": (
+        "observation + coverage + covariance + each candidate's views",
+        ("coverage", "covariance"),
+        True,
+    ),
 }
 FOOTPRINT_TERMS = 9  # ``footprint``'s
 
@@ -66,7 +71,7 @@ class Decision:
     actions: np.ndarray  # (C, 6) the candidates, policy units
     shed: np.ndarray  # (C,) predicted e-folds of excess shed
     seconds: np.ndarray  # (C,) predicted recording time: motion + rest
-    views: np.ndarray = field(default_factory=lambda: np.zeros((0, 2 * FOOTPRINT_TERMS + 1)))  # (C, 19) ``view_terms``
+    views: np.ndarray  # (C, 19) what each candidate's move would show the camera (``view_terms``)
 
     @property
     def rate(self) -> np.ndarray:
@@ -130,9 +135,9 @@ def footprint(lookahead: Lookahead, offset: np.ndarray) -> np.ndarray:
     when too few are seen."""
     camera = lookahead.tracker.guess.camera
     target = lookahead.tracker.target
-    uv, ids = lookahead.board.ideal_observation(camera, lookahead.frame.pose(offset) @ T_BODY_CAM)
+    uv, ids = lookahead.board.ideal_observation(camera, lookahead.camera_pose(offset))
     seen = len(ids) / len(target.points)
-    features = view_features(uv, ids, target, camera.width, camera.height) if len(ids) else None
+    features = view_features(uv, ids, target, camera.width, camera.height)
     if features is None:
         return np.r_[seen, np.zeros(FOOTPRINT_TERMS - 1)]
     size = np.array([camera.width, camera.height], dtype=float)
@@ -182,14 +187,14 @@ class Scorer(torch.nn.Module):
 
 def state_of(d: Decision, state: str) -> np.ndarray:
     """The scorer's input of ``d``'s state (a key of ``STATES``; its candidates' views are ``candidate_terms``')."""
-    extra = {"": [], "coverage": [d.coverage], "covariance": [d.coverage, d.covariance]}
-    extra |= {"geometry": extra["coverage"], "geometry+covariance": extra["covariance"]}
-    return np.concatenate([d.obs, *extra[state]])
+    _, terms, _ = STATES[state]
+    return np.concatenate([d.obs, *(getattr(d, term) for term in terms)])
 
 
 def candidate_terms(d: Decision, state: str) -> np.ndarray:
     """(C, K) each candidate's input beside the state: its action, with its views where ``state`` includes them."""
-    return np.hstack([d.actions, d.views]) if state.startswith("geometry") else d.actions
+    _, _, with_views = STATES[state]
+    return np.hstack([d.actions, d.views]) if with_views else d.actions
 
 
 def flat(decisions: list[Decision], state: str, target: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -306,7 +311,7 @@ def main() -> None:
     row("a random candidate", "random")
     row("the quickest candidate", "quickest")
     for state in args.states:
-        label = STATES[state]
+        label, _, _ = STATES[state]
         for target in ("rate", "shed"):
             scorer = fit(train, state, target, args.epochs, seed=0)
             row(f"{'rate' if target == 'rate' else 'shed / time'}, {label}", scorer, state, target)

@@ -25,7 +25,10 @@ def decisions(count: int, seed: int) -> list[Decision]:
         actions = rng.uniform(-1, 1, (24, 6)).astype(np.float32)
         shed = 1.0 + obs[0] * actions[:, 0] + 0.5 * actions[:, 1]
         seconds = 0.5 + 1.5 * np.abs(actions[:, 2])
-        out.append(Decision("joint", obs, np.zeros(18, np.float32), np.zeros(17, np.float32), actions, shed, seconds))
+        views = np.zeros((24, 19), np.float32)
+        out.append(
+            Decision("joint", obs, np.zeros(18, np.float32), np.zeros(17, np.float32), actions, shed, seconds, views)
+        )
     return out
 
 
@@ -37,8 +40,9 @@ def test_centred_removes_each_state_mean():
 
 def test_regret_of_random_is_the_mean_and_of_the_quickest_its_own():
     d = Decision(
-        "joint", np.zeros(13), np.zeros(18), np.zeros(17), np.zeros((3, 6)), np.array([1.0, 2.0, 6.0]), np.ones(3)
-    )
+        "joint", np.zeros(13), np.zeros(18), np.zeros(17), np.zeros((3, 6)), np.array([1.0, 2.0, 6.0]), np.ones(3),
+        np.zeros((3, 19)),
+    )  # fmt: skip
     assert regret("random", [d], "", "rate") == pytest.approx((6.0 - 3.0) / 5.0)
     d.seconds = np.array([0.5, 1.0, 3.0])  # rates 2, 2, 2: every choice is the best
     assert regret("quickest", [d], "", "rate") == 0.0

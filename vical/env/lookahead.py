@@ -176,12 +176,12 @@ class Lookahead:
         self.timing = timing
         self.tracker = tracker
         self.offset = np.asarray(offset, dtype=float)
-        T_world_cam = self._camera(self.offset)
+        T_world_cam = self.camera_pose(self.offset)
         self.T_world_target = T_world_cam @ invert_transform(tracker.last_pose)
         self.board = ProjectBackend(tracker.target, self.T_world_target, pixel_noise_px=0.0)
         self.rate = state.frame_rate or DEFAULT_FRAME_RATE
 
-    def _camera(self, offset: np.ndarray) -> np.ndarray:
+    def camera_pose(self, offset: np.ndarray) -> np.ndarray:
         """(4, 4) ``T_world_cam`` (optical frame) at the workspace ``offset`` (6,); (N, 4, 4) at offsets (N, 6)."""
         return self.frame.pose(offset) @ T_BODY_CAM
 
@@ -223,7 +223,7 @@ class Lookahead:
         """The predicted frames that see the board, with their poses ``T_cam_target``."""
         t0, t_last = self.tracker.first_stamp or 0, self.tracker.last_time or 0.0
         frames = []
-        for t, T_world_cam in zip(times, self._camera(offsets), strict=True):
+        for t, T_world_cam in zip(times, self.camera_pose(offsets), strict=True):
             uv, ids = self.board.ideal_observation(self.tracker.guess.camera, T_world_cam)
             if len(ids) < self.tracker.min_corners:
                 continue
@@ -237,7 +237,7 @@ class Lookahead:
         dt = 1.0 / IMU_RATE
         t = np.arange(0.0, total + 2 * dt, dt)
         T_cam_imu = self.tracker.guess.T_cam_imu
-        gyro, specific_force = imu_readings(self._camera(offset_at(t)) @ T_cam_imu, dt)
+        gyro, specific_force = imu_readings(self.camera_pose(offset_at(t)) @ T_cam_imu, dt)
         t0, t_last = self.tracker.first_stamp, self.tracker.last_time
         stamps = t0 + np.round((t_last + t) * 1e9).astype(np.int64)
         return ImuSamples(stamps, gyro, specific_force)
