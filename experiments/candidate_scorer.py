@@ -29,6 +29,7 @@ import argparse
 import pickle
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -43,18 +44,25 @@ from vical.policies.rate_planner import RatePlannerPolicy, TaskRatePlanners, rat
 from vical.rl.envs import BoxActions, make_env
 
 _ENVS: dict[str, tuple] = {}
-# The scorer's inputs, by variant: its label, the Decision's state terms beside the policy's observation (the
-# coverage state's, the predicted covariance's: ``covariance_terms``) and whether each candidate's views
-# (``view_terms``) go beside its action.
+
+
+class Variant(NamedTuple):
+    """One of the scorer's inputs: its table label, the Decision's state terms beside the policy's observation (the
+    coverage state's, the predicted covariance's: ``covariance_terms``) and whether each candidate's views
+    (``view_terms``) go beside its action."""
+
+    label: str
+    state_terms: tuple[str, ...]
+    with_views: bool
+
+
 STATES = {
-    "": ("observation", (), False),
-    "coverage": ("observation + coverage", ("coverage",), False),
-    "covariance": ("observation + coverage + covariance", ("coverage", "covariance"), False),
-    "geometry": ("observation + coverage + each candidate's views", ("coverage",), True),
-    "geometry+covariance": (
-        "observation + coverage + covariance + each candidate's views",
-        ("coverage", "covariance"),
-        True,
+    "": Variant("observation", (), False),
+    "coverage": Variant("observation + coverage", ("coverage",), False),
+    "covariance": Variant("observation + coverage + covariance", ("coverage", "covariance"), False),
+    "geometry": Variant("observation + coverage + each candidate's views", ("coverage",), True),
+    "geometry+covariance": Variant(
+        "observation + coverage + covariance + each candidate's views", ("coverage", "covariance"), True
     ),
 }
 FOOTPRINT_TERMS = 9  # ``footprint``'s
@@ -187,14 +195,12 @@ class Scorer(torch.nn.Module):
 
 def state_of(d: Decision, state: str) -> np.ndarray:
     """The scorer's input of ``d``'s state (a key of ``STATES``; its candidates' views are ``candidate_terms``')."""
-    _, terms, _ = STATES[state]
-    return np.concatenate([d.obs, *(getattr(d, term) for term in terms)])
+    return np.concatenate([d.obs, *(getattr(d, term) for term in STATES[state].state_terms)])
 
 
 def candidate_terms(d: Decision, state: str) -> np.ndarray:
     """(C, K) each candidate's input beside the state: its action, with its views where ``state`` includes them."""
-    _, _, with_views = STATES[state]
-    return np.hstack([d.actions, d.views]) if with_views else d.actions
+    return np.hstack([d.actions, d.views]) if STATES[state].with_views else d.actions
 
 
 def flat(decisions: list[Decision], state: str, target: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -311,7 +317,7 @@ def main() -> None:
     row("a random candidate", "random")
     row("the quickest candidate", "quickest")
     for state in args.states:
-        label, _, _ = STATES[state]
+        label = STATES[state].label
         for target in ("rate", "shed"):
             scorer = fit(train, state, target, args.epochs, seed=0)
             row(f"{'rate' if target == 'rate' else 'shed / time'}, {label}", scorer, state, target)
