@@ -123,6 +123,8 @@ def run_one(spec: dict) -> dict:
             "sigma_offset_ms": float(1e3 * sigma[at["time_offset"]]), "solve_time": r.solve_time,
             "noise_scale": r.imu_noise_scale, "pixel_sigma": r.pixel_sigma, "iterations": r.iterations,
             "sigmas": {n: float(sigma[at[n]]) for n in CONSISTENCY_PARAMETERS if n in at},
+            "imu_terms": [{"effect": {n: t.effect[at[n]].tolist() for n in CONSISTENCY_PARAMETERS if n in at},
+                           "spread": t.spread.tolist()} for t in r.unmodelled_imu],
             "line_delay": r.line_delay, "warnings": list(r.warnings),
             "sigma_line_delay": float(sigma[at["line_delay"]]) if "line_delay" in at else None,
         }  # fmt: skip
@@ -232,25 +234,73 @@ def window_values(camera: dict, reference: np.ndarray) -> dict[str, float]:
 def consistency_rows(label: str, windows: list[dict]) -> list[str]:
     """Do the 10 s windows agree within their own sigmas, and do the sigmas explain their spread?
 
-    Per parameter: the largest difference between two windows over its 1-sigma (sqrt(s_a^2 + s_b^2)), and the
-    windows' mean 1-sigma over the standard deviation of their estimates (honest: near 1; over 2: too wide).
-    Three windows give a spread of 2 degrees of freedom, so one parameter's ratio is a weak reading: with
-    honest sigmas it exceeds 2 in 22 % of parameters (P(chi2_2 / 2 < 1/4)). The last row pools the
-    parameters (``pooled_ratio``)."""
+    Each window's 1-sigma holds a part the windows share: the IMU's unmodelled scales and misalignments
+    (``UnmodelledImuTerms``), one IMU's, shift every window by ``effect @ delta`` with the same ``delta``. So two
+    windows differ with the covariance ``D_a + D_b + (e_a - e_b) S (e_a - e_b)^T`` (``D`` a window's covariance
+    without that part, ``S`` the terms' spread, the two windows' mean), and the windows' spread about their mean
+    should be ``mean D + sum (e_i - e_mean) S (e_i - e_mean)^T / (n - 1)``: what differs between them. The part
+    they share, ``e_mean S e_mean^T``, no spread of windows can show; it is printed beside (against the references,
+    which differ by 0.34 deg / 8.0 mm, not against each other).
+
+    Per parameter: the largest difference between two windows over its 1-sigma, and that sigma of the spread over
+    the standard deviation of the windows' estimates (honest: near 1; over 2: too wide). Three windows give a
+    spread of 2 degrees of freedom, so one parameter's ratio is a weak reading: with honest sigmas it exceeds 2 in
+    22 % of parameters (P(chi2_2 / 2 < 1/4)). The last row pools the parameters (``pooled_ratio``)."""
     reference = np.array(windows[0]["T_cam_imu"])[:3, :3]
     values = [window_values(w, reference) for w in windows]
     rows, spreads, sigmas = [], [], []
     for name in windows[0]["sigmas"]:
         x = np.array([v[name] for v in values])
-        s = np.array([w["sigmas"][name] for w in windows])
-        z = max(abs(x[a] - x[b]) / np.hypot(s[a], s[b]) for a in range(len(x)) for b in range(a + 1, len(x)))
+        z, expected, shared = _agreement(x, *_window_parts(windows, name))
         spread = float(np.std(x, ddof=1))
         spreads.append(spread)
-        sigmas.append(float(np.sqrt(np.mean(s**2))))
-        rows.append(f"{label} {name:11} max |diff| / sigma {z:5.2f}   mean sigma / spread {np.mean(s) / spread:5.2f}")
+        sigmas.append(np.sqrt(expected))
+        rows.append(
+            f"{label} {name:11} max |diff| / sigma {z:5.2f}   sigma / spread {np.sqrt(expected) / spread:5.2f}   "
+            f"shared 1-sigma {_in_units(name, np.sqrt(shared))}"
+        )
     ratio, low, high = pooled_ratio(np.array(spreads), np.array(sigmas), len(windows))
     rows.append(f"{label} pooled      sigma / spread {ratio:5.2f}   (honest sigmas: {low:.2f}-{high:.2f}, 95 %)")
     return rows
+
+
+def _agreement(x: np.ndarray, own: np.ndarray, effects: np.ndarray, spreads: list[np.ndarray]):
+    """The largest difference of two windows over its sigma, the windows' expected spread (a variance) and the
+    variance they share (``consistency_rows``)."""
+
+    def through_terms(d: np.ndarray) -> float:  # (K, 6) effects' difference: the variance it carries
+        return sum(float(d[k] @ S @ d[k]) for k, S in enumerate(spreads))
+
+    pairs = [(a, b) for a in range(len(x)) for b in range(a + 1, len(x))]
+    z = max(abs(x[a] - x[b]) / np.sqrt(own[a] + own[b] + through_terms(effects[a] - effects[b])) for a, b in pairs)
+    mean = effects.mean(axis=0)
+    expected = float(np.mean(own)) + sum(through_terms(e - mean) for e in effects) / (len(x) - 1)
+    return z, expected, through_terms(mean)
+
+
+def _window_parts(windows: list[dict], name: str) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Per window, the parameter's variance without the IMU terms (W,), its effects (W, K, 6) per sensor k, and
+    each sensor's spread (6, 6) averaged over the windows."""
+    variances = np.array([w["sigmas"][name] ** 2 for w in windows])
+    if not windows[0].get("imu_terms"):
+        return variances, np.zeros((len(windows), 0, 6)), []
+    effects = np.array([[t["effect"][name] for t in w["imu_terms"]] for w in windows])
+    spreads = [
+        np.mean([np.array(w["imu_terms"][k]["spread"]) for w in windows], axis=0) for k in range(effects.shape[1])
+    ]
+    own = variances - np.array(
+        [sum(float(e @ np.array(t["spread"]) @ e) for e, t in zip(effects[i], w["imu_terms"], strict=True))
+         for i, w in enumerate(windows)]
+    )  # fmt: skip
+    return own, effects, spreads
+
+
+def _in_units(name: str, sigma: float) -> str:
+    if name.startswith("rot"):
+        return f"{np.degrees(sigma):.3f} deg"
+    if name.startswith("t_"):
+        return f"{1e3 * sigma:.2f} mm"
+    return f"{1e3 * sigma:.3f} ms" if name == "time_offset" else f"{sigma:.2f} px"
 
 
 def pooled_ratio(spreads: np.ndarray, sigmas: np.ndarray, windows: int) -> tuple[float, float, float]:

@@ -10,11 +10,12 @@ import pytest
 import yaml
 from test_io_kalibr_chain import OPENVINS_IMU_CHAIN
 
-from vical.apps.calibrate import main
+from vical.apps.calibrate import build_parser, main, run
 from vical.calib.errors import CalibrationSettingError
 from vical.calib.solve.checks import check_memory
 from vical.calib.synthetic import Excitation, make_recording
 from vical.data import ImuIntrinsics, ImuNoise, ImuSamples, Target
+from vical.data.imu_grade import GRADES
 from vical.geometry import CameraModel, transform_error
 from vical.io.csvfiles import write_corners_csv, write_imu_csv
 from vical.io.kalibr import (
@@ -423,3 +424,63 @@ def test_an_export_the_format_cannot_hold_is_refused_before_the_solve(recording_
     assert len(err.splitlines()) == 1 and not out.exists()
     assert main([str(path), "--task", "intrinsic", "--export", "vins-fusion", "--out", str(out)]) == 2
     assert "vins-fusion needs the camera-IMU calibration" in capsys.readouterr().err and not out.exists()
+
+
+@pytest.fixture(scope="module")
+def real_like_csvs(recording_dir, tmp_path_factory):
+    """The recording as a user's real files give it: corner and IMU CSVs (no truth), target, imu.yaml, camchain."""
+    _, rec = recording_dir
+    folder = tmp_path_factory.mktemp("real")
+    write_imu_csv(rec.imu, folder / "imu.csv")
+    write_corners_csv(rec.frames, folder / "corners.csv")
+    write_target_yaml(folder / "target.yaml", rec.target)
+    write_imu_yaml(folder / "imu.yaml", rec.truth.imu_noise)
+    write_camchain_imucam(folder / "known.yaml", rec.truth.camera, None, None)
+    argv = [str(folder / "corners.csv"), "--imu-csv", str(folder / "imu.csv"), "--target", str(folder / "target.yaml"),
+            "--imu-yaml", str(folder / "imu.yaml"), "--task", "extrinsic", "--intrinsics", str(folder / "known.yaml"),
+            "--no-report"]  # fmt: skip
+    return folder, argv
+
+
+def test_a_real_imu_counts_its_grade_in_the_sigmas_the_declared_one_or_the_real_data_default(
+    real_like_csvs, tmp_path, capsys
+):
+    folder, argv = real_like_csvs
+
+    def calibrated(*flags, imu_yaml=None):
+        given = argv if imu_yaml is None else [*argv, "--imu-yaml", str(imu_yaml)]
+        return run(build_parser().parse_args([*given, *flags, "--out", str(tmp_path / "o"), "--overwrite"]))
+
+    default, perfect = calibrated(), calibrated("--imu-grade", "calibrated")
+    assert [t.sensor for t in default.unmodelled_imu] == ["gyro", "accelerometer"]
+    assert not any(np.any(t.covariance()) for t in perfect.unmodelled_imu)
+    np.testing.assert_allclose(default.T_cam_imu, perfect.T_cam_imu)  # the grade moves the sigmas, not the estimate
+    added = sum(t.covariance() for t in default.unmodelled_imu)
+    np.testing.assert_allclose(default.covariance, perfect.covariance + added, rtol=1e-9, atol=1e-18)
+    assert default.sigma("rot_x") > perfect.sigma("rot_x")
+    consumer = folder / "consumer.yaml"
+    write_imu_yaml(consumer, ImuNoise(), grade=GRADES["consumer"])
+    assert calibrated(imu_yaml=consumer).sigma("t_z") > default.sigma("t_z")
+    capsys.readouterr()
+
+
+def test_a_grade_that_contradicts_the_imu_model_or_a_bad_grade_key_is_one_line_and_exit_2(
+    real_like_csvs, tmp_path, capsys
+):
+    folder, argv = real_like_csvs
+    flags = ["--imu-grade", "calibrated", "--imu-model", "scale-misalignment", "--out", str(tmp_path / "a")]
+    assert main([*argv, *flags]) == 2
+    err = capsys.readouterr().err.strip()
+    assert (
+        "the IMU grade 'calibrated' says the IMU has no scale or misalignment, but --imu-model scale-misalignment"
+        in err
+    )
+    assert "(--imu-grade industrial, or consumer)" in err and len(err.splitlines()) == 1
+    bad = folder / "bad.yaml"
+    bad.write_text((folder / "imu.yaml").read_text() + "gyroscope_scale_sigma: 0.3\n")
+    assert main([*argv, "--imu-yaml", str(bad), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert f"{bad}: gyroscope_scale_sigma: IMU grade gyro_scale must be a 1-sigma from 0 to 0.1" in err
+    assert len(err.splitlines()) == 1 and not (tmp_path / "b").exists()
+    assert main([*argv, "--imu-grade", "tactical", "--out", str(tmp_path / "c")]) == 2
+    assert "invalid choice: 'tactical'" in capsys.readouterr().err

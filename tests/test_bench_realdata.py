@@ -48,3 +48,24 @@ def test_the_pooled_sigma_over_spread_is_one_and_inside_its_range_for_honest_sig
     assert 0.93 < inside / 1000 < 0.97
     assert abs(np.median(ratios) - 1.0) < 0.05
     assert abs(np.median(wide) - 2.0) < 0.1
+
+
+def test_windows_that_share_one_imus_terms_are_judged_by_what_differs_between_them():
+    """Three windows shifted by one IMU's terms (the same delta, each window's own effect) and their own noise: the
+    windows' difference over its sigma is standard normal, the expected spread is the spread's mean square, and the
+    shared part is what the mean effect carries (a simulation of the model ``consistency_rows`` states)."""
+    rng = np.random.default_rng(1)
+    own = np.array([1.0, 0.5, 2.0])
+    effects = rng.normal(size=(3, 1, 6)) + 3.0  # mostly common: the case the windows' spread cannot see
+    spread = np.diag(rng.uniform(0.2, 1.0, 6))
+    draws = 40_000
+    delta = rng.multivariate_normal(np.zeros(6), spread, draws)
+    x = delta @ effects[:, 0].T + rng.normal(size=(draws, 3)) * np.sqrt(own)
+    _, expected, shared = bench_realdata._agreement(x[0], own, effects, [spread])
+    mean = effects[:, 0].mean(axis=0)
+    assert shared == pytest.approx(mean @ spread @ mean)
+    assert expected == pytest.approx(np.mean(x.var(axis=1, ddof=1)), rel=0.03)
+    assert expected < 0.2 * np.mean(own + np.einsum("wi,ij,wj->w", effects[:, 0], spread, effects[:, 0]))
+    largest = np.array([bench_realdata._agreement(row, own, effects, [spread])[0] for row in x[:4000]])
+    # the largest of three pairs' |z|: each standard normal, so below 2.39 in about 95 % of draws (1 - 3 * 0.0168)
+    assert 0.93 < np.mean(largest < 2.39) < 0.97

@@ -82,6 +82,7 @@ from vical.calib.solve.plausibility import (
 )
 from vical.calib.solve.visual_inertial import GRAVITY_MAGNITUDE, ViOptions
 from vical.data import DataError, ImuNoise, Recording, Target, median_rate_hz
+from vical.data.imu_grade import GRADES, REAL_DATA_GRADE, ImuGrade, imu_grade
 from vical.data.target import TargetError
 from vical.geometry import CAMERA_MODELS, CameraModel, CameraModelError
 from vical.io.atomic import remove_stale_temporaries
@@ -89,6 +90,7 @@ from vical.io.errors import FormatError, KalibrFormatError
 from vical.io.kalibr import (
     LINE_DELAY_KEY,
     read_camchain,
+    read_imu_grade,
     read_imu_intrinsics,
     read_imu_yaml,
     read_line_delay,
@@ -115,6 +117,7 @@ FLAGS = {
     "image_topic": "--image-topic",
     "imu_topic": "--imu-topic",
     "imu_model": "--imu-model",
+    "imu_grade": "--imu-grade",
     "cameras": "--cameras",
 }
 
@@ -192,6 +195,13 @@ def build_parser() -> argparse.ArgumentParser:
         choices=("calibrated", "scale-misalignment"),
         default="calibrated",
         help="scale-misalignment: also estimate the IMU's scale factors and axis misalignment (Kalibr's model)",
+    )
+    p.add_argument(
+        "--imu-grade",
+        choices=tuple(GRADES),
+        help="the IMU's scale and misalignment 1-sigma, counted in the uncertainty where the recording does not "
+        f"determine them (default: the --imu-yaml's imu_grade keys, else {REAL_DATA_GRADE}; a simulated recording's "
+        "own); calibrated: corrected readings",
     )
     p.add_argument("--g-sensitivity", action="store_true", help="with scale-misalignment: the gyro's g-sensitivity too")
     p.add_argument(
@@ -378,6 +388,26 @@ def _known_intrinsics(args) -> tuple[CameraModel | None, np.ndarray | None, floa
     return None, None, None
 
 
+def _declared_grade(args) -> ImuGrade | None:
+    """The IMU grade ``--imu-grade`` or the ``--imu-yaml`` declares, or None."""
+    if args.imu_grade:
+        return imu_grade(args.imu_grade)
+    return read_imu_grade(args.imu_yaml) if args.imu_yaml else None
+
+
+def _with_grade(options: ViOptions, rec: Recording) -> ViOptions:
+    """``options`` with the declared grade, else ``calibrated`` where the imu.yaml's intrinsics correct the readings,
+    else a simulated recording's own, else a real IMU's default (``REAL_DATA_GRADE``); as they are where the
+    scale-misalignment model estimates the terms instead."""
+    if options.imu_grade is not None or options.estimate_imu_intrinsics:
+        return options
+    if options.imu_intrinsics is not None:
+        grade = imu_grade("calibrated")
+    else:
+        grade = rec.truth.imu_grade if rec.truth is not None else imu_grade(REAL_DATA_GRADE)
+    return replace(options, imu_grade=grade)
+
+
 def _imu_noise(args, rec: Recording) -> ImuNoise:
     if args.imu_yaml:
         return read_imu_yaml(args.imu_yaml)
@@ -452,6 +482,7 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
         imu_model=args.imu_model,
         g_sensitivity=args.g_sensitivity,
         imu_intrinsics=read_imu_intrinsics(args.imu_yaml) if args.imu_yaml else None,
+        imu_grade=_declared_grade(args),
         rolling_shutter=args.rolling_shutter,
     )
     out = Path(args.out)
@@ -470,6 +501,7 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
             lens = s.camera if s.camera is not None else args.model
             check_exportable(vio_format, lens, len(names), args.task, sizes)
     noise = None if args.task == "intrinsic" else _imu_noise(args, rec)
+    options = _with_grade(options, rec)
     noise, rate_note = (None, None) if noise is None else _at_data_rate(args, noise, rec)
     known = {n: s.camera for n, s in setup.items() if s.camera is not None}
     guesses = {n: s.T_cam_imu for n, s in setup.items() if s.T_cam_imu is not None}
@@ -495,7 +527,7 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
 
 # What only the camera-IMU tasks read: the intrinsic task calibrates the camera alone.
 IMU_FLAGS = ("imu_yaml", "imu_csv", "imu_topic", "gyro_unit", "accel_unit", "max_time_offset", "fixed_time_offset",
-             "imu_model", "g_sensitivity")  # fmt: skip
+             "imu_model", "imu_grade", "g_sensitivity")  # fmt: skip
 
 
 def ignored_flags(args: argparse.Namespace, known: dict[str, CameraModel]) -> list[str]:

@@ -159,6 +159,28 @@ class TimeOffsetTrace:
 
 
 @dataclass(frozen=True)
+class UnmodelledImuTerms:
+    """What one IMU sensor's scales and misalignments, which the ``calibrated`` model does not estimate, add to a
+    result's covariance: ``effect @ spread @ effect.T`` (``vical.calib.solve.imu_model_error``).
+
+    Two results of one IMU (windows of one recording) share the terms: their difference's covariance holds
+    ``(effect_a - effect_b) spread (effect_a - effect_b)^T`` of them, not the sum of both.
+
+    Attributes:
+        sensor: ``gyro`` or ``accelerometer``.
+        effect: (P, 6) the parameters' first-order shift per unit of its entries (scales - 1, misalignments [rad]).
+        spread: (6, 6) the expected square of the entries the solve leaves uncorrected.
+    """
+
+    sensor: str
+    effect: np.ndarray
+    spread: np.ndarray
+
+    def covariance(self) -> np.ndarray:
+        return self.effect @ self.spread @ self.effect.T
+
+
+@dataclass(frozen=True)
 class CalibrationResult:
     """The outcome of ``calibrate_intrinsics`` / ``calibrate_extrinsics`` / ``calibrate_joint``.
 
@@ -201,6 +223,8 @@ class CalibrationResult:
             timestamp): estimated, or the known one the solve used; None for a global shutter.
         rolling_shutter_evidence: [s] the readout a global-shutter solve's residuals show where they show one
             (``vical.calib.solve.rolling_shutter``: a lower bound), else None.
+        unmodelled_imu: what the IMU's unmodelled scales and misalignments add to ``covariance``, per sensor
+            (``UnmodelledImuTerms``; empty: nothing, e.g. the intrinsic task or the scale-misalignment model).
     """
 
     task: str
@@ -239,6 +263,7 @@ class CalibrationResult:
     lens_misfit: tuple[float, float] | None = None
     line_delay: float | None = None
     rolling_shutter_evidence: float | None = None
+    unmodelled_imu: list[UnmodelledImuTerms] = field(default_factory=list)
 
     @property
     def sigmas(self) -> dict[str, float]:

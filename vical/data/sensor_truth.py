@@ -11,6 +11,7 @@ import numpy as np
 
 from vical.data.errors import DataError
 from vical.data.imu import ImuNoise
+from vical.data.imu_grade import ImuGrade
 from vical.data.imu_model import ImuIntrinsics
 from vical.geometry.camera import CameraModel
 
@@ -27,6 +28,8 @@ class SensorTruth:
         imu_noise: the IMU noise model.
         gyro_bias: (3,) [rad/s] initial gyro bias; accel_bias: (3,) [m/s^2] initial accel bias.
         imu_intrinsics: the IMU's scale, misalignment and g-sensitivity (identity: exact axes).
+        imu_grade: the grade ``imu_intrinsics`` were drawn from (``vical.data.imu_grade``): what the sensor declares
+            of them (``calibrated``: exact axes).
         line_delay: [s/row] the camera's rolling shutter: image row ``v`` is exposed ``line_delay * v`` after
             the image's timestamp (row 0 at the timestamp, ``docs/formats.md``); 0: a global shutter.
     """
@@ -39,6 +42,7 @@ class SensorTruth:
     accel_bias: np.ndarray = field(default_factory=lambda: np.zeros(3))
     imu_intrinsics: ImuIntrinsics = field(default_factory=ImuIntrinsics)
     line_delay: float = 0.0
+    imu_grade: ImuGrade = field(default_factory=ImuGrade)
 
     def __post_init__(self) -> None:
         T = np.asarray(self.T_cam_imu, dtype=np.float64)
@@ -61,6 +65,7 @@ class SensorTruth:
             "accel_bias": self.accel_bias.tolist(),
             "imu_intrinsics": self.imu_intrinsics.to_dict(),
             "line_delay": float(self.line_delay),
+            "imu_grade": self.imu_grade.to_dict(),
         }
 
     @classmethod
@@ -74,4 +79,5 @@ class SensorTruth:
             accel_bias=np.asarray(d.get("accel_bias", [0, 0, 0]), dtype=np.float64),
             imu_intrinsics=ImuIntrinsics.from_dict(d["imu_intrinsics"]) if "imu_intrinsics" in d else ImuIntrinsics(),
             line_delay=float(d.get("line_delay", 0.0)),
+            imu_grade=ImuGrade(**d.get("imu_grade", {})),
         )

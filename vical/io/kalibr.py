@@ -32,11 +32,14 @@ from __future__ import annotations
 import logging
 import os
 import warnings
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
 from vical.data import ImuIntrinsics, ImuNoise, Target, TargetError
+from vical.data.errors import DataError
+from vical.data.imu_grade import REAL_DATA_GRADE, ImuGrade, imu_grade
 from vical.geometry import wide_angle
 from vical.geometry.camera import CameraModel, CameraModelError
 from vical.geometry.transforms import invert_transform
@@ -279,15 +282,17 @@ def write_imu_yaml(
     rostopic: str = "/imu0",
     comment: str | None = None,
     intrinsics: ImuIntrinsics | None = None,
+    grade: ImuGrade | None = None,
 ) -> None:
     """Write Kalibr's IMU configuration (``imu.yaml``) for ``noise``, atomically, headed by ``comment`` (``#`` lines).
 
     Units: noise densities in rad/s/sqrt(Hz) (gyro) and m/s^2/sqrt(Hz) (accel), random walks in
     rad/s^2/sqrt(Hz) and m/s^3/sqrt(Hz), ``update_rate`` in Hz. With ``intrinsics``, also Kalibr's
     ``scale-misalignment`` keys: ``model``, ``accelerometers: {M}``, ``gyroscopes: {M, A, C_gyro_i}``
-    (``vical.data.ImuIntrinsics``; ``A`` in (rad/s)/(m/s^2)).
+    (``vical.data.ImuIntrinsics``; ``A`` in (rad/s)/(m/s^2)). With ``grade``, vical's grade keys
+    (``GRADE_KEYS``, which Kalibr does not read).
     """
-    data = {
+    data: dict[str, Any] = {
         "accelerometer_noise_density": float(noise.accel_noise_density),
         "accelerometer_random_walk": float(noise.accel_random_walk),
         "gyroscope_noise_density": float(noise.gyro_noise_density),
@@ -301,7 +306,41 @@ def write_imu_yaml(
         data["gyroscopes"] = {
             "M": intrinsics.M_gyro.tolist(), "A": intrinsics.A_gyro.tolist(), "C_gyro_i": intrinsics.C_gyro_i.tolist()
         }  # fmt: skip
+    if grade is not None:
+        data.update({key: getattr(grade, name) for name, key in GRADE_KEYS.items()})
     dump_yaml(path, data, comment=comment)
+
+
+# vical's keys of an imu.yaml's grade (vical.data.imu_grade; Kalibr ignores them): a named grade, then any term
+# that differs from it (1-sigma; scales as a fraction, misalignments in rad).
+GRADE_NAME_KEY = "imu_grade"
+GRADE_KEYS = {
+    "gyro_scale": "gyroscope_scale_sigma",
+    "gyro_misalignment": "gyroscope_misalignment_sigma",
+    "accel_scale": "accelerometer_scale_sigma",
+    "accel_misalignment": "accelerometer_misalignment_sigma",
+}
+
+
+def read_imu_grade(path: str | os.PathLike) -> ImuGrade | None:
+    """The grade an IMU file declares (``GRADE_NAME_KEY``, ``GRADE_KEYS``; flat or ``imu0`` section), or None
+    where it declares none. Terms it does not give are the named grade's, else ``REAL_DATA_GRADE``'s."""
+    data = load_mapping(path, KalibrFormatError)
+    entry, where = (data["imu0"], f"{path} [imu0]") if isinstance(data.get("imu0"), dict) else (data, str(path))
+    given = {name: key for name, key in GRADE_KEYS.items() if key in entry}
+    if GRADE_NAME_KEY not in entry and not given:
+        return None
+    terms = {}
+    for name, key in [(None, GRADE_NAME_KEY), *given.items()]:
+        try:
+            if name is None:
+                base = imu_grade(str(entry.get(GRADE_NAME_KEY, REAL_DATA_GRADE)))
+            else:
+                terms[name] = float(as_floats(entry[key], 1, key, where, KalibrFormatError)[0])
+                ImuGrade(**{name: terms[name]})  # refused by its own key
+        except DataError as exc:
+            raise KalibrFormatError(f"{where}: {key}: {exc}") from exc
+    return replace(base, **terms)
 
 
 INTRINSIC_KEYS = (("accelerometers", "M"), ("gyroscopes", "M"), ("gyroscopes", "A"), ("gyroscopes", "C_gyro_i"))

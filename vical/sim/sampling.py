@@ -21,6 +21,7 @@ import numpy as np
 
 from vical.config_checks import ConfigError, from_mapping, require, require_range
 from vical.data import ImuIntrinsics, ImuNoise, SensorTruth
+from vical.data.imu_grade import ImuGrade
 from vical.geometry import (
     CameraModel,
     CameraModelError,
@@ -262,6 +263,11 @@ class ImuSampling:
             [3, 3, 3, 3, 3, 9],
         )  # fmt: skip
 
+    def grade(self) -> ImuGrade:
+        """The grade the IMU's scales and misalignments are drawn from: what the simulated sensor declares."""
+        return ImuGrade(self.gyro_scale_std, self.gyro_misalignment_std, self.accel_scale_std,
+                        self.accel_misalignment_std)  # fmt: skip
+
     def kalibr_noise(self) -> ImuNoise:
         """The noise model as Kalibr densities (converting per-sample sigmas when ``discrete``)."""
         if self.noise_units == "continuous":
@@ -478,6 +484,7 @@ def sample_sensor(cfg: SensorSampling, rng: np.random.Generator, asymmetric: boo
         accel_bias=accel_bias,
         imu_intrinsics=intrinsics,
         line_delay=_line_delay(cfg.camera, rng),
+        imu_grade=cfg.imu.grade(),
     )
 
 

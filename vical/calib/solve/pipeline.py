@@ -233,6 +233,8 @@ def _combine(intrinsic: CalibrationResult, extrinsic: CalibrationResult, elapsed
     covariance[n_i:, n_i:] = extrinsic.covariance
     names = intrinsic.parameter_names + extrinsic.parameter_names
     estimate = np.concatenate([intrinsic.estimate, extrinsic.estimate])
+    imu_terms = [replace(t, effect=np.vstack([np.zeros((n_i, t.effect.shape[1])), t.effect]))
+                 for t in extrinsic.unmodelled_imu]  # fmt: skip
     assessment = assess(names, covariance, extrinsic.camera)  # its warnings: each stage's, below
     return replace(
         extrinsic,
@@ -240,6 +242,7 @@ def _combine(intrinsic: CalibrationResult, extrinsic: CalibrationResult, elapsed
         parameter_names=names,
         estimate=estimate,
         covariance=covariance,
+        unmodelled_imu=imu_terms,
         weak_parameters=assessment.weak_parameters,
         correlations=assessment.correlations,
         iterations=intrinsic.iterations + extrinsic.iterations,

@@ -4,12 +4,13 @@ one (``vical.calib.solve.robust_covariance``), and the warnings about the noise,
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import gtsam
 import numpy as np
 
-from vical.calib.solve.gyro_model import GyroModelError, gyro_model_error
+from vical.calib.result import UnmodelledImuTerms
+from vical.calib.solve.imu_model_error import ImuModelError, imu_model_errors
 from vical.calib.solve.robust_covariance import LinearSystem, sandwich_covariances, widen
 from vical.calib.solve.solver import covariance_or_unobservable, determined
 from vical.calib.solve.vi_graph import ViGraph, variance_scale
@@ -107,18 +108,19 @@ class ViMarginals:
     model: np.ndarray
     scaled: np.ndarray | None
     robust: np.ndarray | None
-    gyro: GyroModelError | None = None  # the gyro's scales and misalignments the residuals show (gyro_model)
+    # the gyro's and accelerometer's scales and misalignments the residuals show (imu_model_error)
+    imu_model: list[ImuModelError] = field(default_factory=list)
 
-    def block(self, keys: list[int]) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        """The keys' covariance (the measured noise levels' where finite, else the model's), robust one, and the
-        covariance the gyro's unmodelled scales and misalignments add (zero where the data do not show them)."""
+    def block(self, keys: list[int]) -> tuple[np.ndarray, np.ndarray | None, list[UnmodelledImuTerms]]:
+        """The keys' covariance (the measured noise levels' where finite, else the model's), robust one, and what
+        the IMU's unmodelled scales and misalignments add, per sensor (``ImuModelError.considered``)."""
         index = np.concatenate([self.columns[k] for k in keys])
         model = self.model[np.ix_(index, index)]
         if self.scaled is not None and np.all(np.isfinite(model)):
             model = self.scaled[np.ix_(index, index)]
         robust = None if self.robust is None else self.robust[np.ix_(index, index)]
-        considered = np.zeros_like(model) if self.gyro is None else self.gyro.considered()[np.ix_(index, index)]
-        return model, robust, considered
+        terms = [UnmodelledImuTerms(f.sensor.name, f.sensitivity[index], f.spread()) for f in self.imu_model]
+        return model, robust, terms
 
 
 def _camera_keys(index: int, joint: bool, fixed_offset: bool, rolling: bool) -> list[int]:
@@ -148,12 +150,12 @@ def solution_marginals(
     sizes = [zero.at(k).size for k in keys]
     starts = np.cumsum([0, *sizes])
     columns = {k: np.arange(starts[n], starts[n + 1]) for n, k in enumerate(keys)}
-    gyro = None
+    imu_model = []
     if not estimated_imu:  # the scale-misalignment model estimates them
-        imu = (problem.t_imu, problem.gyro)
-        gyro = gyro_model_error(system, linear, values, g.imu_factors, g.state_times, imu, keys)
+        imu = (problem.t_imu, problem.gyro, problem.accel)
+        imu_model = imu_model_errors(system, linear, g.imu_factors, g.state_times, imu, keys, problem.options.imu_grade)
     scaled, robust = (None, None) if found is None else (found.scaled, found.robust)
-    return ViMarginals(columns, model, scaled, robust, gyro)
+    return ViMarginals(columns, model, scaled, robust, imu_model)
 
 
 def parameter_covariance(
@@ -166,20 +168,21 @@ def parameter_covariance(
     imu_theta: np.ndarray | None = None,
     rows: int | None = None,
     centre: float = 0.0,
-):
-    """(P, P) covariance in the order of the result's parameter names and its widening (P,) over the noise model's.
+) -> tuple[np.ndarray, np.ndarray, list[UnmodelledImuTerms]]:
+    """(P, P) covariance in the order of the result's parameter names, its widening (P,) over the noise model's, and
+    what the IMU's unmodelled scales and misalignments add to it, per sensor, in those parameters.
 
     Of camera ``index``'s variables (0: the first camera's), its line delay when it has ``rows`` (its image height:
     the graph's variable is the readout, the line delay times the rows), the first bias and, with ``imu_theta``
     (the estimated IMU intrinsics), those. The time offset (row 0's) is the graph's (``centre``'s row's) less the
     readout up to that row. The covariance under the measured noise levels widened wherever the
-    cluster-robust one (``vical.calib.solve.robust_covariance``) is larger, plus what the gyro's unmodelled scales and
-    misalignments add where the data show them (``vical.calib.solve.gyro_model``; not part of the widening, which
+    cluster-robust one (``vical.calib.solve.robust_covariance``) is larger, plus what the IMU's unmodelled scales and
+    misalignments add (``vical.calib.solve.imu_model_error``; not part of the widening, which
     is the robust one's); a fixed time offset gets zero variance.
     """
     intrinsic_keys = [] if imu_theta is None else [I_KEY]
     keys = [*_camera_keys(index, joint, fixed_offset, rows is not None), state_key("b", 0), *intrinsic_keys]
-    model, robust, considered = marginals.block(keys)
+    model, robust, terms = marginals.block(keys)
     cov = model if robust is None else widen(model, robust)
     camera_block = [np.eye(values.atVector(state_key("k", index)).size)] if joint else []
     blocks = camera_block + [_extrinsic_jacobian(T_cam_imu), _timing_block(fixed_offset, rows, centre), np.eye(6)]
@@ -192,7 +195,9 @@ def parameter_covariance(
     final, noise_model = J @ cov @ J.T, J @ model @ J.T
     with np.errstate(divide="ignore", invalid="ignore"):
         widening = np.sqrt(np.diag(final) / np.diag(noise_model))
-    return final + J @ considered @ J.T, np.where(np.isfinite(widening), widening, 1.0)
+    imu_terms = [replace(t, effect=J @ t.effect) for t in terms]
+    considered = sum((t.covariance() for t in imu_terms), np.zeros_like(final))
+    return final + considered, np.where(np.isfinite(widening), widening, 1.0), imu_terms
 
 
 def _timing_block(fixed_offset: bool, rows: int | None, centre: float) -> np.ndarray:

@@ -20,6 +20,7 @@ from vical.calib.solve.outliers import reject_outliers
 from vical.calib.solve.rig import OtherCamera
 from vical.calib.solve.time_alignment import align, rotation_increments
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target, seconds_since
+from vical.data.imu_grade import ImuGrade
 from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel, invert_transform, make_transform
 
@@ -91,6 +92,9 @@ class ViOptions:
         g_sensitivity: with ``scale-misalignment``, also estimate the gyro's g-sensitivity.
         imu_intrinsics: the IMU's known intrinsics (e.g. from Kalibr's imu.yaml), or None (identity).
         noise_weighting: how the sensors' measured noise enters the solve (``NOISE_WEIGHTINGS``).
+        imu_grade: the IMU's declared scale and misalignment 1-sigma (``vical.data.imu_grade``), counted as a
+            consider-prior where the data do not determine them (``vical.calib.solve.imu_model_error``); None: none
+            declared, as ``calibrated`` (callers with real data resolve the default: ``declared_grade``).
         rolling_shutter: estimate each camera's line delay (a rolling shutter) with the time offset, every
             corner seen at its row's time; without it a camera's given line delay (``CameraInput.line_delay``,
             0: a global shutter) is used as it is.
@@ -108,6 +112,7 @@ class ViOptions:
     g_sensitivity: bool = False
     imu_intrinsics: ImuIntrinsics | None = None
     noise_weighting: str = "declared-or-less"
+    imu_grade: ImuGrade | None = None
     rolling_shutter: bool = False
 
     def __post_init__(self) -> None:
@@ -137,6 +142,15 @@ class ViOptions:
                 f"calibration option noise_weighting must be one of {allowed}, got {self.noise_weighting!r}"
             )
         check_imu_model(self.imu_model, self.g_sensitivity)
+        if self.estimate_imu_intrinsics and self.imu_grade is not None and self.imu_grade.perfect:
+            raise CalibrationSettingError(
+                "the IMU grade 'calibrated' says the IMU has no scale or misalignment, but {imu_model} estimates "
+                "them: declare the IMU's grade ({fix}, or consumer) or calibrate with the calibrated IMU model",
+                "imu_grade",
+                "GRADES['industrial']",
+                "industrial",
+                {"imu_model": ("'scale-misalignment'", "scale-misalignment")},
+            )
 
     @property
     def estimate_imu_intrinsics(self) -> bool:

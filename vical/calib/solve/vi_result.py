@@ -118,7 +118,7 @@ def first_camera_result(
     values = solution.values
     camera = problem.camera
     rows = camera.height if problem.options.rolling_shutter else None
-    covariance, widening = parameter_covariance(
+    covariance, widening, imu_terms = parameter_covariance(
         marginals, values, est.T_cam_imu, joint, not problem.options.estimate_time_offset, imu_theta=est.imu_theta,
         rows=rows, centre=row_centre(problem.options),
     )  # fmt: skip
@@ -153,6 +153,7 @@ def first_camera_result(
         parameter_names=names,
         estimate=estimate,
         covariance=covariance,
+        unmodelled_imu=imu_terms,
         weak_parameters=assessment.weak_parameters,
         correlations=assessment.correlations,
         reprojection=ResidualStats.of(residuals),
@@ -220,7 +221,7 @@ def other_camera_result(
     values = solution.values
     camera = other.camera
     rows = camera.height if problem.options.rolling_shutter else None
-    covariance, widening = parameter_covariance(
+    covariance, widening, imu_terms = parameter_covariance(
         marginals, values, other.T_cam_imu, joint, not problem.options.estimate_time_offset, other.index, rows=rows,
         centre=row_centre(problem.options),
     )  # fmt: skip
@@ -252,6 +253,7 @@ def other_camera_result(
         time_offset=other.tau0,
         estimate=estimate,
         covariance=covariance,
+        unmodelled_imu=imu_terms,
         weak_parameters=assessment.weak_parameters,
         correlations=assessment.correlations,
         reprojection=ResidualStats.of(residuals),

@@ -31,7 +31,7 @@ import numpy as np
 from vical.calib.errors import CalibrationError
 from vical.calib.result import CalibrationResult
 from vical.calib.solve.checks import check_imu_noise, check_memory
-from vical.calib.solve.gyro_model import gyro_model_warning
+from vical.calib.solve.imu_model_error import imu_model_warnings
 from vical.calib.solve.intrinsics import check_model
 from vical.calib.solve.nominal import nominal_T_cam_imu
 from vical.calib.solve.rig import OtherCamera, initialise_other, prepare_other
@@ -101,7 +101,7 @@ def run_visual_inertial(
     problem.warnings += span_warnings(problem, g) + gap_warnings(g.state_times)
     problem.warnings += imu_noise_warning(problem.imu_noise_scale, imu_noise, options.noise_weighting)
     marginals = solution_marginals(problem, g, solution.values, joint, est.imu_theta is not None)
-    problem.warnings += gyro_model_warning(marginals.gyro)
+    problem.warnings += imu_model_warnings(marginals.imu_model)
     result = first_camera_result(task, problem, g, solution, est, iterations + more, start, marginals)
     result = replace(result, frame_log=first_frame_log(frames, every, problem, g, result.reprojection_frames))
     results = [result] + [

@@ -1,5 +1,5 @@
 """The gyro's scales and misalignments at the solution of a ``calibrated``-model graph
-(``vical.calib.solve.gyro_model``): the readings' Jacobian against re-preintegrated readings, the evidence
+(``vical.calib.solve.imu_model_error``): the readings' Jacobian against re-preintegrated readings, the evidence
 threshold against a simulation, the values found against the truth, an ideal gyro left alone, and a scaled gyro's
 effect on the extrinsic counted in its uncertainty."""
 
@@ -7,12 +7,12 @@ import gtsam
 import numpy as np
 import pytest
 
-import vical.calib.solve.gyro_model as gyro_model
+import vical.calib.solve.imu_model_error as imu_model_error
 import vical.calib.solve.vi_covariance as vi_covariance
 from vical.calib import calibrate_extrinsics
-from vical.calib.solve.gyro_model import GYRO_ENTRIES, evidence_threshold, reading_jacobian
 from vical.calib.solve.imu_integration import preintegration_params
 from vical.calib.solve.imu_intrinsics import IntervalReadings
+from vical.calib.solve.imu_model_error import GYRO, GYRO_ENTRIES, evidence_threshold, reading_jacobian
 from vical.calib.synthetic import make_recording
 from vical.data import ImuIntrinsics, ImuNoise
 from vical.geometry import rotation_angle, so3_log
@@ -54,7 +54,7 @@ def test_the_readings_jacobian_agrees_with_re_preintegrating_corrected_readings(
     values.insert(keys[6], gtsam.Unit3(np.array([0.0, 0.0, -1.0])))
     A, _ = base.linearize(values).jacobian()
     mean_rate = (readings.knots[1:] - readings.knots[:-1]) @ (0.5 * (readings.gyro[1:] + readings.gyro[:-1])) / 0.05
-    found = reading_jacobian(base, A, mean_rate)
+    found = reading_jacobian(base, A, mean_rate, GYRO.bias_columns)
     step = 1e-6
     expected = np.empty_like(found)
     for column, entry in enumerate(GYRO_ENTRIES):
@@ -81,14 +81,15 @@ def test_the_evidence_threshold_is_hotellings_over_few_windows_and_chi_square_wi
 
 @pytest.fixture
 def spy(monkeypatch):
-    """Every GyroModelError the solves compute (the real function runs)."""
+    """The gyro's ImuModelError of every solve (the real function runs)."""
     seen = []
 
     def recorded(*args, **kwargs):
-        seen.append(gyro_model.gyro_model_error(*args, **kwargs))
-        return seen[-1]
+        found = imu_model_error.imu_model_errors(*args, **kwargs)
+        seen.append(next(f for f in found if f.sensor is GYRO))
+        return found
 
-    monkeypatch.setattr(vi_covariance, "gyro_model_error", recorded)
+    monkeypatch.setattr(vi_covariance, "imu_model_errors", recorded)
     return seen
 
 
@@ -130,7 +131,7 @@ def test_a_scaled_gyro_is_found_and_the_extrinsic_uncertainty_covers_what_it_shi
 
     # Without the gyro's effect in the covariance the same estimate lies far outside its 1-sigma ellipsoid; with
     # it, inside the 99.9 % one (chi-square, 3 degrees of freedom: 16.3).
-    monkeypatch.setattr(gyro_model, "FALSE_ALARM", 0.0)
+    monkeypatch.setattr(imu_model_error, "FALSE_ALARM", 0.0)
     unwidened = calibrate(recording)
     assert rotation_angle(unwidened.T_cam_imu[:3, :3] @ result.T_cam_imu[:3, :3].T) < 1e-9  # the estimate is the same
     assert rotation_mahalanobis(unwidened) > 16.3
