@@ -23,7 +23,17 @@ import sys
 import time
 
 import numpy as np
-from imu_weighting import DECLARED, KINDS, NAMES, PIXEL_SIGMA, errors, euroc_like_camera, noisy_imu, true_extrinsic
+from imu_weighting import (
+    DECLARED,
+    KINDS,
+    PIXEL_SIGMA,
+    coverage,
+    errors,
+    euroc_like_camera,
+    noisy_imu,
+    sigmas,
+    true_extrinsic,
+)
 
 from vical.calib.errors import CalibrationError
 from vical.calib.solve.pipeline import calibrate_extrinsics
@@ -73,7 +83,7 @@ def run_one(seed: int, drawn: str, declared: str, kind: str, factor: float, dura
     except CalibrationError as exc:
         return row | {"failed": str(exc)[:80]}
     e = errors(result, rec)
-    s = np.sqrt(np.diag(result.covariance)[[result.parameter_names.index(n) for n in NAMES]])
+    s = sigmas(result)
     return row | {
         "failed": "", "rot_deg": float(np.degrees(np.linalg.norm(e[:3]))),
         "trans_mm": float(1e3 * np.linalg.norm(e[3:6])),
@@ -98,8 +108,7 @@ def table(rows: list[dict]) -> str:
                 continue
             medians = ("rot_deg", "trans_mm", "sigma_rot_deg", "sigma_t_mm")
             med = {k: float(np.median([r[k] for r in ok])) for k in medians}
-            n = len(NAMES) * len(ok)
-            w1, w3 = sum(r["within1"] for r in ok) / n, sum(r["within3"] for r in ok) / n
+            w1, w3 = coverage(ok)
             noise = "all" if kind == "all" else f"{kind} x{factor:g}"
             lines.append(
                 f"{drawn:11} {declared:11} {noise:14} {len(ok):2d}/{len(group):<2d} {med['rot_deg']:8.4f} "

@@ -138,6 +138,12 @@ def run_one(seed: int, factor: float, kind: str, scheme: str) -> dict:
     }  # fmt: skip
 
 
+def coverage(runs: list[dict]) -> tuple[float, float]:
+    """The share of the runs' parameters (``NAMES``) whose truth lies within 1 and within 3 reported sigma."""
+    n = len(NAMES) * max(len(runs), 1)
+    return sum(r["within1"] for r in runs) / n, sum(r["within3"] for r in runs) / n
+
+
 def table(rows: list[dict]) -> str:
     lines = [
         f"{'kind':9} {'factor':>6} {'scheme':9} {'runs':>4} {'rot deg':>8} {'t mm':>7} {'dt ms':>6} "
@@ -152,8 +158,7 @@ def table(rows: list[dict]) -> str:
                     continue
                 med = {k: np.median([r[k] for r in ok]) if ok else np.nan
                        for k in ("rot_deg", "trans_mm", "offset_ms", "noise_scale")}  # fmt: skip
-                n = 7 * max(len(ok), 1)
-                w1, w3 = sum(r["within1"] for r in ok) / n, sum(r["within3"] for r in ok) / n
+                w1, w3 = coverage(ok)
                 lines.append(
                     f"{kind:9} {factor:6g} {scheme:9} {len(ok):2d}/{len(group):<1d} {med['rot_deg']:8.4f} "
                     f"{med['trans_mm']:7.2f} {med['offset_ms']:6.3f} {med['noise_scale']:7.2f} {100 * w1:6.1f}% "
