@@ -5,7 +5,9 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import hydra.utils
 import numpy as np
@@ -16,21 +18,35 @@ from omegaconf import OmegaConf
 from scipy.spatial.transform import Rotation
 from stopped_collections import calibrate_joint, default_sigint, file_size_limit
 
-from vical.apps.collect import CONF_DIR, build_collector, check_settings, collect, mdp_config, nominal_sensor
+from vical.apps.cli import plain
+from vical.apps.collect import (
+    CONF_DIR,
+    CollectionOutput,
+    board,
+    build_collector,
+    check_settings,
+    collect,
+    mdp_config,
+    nominal_sensor,
+    write_calibration_inputs,
+)
 from vical.calib.metrics import parameter_errors
 from vical.calib.tasks import CalibrationTask, run_task, task_score
 from vical.collection.runner import CollectionStopped, Collector
 from vical.config_checks import ConfigError
+from vical.data import ImuNoise
+from vical.data.imu_grade import GRADES
 from vical.env.actions import step_to_action
 from vical.evaluation.harness import build_env, instantiate_policy, run_trajectory
 from vical.geometry import invert_transform, make_transform
 from vical.io.bag import read_bag
 from vical.io.euroc import read_euroc
-from vical.io.kalibr import read_camchain, read_target_yaml
+from vical.io.kalibr import read_camchain, read_imu_grade, read_target_yaml, write_imu_yaml
 from vical.policies.base import Policy
 from vical.policies.expert import expert_policy
 from vical.policies.learned import PAPER_POLICY_DIR
 from vical.robot import Arm, MotionRefused, SensorStreamError, StampedPose
+from vical.sim.sampling import SensorSampling, mean_sensor
 
 
 def config(*overrides: str):
@@ -226,6 +242,10 @@ def test_bad_settings_are_refused_by_key(tmp_path):
     (tmp_path / "zero.yaml").write_text(noise + "gyroscope_noise_density: 2.0e-4\ngyroscope_random_walk: 2.0e-5\n")
     with pytest.raises(ConfigError, match=r"guess\.imu_yaml=.*accelerometer_noise_density must be a positive"):
         check_settings(config(f"out={tmp_path / 'o'}", f"guess.imu_yaml={tmp_path / 'zero.yaml'}"))
+    write_imu_yaml(tmp_path / "tactical.yaml", ImuNoise())
+    (tmp_path / "tactical.yaml").write_text(f"{(tmp_path / 'tactical.yaml').read_text()}imu_grade: tactical\n")
+    with pytest.raises(ConfigError, match=r"guess\.imu_yaml=.*imu_grade: IMU grade 'tactical' does not exist"):
+        check_settings(config(f"out={tmp_path / 'o'}", f"guess.imu_yaml={tmp_path / 'tactical.yaml'}"))
     # A robot the adapter refuses, or one whose extra is missing: one line, not Hydra's "Error in call to target".
     with pytest.raises(ConfigError, match=r"^robot: RigFaults\.latency must be a number >= 0, got -1$"):
         collect(config(f"out={tmp_path / 'o'}", "robot.faults.latency=-1"))
@@ -259,6 +279,26 @@ def test_collect_records_and_calibrates_with_a_random_policy(tmp_path):
     assert (out / "calibration" / "camchain-imucam.yaml").is_file()
     summary = (out / "collect.yaml").read_text()
     assert "steps: 12" in summary and "done: the step limit" in summary
+    assert read_imu_grade(out / "imu.yaml") == GRADES["calibrated"]  # the simulated IMU declares itself perfect
+
+
+def test_the_imu_yaml_of_a_collection_declares_the_grade_of_the_guess_file_else_of_the_datasheet(tmp_path):
+    cfg = config()
+    datasheet = replace(mean_sensor(SensorSampling.from_config(plain(cfg.sensor))), imu_grade=GRADES["consumer"])
+    plain_file, graded_file = tmp_path / "plain.yaml", tmp_path / "graded.yaml"
+    write_imu_yaml(plain_file, ImuNoise())
+    write_imu_yaml(graded_file, ImuNoise(), grade=GRADES["industrial"])
+
+    def declared(imu_yaml, rig):
+        s = CollectionOutput(tmp_path / "out", False, "joint", None, imu_yaml, False)
+        write_calibration_inputs(s, board(cfg, rig), datasheet, rig)
+        return read_imu_grade(s.out / "imu.yaml")
+
+    with_datasheet = SimpleNamespace(datasheet=datasheet)
+    assert declared(None, with_datasheet) == GRADES["consumer"]  # the datasheet's
+    assert declared(plain_file, with_datasheet) == GRADES["consumer"]  # a file that declares none: the datasheet's
+    assert declared(graded_file, with_datasheet) == GRADES["industrial"]  # the file's
+    assert declared(plain_file, SimpleNamespace()) is None  # none declared: vical-calibrate's real-IMU default
 
 
 def test_a_collection_is_also_written_as_a_ros2_bag(tmp_path):

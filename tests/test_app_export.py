@@ -21,7 +21,7 @@ from vical.geometry import CAMERA_MODELS
 from vical.geometry.transforms import invert_transform
 from vical.io import open_recording, read_camchain, read_chain, read_imu_yaml, read_target_yaml, save_recording
 from vical.io.bag import bag_image_topics
-from vical.io.kalibr import read_imu_intrinsics
+from vical.io.kalibr import read_imu_grade, read_imu_intrinsics
 
 
 def test_export_writes_kalibr_inputs_that_read_back(tmp_path, capsys):
@@ -32,6 +32,7 @@ def test_export_writes_kalibr_inputs_that_read_back(tmp_path, capsys):
 
     assert read_target_yaml(out / "target.yaml") == rec.target
     assert read_imu_yaml(out / "imu.yaml") == rec.truth.imu_noise
+    assert read_imu_grade(out / "imu.yaml") == rec.truth.imu_grade  # declared as its noise: calibrated
     camera, T, shift = read_camchain(out / "camchain.yaml")
     assert camera == rec.truth.camera and T is None and shift is None
     _, T_truth, shift_truth = read_camchain(out / "camchain-imucam-truth.yaml")

@@ -7,10 +7,12 @@ import pytest
 
 from vical.calib.metrics import extrinsic_relative_error, intrinsic_relative_error
 from vical.calib.solve.intrinsics import calibrate_intrinsics
+from vical.calib.solve.visual_inertial import ViOptions
 from vical.calib.synthetic import make_recording
 from vical.calib.tasks import CalibrationTask, calibrate_task, run_task
 from vical.config_checks import ConfigError
 from vical.data import ImuNoise, SensorTruth
+from vical.data.imu_grade import GRADES
 
 
 @pytest.fixture(scope="module")
@@ -45,6 +47,17 @@ def test_time_offset_follows_the_task(recording):
     estimated = calibrate_task(CalibrationTask(calibrate="extrinsic", estimate_time_offset=True), recording)
     assert fixed.time_offset == 0.0  # stays at the initial value
     assert estimated.time_offset != 0.0  # noisy data: the estimate moves off the exact truth 0
+
+
+def test_the_sensors_declared_imu_grade_enters_the_sigmas_as_a_calibrate_grade_would(recording):
+    task = CalibrationTask(calibrate="extrinsic")
+    perfect = calibrate_task(task, recording)  # make_recording's IMU is perfect and declares so
+    consumer = replace(recording, truth=replace(recording.truth, imu_grade=GRADES["consumer"]))
+    declared = calibrate_task(task, consumer)
+    np.testing.assert_allclose(declared.covariance, calibrate_task(task, recording, options=ViOptions(
+        imu_grade=GRADES["consumer"])).covariance)  # fmt: skip
+    assert declared.sigma("rot_x") > perfect.sigma("rot_x")
+    assert not any(np.any(t.covariance()) for t in perfect.unmodelled_imu)
 
 
 def test_two_stage_takes_the_intrinsics_from_the_given_frames(recording):

@@ -49,9 +49,12 @@ def test_an_imu_yaml_declares_its_grade_by_name_and_by_terms(tmp_path):
     assert read_imu_grade(path) is None  # Kalibr's file declares none
     write_imu_yaml(path, ImuNoise(), grade=GRADES["consumer"])
     assert read_imu_grade(path) == GRADES["consumer"] and read_imu_yaml(path) == ImuNoise()
-    text = path.read_text()
-    path.write_text(f"{text}imu_grade: calibrated\n")  # terms override the named grade's
-    assert read_imu_grade(path) == GRADES["consumer"]
+    assert "imu_grade: consumer" in path.read_text() and "_sigma" not in path.read_text()  # a named one by its name
+    own = replace(GRADES["consumer"], gyro_scale=0.003)
+    write_imu_yaml(path, ImuNoise(), grade=own)
+    assert read_imu_grade(path) == own and "imu_grade" not in path.read_text()  # another by its terms
+    path.write_text(f"{path.read_text()}imu_grade: calibrated\n")  # terms override the named grade's
+    assert read_imu_grade(path) == own
     write_imu_yaml(path, ImuNoise())
     path.write_text(f"{path.read_text()}gyroscope_scale_sigma: 0.002\n")  # the rest: the real-data default's
     assert read_imu_grade(path) == replace(GRADES[REAL_DATA_GRADE], gyro_scale=0.002)

@@ -395,19 +395,6 @@ def _declared_grade(args) -> ImuGrade | None:
     return read_imu_grade(args.imu_yaml) if args.imu_yaml else None
 
 
-def _with_grade(options: ViOptions, rec: Recording) -> ViOptions:
-    """``options`` with the declared grade, else ``calibrated`` where the imu.yaml's intrinsics correct the readings,
-    else a simulated recording's own, else a real IMU's default (``REAL_DATA_GRADE``); as they are where the
-    scale-misalignment model estimates the terms instead."""
-    if options.imu_grade is not None or options.estimate_imu_intrinsics:
-        return options
-    if options.imu_intrinsics is not None:
-        grade = imu_grade("calibrated")
-    else:
-        grade = rec.truth.imu_grade if rec.truth is not None else imu_grade(REAL_DATA_GRADE)
-    return replace(options, imu_grade=grade)
-
-
 def _imu_noise(args, rec: Recording) -> ImuNoise:
     if args.imu_yaml:
         return read_imu_yaml(args.imu_yaml)
@@ -501,7 +488,7 @@ def run(args: argparse.Namespace) -> CalibrationResult | RigCalibration:
             lens = s.camera if s.camera is not None else args.model
             check_exportable(vio_format, lens, len(names), args.task, sizes)
     noise = None if args.task == "intrinsic" else _imu_noise(args, rec)
-    options = _with_grade(options, rec)
+    options = options.with_default_grade(rec.truth.imu_grade if rec.truth is not None else None)
     noise, rate_note = (None, None) if noise is None else _at_data_rate(args, noise, rec)
     known = {n: s.camera for n, s in setup.items() if s.camera is not None}
     guesses = {n: s.T_cam_imu for n, s in setup.items() if s.T_cam_imu is not None}

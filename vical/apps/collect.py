@@ -43,7 +43,8 @@ from vical.calib.errors import CalibrationError
 from vical.calib.tasks import CalibrationTask
 from vical.collection.runner import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
 from vical.config_checks import ConfigError, from_mapping, require
-from vical.data import SensorTruth, Target
+from vical.data import ImuNoise, SensorTruth, Target
+from vical.data.imu_grade import ImuGrade
 from vical.env.calibration import declared_lens_spread
 from vical.env.information import Guess, LensSpread
 from vical.env.reachability import check_horizon
@@ -53,7 +54,14 @@ from vical.io.atomic import replace_directory, unused_sibling
 from vical.io.bag import BAG_FORMATS, write_bag
 from vical.io.errors import FormatError, RecordingWriteError
 from vical.io.euroc import EurocStreamWriter, read_euroc
-from vical.io.kalibr import read_camchain, read_imu_yaml, read_target_yaml, write_imu_yaml, write_target_yaml
+from vical.io.kalibr import (
+    read_camchain,
+    read_imu_grade,
+    read_imu_yaml,
+    read_target_yaml,
+    write_imu_yaml,
+    write_target_yaml,
+)
 from vical.io.yamlfile import dump_yaml
 from vical.policies.base import Policy
 from vical.policies.stopping import StopRule, with_stop
@@ -128,6 +136,11 @@ def _readable_file(value: Any, key: str, reader) -> Path | None:
     return path
 
 
+def _imu_declaration(path: Path) -> tuple[ImuNoise, ImuGrade | None]:
+    """What an imu.yaml declares: the noise densities and the grade (either's bad keys refused)."""
+    return read_imu_yaml(path), read_imu_grade(path)
+
+
 def check_settings(cfg: DictConfig) -> CollectSettings:
     """The settings of ``cfg``, checked before anything connects; ``ConfigError`` naming the key otherwise."""
     try:
@@ -156,7 +169,7 @@ def check_output(cfg: DictConfig) -> dict[str, Any]:
         raise ConfigError("the extrinsic task calibrates with known intrinsics: pass guess.camchain=<camchain.yaml>")
     rolling = cfg.get("rolling_shutter", False)
     require(isinstance(rolling, bool), "rolling_shutter", "true or false", rolling)
-    imu_yaml = _readable_file(guess.get("imu_yaml"), "guess.imu_yaml", read_imu_yaml)
+    imu_yaml = _readable_file(guess.get("imu_yaml"), "guess.imu_yaml", _imu_declaration)
     return {"out": path, "overwrite": overwrite, "task": task, "camchain": camchain, "imu_yaml": imu_yaml,
             "rolling_shutter": rolling}  # fmt: skip
 
@@ -185,6 +198,22 @@ def nominal_sensor(s: CollectionOutput, rig: Any) -> SensorTruth:
         raise ConfigError(f"guess.camchain={s.camchain} holds no T_cam_imu; write the nominal extrinsic into it")
     noise = read_imu_yaml(s.imu_yaml) if s.imu_yaml is not None else datasheet.imu_noise
     return SensorTruth(camera, T_cam_imu, shift or 0.0, noise)
+
+
+def declared_grade(s: CollectionOutput, rig: Any) -> ImuGrade | None:
+    """The IMU grade the sensor declares: ``guess.imu_yaml``'s, else the adapter's datasheet's; None where neither
+    declares one (the calibration then takes a real IMU's default)."""
+    declared = read_imu_grade(s.imu_yaml) if s.imu_yaml is not None else None
+    datasheet: SensorTruth | None = getattr(rig, "datasheet", None)
+    return declared if declared is not None or datasheet is None else datasheet.imu_grade
+
+
+def write_calibration_inputs(s: CollectionOutput, target: Target, nominal: SensorTruth, rig: Any) -> None:
+    """``<out>/target.yaml`` and ``<out>/imu.yaml`` (the nominal noise densities, the declared grade): what the
+    calibration of the recording reads (``calibrate_hint``)."""
+    s.out.mkdir(parents=True, exist_ok=True)
+    write_target_yaml(s.out / "target.yaml", target)
+    write_imu_yaml(s.out / "imu.yaml", nominal.imu_noise, grade=declared_grade(s, rig))
 
 
 def build_robot(robot: DictConfig, group: str = "robot") -> Any:
@@ -286,9 +315,7 @@ def _dry_run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp:
 
 def _run(cfg: DictConfig, s: CollectSettings, rig: Any, policy: Policy, mdp: MdpConfig, nominal: SensorTruth):
     """The collection; None when it stopped on a fault (reported), the result otherwise."""
-    s.out.mkdir(parents=True, exist_ok=True)
-    write_target_yaml(s.out / "target.yaml", board(cfg, rig))
-    write_imu_yaml(s.out / "imu.yaml", nominal.imu_noise)
+    write_calibration_inputs(s, board(cfg, rig), nominal, rig)
     collector = build_collector(cfg, s, rig, policy, mdp, nominal, s.out / "recording")
     writer = collector.stream.writer
     try:

@@ -191,7 +191,8 @@ def export(
             write_bag(rec, path_of(bag_name(bag_format)), topics, imu_topic, bag_format=bag_format)
         write_target_yaml(path_of("target.yaml"), rec.target)
         noise = rec.truth.imu_noise if rec.truth is not None else ImuNoise()
-        write_imu_yaml(path_of("imu.yaml"), noise, rostopic=imu_topic)
+        grade = rec.truth.imu_grade if rec.truth is not None else None  # the sensor declares it, as its noise
+        write_imu_yaml(path_of("imu.yaml"), noise, rostopic=imu_topic, grade=grade)
         if knows_every_truth(rec):
             write_chain(path_of("camchain.yaml"), truth_chain(rec, topics, with_imu=False))
             write_chain(path_of("camchain-imucam-truth.yaml"), truth_chain(rec, topics, with_imu=True))

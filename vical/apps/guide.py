@@ -45,6 +45,7 @@ from vical.apps.collect import (
     mdp_config,
     nominal_sensor,
     recording_kept,
+    write_calibration_inputs,
     write_summary,
 )
 from vical.apps.entry import interrupted_by, interrupted_status, interrupts_as_raised
@@ -60,7 +61,6 @@ from vical.env.reachability import check_horizon
 from vical.env.settings import MdpConfig
 from vical.io.atomic import replace_directory
 from vical.io.euroc import EurocStreamWriter
-from vical.io.kalibr import write_imu_yaml, write_target_yaml
 from vical.policies.base import Policy
 from vical.robot import Guidance, Person
 
@@ -199,9 +199,7 @@ def build_guide(
 
 def _run(cfg, s: GuideSettings, holder, policy, mdp, nominal, page) -> CollectResult | None:
     """The guided collection; None when it stopped on a fault (reported), the result otherwise."""
-    s.out.mkdir(parents=True, exist_ok=True)
-    write_target_yaml(s.out / "target.yaml", board(cfg, holder))
-    write_imu_yaml(s.out / "imu.yaml", nominal.imu_noise)
+    write_calibration_inputs(s, board(cfg, holder), nominal, holder)
     guide_ = build_guide(cfg, s, holder, policy, mdp, nominal, page, s.out / "recording")
     writer = guide_.stream.writer
     try:

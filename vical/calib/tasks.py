@@ -100,7 +100,7 @@ def calibrate_task(
     Args:
         task: the task.
         recording: frames, IMU and target; its ``truth`` supplies the known intrinsics of the
-            ``extrinsic`` solve and the IMU noise densities of the camera-IMU solves.
+            ``extrinsic`` solve and the IMU noise densities and grade of the camera-IMU solves.
         intrinsic_frames: frames of another recording of the same camera for the intrinsic
             stage of ``two_stage`` (the paper's baselines run an intrinsic trajectory, then an
             extrinsic one); None uses the recording's own frames.
@@ -110,8 +110,9 @@ def calibrate_task(
         CalibrationError: the data cannot be calibrated (too few views, degenerate motion, ...).
         ConfigError: the solve needs the truth or IMU data that the recording lacks.
     """
-    opts = replace(options or ViOptions(), estimate_time_offset=task.estimate_time_offset)
     truth = recording.truth
+    opts = replace(options or ViOptions(), estimate_time_offset=task.estimate_time_offset)
+    opts = opts.with_default_grade(truth.imu_grade if truth is not None else None)
     size = (truth.camera.width, truth.camera.height) if truth else None
     if task.calibrate != "intrinsic" and truth is None:
         raise ConfigError(f"task {task.name}: the recording carries no sensor truth (known intrinsics, IMU noise)")

@@ -39,7 +39,7 @@ import numpy as np
 
 from vical.data import ImuIntrinsics, ImuNoise, Target, TargetError
 from vical.data.errors import DataError
-from vical.data.imu_grade import REAL_DATA_GRADE, ImuGrade, imu_grade
+from vical.data.imu_grade import GRADES, REAL_DATA_GRADE, ImuGrade, imu_grade
 from vical.geometry import wide_angle
 from vical.geometry.camera import CameraModel, CameraModelError
 from vical.geometry.transforms import invert_transform
@@ -307,8 +307,17 @@ def write_imu_yaml(
             "M": intrinsics.M_gyro.tolist(), "A": intrinsics.A_gyro.tolist(), "C_gyro_i": intrinsics.C_gyro_i.tolist()
         }  # fmt: skip
     if grade is not None:
-        data.update({key: getattr(grade, name) for name, key in GRADE_KEYS.items()})
+        data.update(_grade_entries(grade))
     dump_yaml(path, data, comment=comment)
+
+
+def _grade_entries(grade: ImuGrade) -> dict[str, Any]:
+    """An imu.yaml's grade keys: the grade's name where it is a named one (what a person reads and edits), else
+    every term."""
+    name = next((name for name, named in GRADES.items() if named == grade), None)
+    if name is not None:
+        return {GRADE_NAME_KEY: name}
+    return {key: getattr(grade, term) for term, key in GRADE_KEYS.items()}
 
 
 # vical's keys of an imu.yaml's grade (vical.data.imu_grade; Kalibr ignores them): a named grade, then any term

@@ -509,7 +509,7 @@ def sample_rig(cfg: SensorSampling, rng: np.random.Generator, first: SensorTruth
 
 
 def mean_sensor(cfg: SensorSampling) -> SensorTruth:
-    """The sensor at the distributions' means (no distortion-centre offset, no biases)."""
+    """The sensor at the distributions' means (no distortion-centre offset, no biases), declaring its IMU's grade."""
     camera = CameraModel.from_hfov(
         cfg.camera.hfov.mean,
         cfg.camera.width,
@@ -520,7 +520,7 @@ def mean_sensor(cfg: SensorSampling) -> SensorTruth:
     T_body_imu = make_transform(euler_to_matrix(cfg.extrinsic.rpy_mean), np.asarray(cfg.extrinsic.position_mean))
     return SensorTruth(
         camera, cam_imu_from_body_imu(T_body_imu), cfg.time_offset.mean, cfg.imu.kalibr_noise(),
-        line_delay=cfg.camera.line_delay.mean,
+        line_delay=cfg.camera.line_delay.mean, imu_grade=cfg.imu.grade(),
     )  # fmt: skip
 
 

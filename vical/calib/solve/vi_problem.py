@@ -4,7 +4,7 @@ screen and closed-form initial estimate it is built from (``vical.calib.solve.vi
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import gtsam
 import numpy as np
@@ -20,7 +20,7 @@ from vical.calib.solve.outliers import reject_outliers
 from vical.calib.solve.rig import OtherCamera
 from vical.calib.solve.time_alignment import align, rotation_increments
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target, seconds_since
-from vical.data.imu_grade import ImuGrade
+from vical.data.imu_grade import REAL_DATA_GRADE, ImuGrade, imu_grade
 from vical.data.imu_model import ImuIntrinsics
 from vical.geometry import CameraModel, invert_transform, make_transform
 
@@ -94,7 +94,7 @@ class ViOptions:
         noise_weighting: how the sensors' measured noise enters the solve (``NOISE_WEIGHTINGS``).
         imu_grade: the IMU's declared scale and misalignment 1-sigma (``vical.data.imu_grade``), counted as a
             consider-prior where the data do not determine them (``vical.calib.solve.imu_model_error``); None: none
-            declared, as ``calibrated`` (callers with real data resolve the default: ``declared_grade``).
+            declared, as ``calibrated`` (``with_default_grade`` resolves a recording's default).
         rolling_shutter: estimate each camera's line delay (a rolling shutter) with the time offset, every
             corner seen at its row's time; without it a camera's given line delay (``CameraInput.line_delay``,
             0: a global shutter) is used as it is.
@@ -155,6 +155,19 @@ class ViOptions:
     @property
     def estimate_imu_intrinsics(self) -> bool:
         return self.imu_model == "scale-misalignment"
+
+    def with_default_grade(self, sensor_grade: ImuGrade | None) -> ViOptions:
+        """These options with the grade the solve counts: their own where declared; else ``calibrated`` where
+        ``imu_intrinsics`` correct the readings; else ``sensor_grade`` (a simulated sensor's own, None: unknown);
+        else a real IMU's default (``REAL_DATA_GRADE``). Unchanged where the scale-misalignment model estimates
+        the terms instead."""
+        if self.imu_grade is not None or self.estimate_imu_intrinsics:
+            return self
+        if self.imu_intrinsics is not None:
+            grade = imu_grade("calibrated")
+        else:
+            grade = sensor_grade if sensor_grade is not None else imu_grade(REAL_DATA_GRADE)
+        return replace(self, imu_grade=grade)
 
     def initial_imu_theta(self) -> np.ndarray:
         """The intrinsics' starting parameters (``ImuIntrinsics.vector``)."""
