@@ -69,3 +69,26 @@ def test_windows_that_share_one_imus_terms_are_judged_by_what_differs_between_th
     largest = np.array([bench_realdata._agreement(row, own, effects, [spread])[0] for row in x[:4000]])
     # the largest of three pairs' |z|: each standard normal, so below 2.39 in about 95 % of draws (1 - 3 * 0.0168)
     assert 0.93 < np.mean(largest < 2.39) < 0.97
+
+
+def test_a_joint_extrinsic_turned_into_the_published_frame_is_compared_there():
+    """A joint run whose principal point sits 7 px left of the published one, and whose extrinsic is the extrinsic
+    task's seen from that camera's frame: turned back, it lands where the extrinsic task's did, 0 sigma from it."""
+    from vical.geometry import CameraModel, camera_frame_turn
+
+    published = CameraModel("radtan", 752, 480, 458.654, 457.296, 367.215, 248.375, np.array([-0.283, 0.074, 0, 0]))
+    joint_camera = published.with_intrinsics(published.fx, published.fy, published.cx - 7.0, published.cy,
+                                             published.dist)  # fmt: skip
+    turn = np.eye(4)
+    turn[:3, :3] = camera_frame_turn(joint_camera, published)
+    T_extrinsic = bench_realdata.EUROC["cam0"]
+    sigmas = dict.fromkeys(("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z"), 1e-3)
+    joint = {"T_cam_imu": (np.linalg.inv(turn) @ T_extrinsic).tolist(), "camera": joint_camera.to_dict(),
+             "sigmas": sigmas}  # fmt: skip
+    found = {
+        (("cam0",), "joint", (0.0, 30.0)): {"cameras": {"cam0": joint}},
+        (("cam0",), "extrinsic", (0.0, 30.0)): {"cameras": {"cam0": {"T_cam_imu": T_extrinsic.tolist()}}},
+    }
+    [row] = bench_realdata.published_frame_rows(found, {"cam0": published})
+    assert re.search(r"turned 0\.8\d\d deg: EuRoC 0\.00\d deg 0\.00 mm Basalt 0\.3\d\d deg .* sigma 0\.0\d ", row), row
+    assert bench_realdata.pose_error(np.array(joint["T_cam_imu"]), T_extrinsic)[0] > 0.8  # untouched: 0.9 deg away

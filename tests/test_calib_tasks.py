@@ -1,5 +1,6 @@
 """Calibration tasks: the solve each runs and the score it reports, on synthetic recordings."""
 
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -58,6 +59,24 @@ def test_the_sensors_declared_imu_grade_enters_the_sigmas_as_a_calibrate_grade_w
         imu_grade=GRADES["consumer"])).covariance)  # fmt: skip
     assert declared.sigma("rot_x") > perfect.sigma("rot_x")
     assert not any(np.any(t.covariance()) for t in perfect.unmodelled_imu)
+
+
+def test_a_joint_result_says_its_rotation_is_relative_to_its_principal_point_and_how_to_pair_other_intrinsics(
+    recording,
+):
+    """The note's numbers: 1 px of principal point turns the frame by about 1 / f rad, and rho is the covariance's."""
+    result = calibrate_task(CalibrationTask(calibrate="joint"), recording)
+    [note] = [w for w in result.warnings if "relative to this calibration's principal point" in w]
+    turn = re.search(r"cx by 1 px turns it (\S+) deg about y, cy by 1 px (\S+) deg about x", note)
+    assert float(turn[1]) == pytest.approx(np.degrees(1 / result.camera.fx), abs=6e-4)
+    assert float(turn[2]) == pytest.approx(np.degrees(1 / result.camera.fy), abs=6e-4)
+    at = {n: i for i, n in enumerate(result.parameter_names)}
+    C = result.covariance
+    rho = C[at["cx"], at["rot_y"]] / np.sqrt(C[at["cx"], at["cx"]] * C[at["rot_y"], at["rot_y"]])
+    assert f"rho = {rho:+.2f}" in note
+    assert "--task extrinsic --intrinsics <camchain.yaml>, or --task two_stage" in note
+    extrinsic = calibrate_task(CalibrationTask(calibrate="extrinsic"), recording)
+    assert not any("principal point" in w for w in extrinsic.warnings)  # given intrinsics: nothing to pair
 
 
 def test_two_stage_takes_the_intrinsics_from_the_given_frames(recording):

@@ -10,6 +10,7 @@ from vical.geometry import (
     CameraModelError,
     body_imu_from_cam_imu,
     cam_imu_from_body_imu,
+    camera_frame_turn,
     euler_to_matrix,
     invert_transform,
     make_transform,
@@ -195,3 +196,20 @@ def test_step_pose_moves_in_world_and_adds_euler_increments():
     T2 = step_pose(T, [0.1, 0.0, -0.1], [0.05, 0.1, -0.2])
     np.testing.assert_allclose(T2[:3, 3], [1.1, 2.0, 2.9])
     np.testing.assert_allclose(matrix_to_euler(T2[:3, :3]), [0.15, -0.1, 0.1], atol=1e-12)
+
+
+@pytest.mark.parametrize("model", ["radtan", "ds"])
+def test_a_principal_point_shift_turns_the_camera_frame_by_about_its_angle_at_the_centre(model):
+    """Two calibrations of one camera, 7 px apart in cx: the frames' best-fit turn is about the optical axis's
+    angle between them (atan(7 / fx) at the centre, about y; the lens bends the rays further out by a little)."""
+    coefficients = np.array([-0.28, 0.07, 0.0, 0.0]) if model == "radtan" else np.array([-0.2, 0.6])
+    camera = CameraModel.from_hfov(np.radians(80), 752, 480, coefficients, model)
+    shifted = camera.with_intrinsics(camera.fx, camera.fy, camera.cx + 7.0, camera.cy, camera.dist)
+    turn = so3_log(camera_frame_turn(camera, shifted))
+    centre_rays = [shifted.bearings(np.array([[camera.cx, camera.cy]]))[0][0], np.array([0.0, 0.0, 1.0])]
+    at_centre = np.arccos(centre_rays[0] @ centre_rays[1])
+    assert turn[1] < 0 and abs(turn[1]) == pytest.approx(at_centre, rel=0.03)
+    assert np.hypot(turn[0], turn[2]) < 0.01 * abs(turn[1])
+    np.testing.assert_allclose(camera_frame_turn(camera, camera), np.eye(3), atol=1e-12)
+    # from each to the other: one turn and its inverse
+    assert np.allclose(camera_frame_turn(shifted, camera) @ camera_frame_turn(camera, shifted), np.eye(3), atol=1e-9)

@@ -1,7 +1,13 @@
 """Pure geometry: rigid transforms, rotation parameterisations and camera models."""
 
 from vical.geometry.camera import CAMERA_MODELS, COEFFICIENT_NAMES, DISTORTION_MODELS, CameraModel, CameraModelError
-from vical.geometry.frames import R_CAM_BODY, T_CAM_BODY, body_imu_from_cam_imu, cam_imu_from_body_imu
+from vical.geometry.frames import (
+    R_CAM_BODY,
+    T_CAM_BODY,
+    body_imu_from_cam_imu,
+    cam_imu_from_body_imu,
+    camera_frame_turn,
+)
 from vical.geometry.transforms import (
     euler_to_matrix,
     interpolate_transform,
@@ -32,6 +38,7 @@ __all__ = [
     "CameraModelError",
     "body_imu_from_cam_imu",
     "cam_imu_from_body_imu",
+    "camera_frame_turn",
     "euler_to_matrix",
     "interpolate_transform",
     "interpolate_transforms",

@@ -23,7 +23,7 @@ from vical.calib.solve.imu_integration import interpolate
 from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.solve.model_fit import is_model_warning
 from vical.calib.solve.observations import FrameObservation, collect_observations
-from vical.calib.solve.uncertainty import assess
+from vical.calib.solve.uncertainty import assess, principal_point_frame_warning
 from vical.calib.solve.visual_inertial import CameraInput, ViOptions, run_visual_inertial
 from vical.data import CameraFrames, ImuNoise, ImuSamples, Target, seconds_since
 from vical.geometry import CameraModel, invert_transform
@@ -217,10 +217,12 @@ def _with_joint_warnings(
     result: CalibrationResult, observations: list[FrameObservation], start: CalibrationResult
 ) -> CalibrationResult:
     """The joint result with the image coverage of every view and the start's warning that the lens model does not
-    fit (if any, with the other models' fit) before its own warnings."""
+    fit (if any, with the other models' fit) before its own warnings, and after them the note that its rotation is
+    relative to its principal point."""
     coverage = image_coverage_warnings(observations, (result.camera.width, result.camera.height))
     lens = [w for w in start.warnings if is_model_warning(w)]
-    return replace(result, warnings=coverage + lens + result.warnings, model_fits=start.model_fits)
+    frame = principal_point_frame_warning(result.camera, result.parameter_names, result.covariance)
+    return replace(result, warnings=coverage + lens + result.warnings + [frame], model_fits=start.model_fits)
 
 
 def _combine(intrinsic: CalibrationResult, extrinsic: CalibrationResult, elapsed: float) -> CalibrationResult:
