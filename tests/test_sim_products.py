@@ -8,6 +8,7 @@ from configs import composed, env_parts
 
 from vical.calib.tasks import CalibrationTask, run_task
 from vical.config_checks import ConfigError
+from vical.data.imu_grade import GRADES
 from vical.env.calibration import CalibrationEnv
 from vical.env.settings import Workspace
 from vical.env.workspace import board_in_sight, sight_range
@@ -106,9 +107,35 @@ def test_the_unit_drawn_from_a_seed_does_not_depend_on_its_product_draw():
     assert unit.time_offset == plain.time_offset
 
 
+GRADED = [
+    {"grade": "industrial", "weight": 0.4},
+    {"grade": "consumer", "weight": 0.4},
+    {"grade": "calibrated", "weight": 0.2},
+]
+
+
+def test_an_imu_grade_is_drawn_per_product_its_units_terms_from_it_and_its_datasheet_declares_it():
+    plain, graded = SensorSampling.from_config(PRACTITIONER), products(imu_grades=GRADED)
+    drawn = [draw_product(graded, seed) for seed in SEEDS]
+    for name, weight in (("industrial", 0.4), ("consumer", 0.4), ("calibrated", 0.2)):
+        share = sum(p.datasheet.imu_grade == GRADES[name] for p in drawn) / len(drawn)
+        assert abs(share - weight) < 4 * np.sqrt(weight * (1 - weight) / len(drawn))
+    for seed in SEEDS[:40]:  # the grade is drawn last: the rest of the product is the one drawn without it
+        product, before = draw_product(graded, seed), draw_product(plain, seed)
+        assert product.board == before.board and product.sampling.camera == before.sampling.camera
+        assert product.sampling.imu.grade() == product.datasheet.imu_grade
+    consumer = [p for p in drawn if p.datasheet.imu_grade == GRADES["consumer"]][:200]
+    scales = np.array([sample_sensor(p.sampling, np.random.default_rng(k)).imu_intrinsics.vector()[:3]
+                       for k, p in enumerate(consumer)])  # fmt: skip
+    assert np.std(scales) == pytest.approx(GRADES["consumer"].accel_scale, rel=0.15)
+    calibrated = next(p for p in drawn if p.datasheet.imu_grade.perfect)
+    assert sample_sensor(calibrated.sampling, np.random.default_rng(0)).imu_intrinsics.is_identity()
+
+
 @pytest.mark.parametrize(
     ("change", "key"),
     [
+        ({"imu_grades": [{"grade": "tactical"}]}, r"sensor\.products\.imu_grades\[0\]\.grade"),
         ({"imu_noise_scale": {"low": 2.0, "high": 1.0}}, r"sensor\.products\.imu_noise_scale\.high"),
         ({"imu_noise_scale": {"low": 0.0, "high": 1.0, "log": True}}, r"sensor\.products\.imu_noise_scale\.low"),
         (

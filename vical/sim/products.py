@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from vical.config_checks import ConfigError, from_mapping, require, require_range
+from vical.data.imu_grade import GRADES, ImuGrade
 from vical.sim.settings import BoardConfig
 
 
@@ -83,24 +84,40 @@ class BoardChoice:
 
 
 @dataclass(frozen=True)
+class GradeChoice:
+    """An IMU grade a product's IMU is made to (``vical.data.imu_grade.GRADES``: its scale and misalignment 1-sigma,
+    from which each unit's terms are drawn and which its datasheet declares)."""
+
+    grade: str
+    weight: float = 1.0
+
+
+@dataclass(frozen=True)
 class Products:
     """What varies from one episode's product to the next (each empty / null: the ``sensor`` group's own).
 
     Attributes:
         lenses: lens families, one drawn per episode with probability proportional to its weight.
         boards: printed boards, one drawn per episode likewise.
-        imu_noise_scale: the factor on all four of ``sensor.imu``'s noise densities (the IMU's grade); the
+        imu_noise_scale: the factor on all four of ``sensor.imu``'s noise densities (the IMU's noise grade); the
             datasheet states the scaled values.
+        imu_grades: the IMU's scale and misalignment grades, one drawn per episode likewise (empty: the
+            ``sensor.imu``'s own ``*_scale_std`` and ``*_misalignment_std``).
     """
 
     lenses: tuple[LensChoice, ...] = ()
     boards: tuple[BoardChoice, ...] = ()
     imu_noise_scale: Range | None = None
+    imu_grades: tuple[GradeChoice, ...] = ()
 
     def __post_init__(self) -> None:
         key = "sensor.products"
         object.__setattr__(self, "lenses", _choices(self.lenses, LensChoice, f"{key}.lenses"))
         object.__setattr__(self, "boards", _choices(self.boards, BoardChoice, f"{key}.boards"))
+        object.__setattr__(self, "imu_grades", _choices(self.imu_grades, GradeChoice, f"{key}.imu_grades"))
+        for index, choice in enumerate(self.imu_grades):
+            require(choice.grade in GRADES, f"{key}.imu_grades[{index}].grade", f"one of {list(GRADES)}",
+                    choice.grade)  # fmt: skip
         for index, lens in enumerate(self.lenses):
             lens.hfov.check(f"{key}.lenses[{index}].hfov")
         for index, board in enumerate(self.boards):
@@ -127,6 +144,10 @@ class Products:
     def imu_scale(self, rng: np.random.Generator) -> float:
         """The episode's factor on the IMU's noise (1 without ``imu_noise_scale``)."""
         return 1.0 if self.imu_noise_scale is None else self.imu_noise_scale.draw(rng)
+
+    def pick_grade(self, rng: np.random.Generator) -> ImuGrade | None:
+        """The episode's IMU scale and misalignment grade, or None (the ``sensor.imu``'s)."""
+        return GRADES[_pick(self.imu_grades, rng).grade] if self.imu_grades else None
 
 
 def _choices(items: Any, cls: type, key: str) -> tuple[Any, ...]:

@@ -386,10 +386,14 @@ def _one_product(cfg: SensorSampling, products: Products, rng: np.random.Generat
     lens = products.pick_lens(rng)
     board = products.pick_board(rng)
     scale = products.imu_scale(rng)
+    grade = products.pick_grade(rng)  # drawn last: products without grades are those drawn before them
     camera = cfg.camera if lens is None else _lens_camera(cfg.camera, *lens)
     i = cfg.imu
     imu = replace(i, accel_noise=i.accel_noise * scale, accel_random_walk=i.accel_random_walk * scale,
                   gyro_noise=i.gyro_noise * scale, gyro_random_walk=i.gyro_random_walk * scale)  # fmt: skip
+    if grade is not None:
+        imu = replace(imu, gyro_scale_std=grade.gyro_scale, gyro_misalignment_std=grade.gyro_misalignment,
+                      accel_scale_std=grade.accel_scale, accel_misalignment_std=grade.accel_misalignment)  # fmt: skip
     return Product(replace(cfg, camera=camera, imu=imu, products=None), board)
 
 
