@@ -11,12 +11,15 @@ import numpy as np
 import pytest
 from configs import composed
 
+from vical.calib.solve.imu_model_error import ACCEL, GYRO
 from vical.calib.solve.intrinsics import calibrate_intrinsics
 from vical.calib.solve.observations import collect_observations
 from vical.calib.solve.pipeline import calibrate_extrinsics, calibrate_joint
+from vical.calib.solve.visual_inertial import ViOptions
 from vical.calib.synthetic import make_recording, scattered_views, wide_angle_camera
 from vical.config_checks import ConfigError
 from vical.data import ImuNoise, ImuSamples, Target
+from vical.data.imu_grade import GRADES
 from vical.env.calibration import CalibrationEnv
 from vical.env.information import (
     GROUPS,
@@ -101,6 +104,32 @@ def test_predicted_axis_sigmas_are_the_calibrators_per_axis(recording, task):
     assert tracker.axis_sigmas()[3:].max() <= groups["translation"] * (1 + 1e-9)
     assert InformationTracker("intrinsic", rec.target, Guess(truth.camera, truth.T_cam_imu, 0.0, truth.imu_noise)
                               ).axis_sigmas() is None  # fmt: skip
+
+
+def test_a_declared_imu_grade_adds_what_the_calibrator_counts_for_it_where_the_data_show_nothing(recording):
+    """The grade's terms as considered columns: the prediction grows by the calibrator's own ``S Sigma_g S^T`` (its
+    unmodelled_imu effects at the grade's 1-sigma), within 15 % per axis; a ``calibrated`` grade adds nothing."""
+    rec, truth = recording, recording.truth
+    observations = collect_observations(rec.frames, rec.target)
+
+    def predicted(grade):
+        tracker = InformationTracker("extrinsic", rec.target, Guess(truth.camera, truth.T_cam_imu, truth.time_offset,
+                                                                    truth.imu_noise, 0.3, imu_grade=grade))  # fmt: skip
+        for k in range(0, len(observations), 10):
+            tracker.add_frames(observations[k : k + 10], rec.imu)
+        names, cov = tracker.covariance()
+        at = [i for i, name in enumerate(names) if name == "E"]
+        return cov[np.ix_(at, at)]
+
+    grade = GRADES["consumer"]
+    result = calibrate_extrinsics(rec.frames, rec.imu, rec.target, truth.camera, truth.imu_noise,
+                                  options=ViOptions(imu_grade=grade))  # fmt: skip
+    at = [result.parameter_names.index(n) for n in ("rot_x", "rot_y", "rot_z", "t_x", "t_y", "t_z")]
+    sensors = {"gyro": GYRO, "accelerometer": ACCEL}
+    counted = sum(t.effect[at] @ sensors[t.sensor].prior(grade) @ t.effect[at].T for t in result.unmodelled_imu)
+    added = predicted(grade) - predicted(None)
+    np.testing.assert_allclose(np.sqrt(np.diag(added)), np.sqrt(np.diag(counted)), rtol=0.15)
+    np.testing.assert_array_equal(predicted(GRADES["calibrated"]), predicted(None))
 
 
 def test_more_data_never_increases_the_predicted_sigma(recording):

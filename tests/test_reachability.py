@@ -81,6 +81,18 @@ def test_a_checkerboard_sensors_verdict_names_an_aprilgrid_where_the_board_limit
     assert ("lower-noise IMU" if group == "translation" else "synchronised clock") in line
 
 
+@pytest.mark.parametrize("graded, group, calibrated_imu", [(True, "rotation", True), (False, "rotation", False),
+                                                            (True, "time_offset", False)])  # fmt: skip
+def test_a_graded_imus_verdict_names_a_calibrated_imu_where_its_terms_limit_the_group(graded, group, calibrated_imu):
+    # The grade's scales and misalignments leave the extrinsic a floor (the information state's considered terms).
+    forecast = ReachForecast(TOLERANCES, imu_graded=graded)
+    others = dict.fromkeys(TOLERANCES, 0.5)
+    feed(forecast, lambda t: {**others, group: max(1.6, 30 / t)}, 60.0)
+    line = forecast.verdict(45.0).line()
+    assert ("an IMU whose scales and misalignments are calibrated" in line) == calibrated_imu
+    assert ("lower-noise IMU" if group == "rotation" else "synchronised clock") in line
+
+
 def test_a_group_in_reach_within_the_margin_is_not_called_out_of_reach():
     ratio = power_law(2.0, 20.0, 1.0)  # needs 80 s: past the 45 s horizon, within 2 x 45 s
     forecast = ReachForecast(TOLERANCES)

@@ -128,6 +128,9 @@ def test_an_imu_grade_is_drawn_per_product_its_units_terms_from_it_and_its_datas
     scales = np.array([sample_sensor(p.sampling, np.random.default_rng(k)).imu_intrinsics.vector()[:3]
                        for k, p in enumerate(consumer)])  # fmt: skip
     assert np.std(scales) == pytest.approx(GRADES["consumer"].accel_scale, rel=0.15)
+    unit = sample_sensor(consumer[0].sampling, np.random.default_rng(0)).imu_intrinsics
+    np.testing.assert_array_equal(unit.C_gyro_i, np.eye(3))  # no grade term for it: not drawn
+    assert not np.allclose(unit.M_gyro, np.eye(3))
     calibrated = next(p for p in drawn if p.datasheet.imu_grade.perfect)
     assert sample_sensor(calibrated.sampling, np.random.default_rng(0)).imu_intrinsics.is_identity()
 

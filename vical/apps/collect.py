@@ -44,7 +44,7 @@ from vical.calib.tasks import CalibrationTask
 from vical.collection.runner import Alignment, CollectionStopped, Collector, CollectResult, Limits, RobotEpisode
 from vical.config_checks import ConfigError, from_mapping, require
 from vical.data import ImuNoise, SensorTruth, Target
-from vical.data.imu_grade import ImuGrade
+from vical.data.imu_grade import REAL_DATA_GRADE, ImuGrade, imu_grade
 from vical.env.calibration import declared_lens_spread
 from vical.env.information import Guess, LensSpread
 from vical.env.reachability import check_horizon
@@ -181,7 +181,8 @@ def mdp_config(cfg: DictConfig, policy: Policy) -> MdpConfig:
 
 
 def nominal_sensor(s: CollectionOutput, rig: Any) -> SensorTruth:
-    """The sensor's nominal values: the ``guess`` files, else the adapter's datasheet."""
+    """The sensor's nominal values: the ``guess`` files, else the adapter's datasheet; its IMU grade as the
+    calibration of the recording will count it (``declared_grade``)."""
     datasheet: SensorTruth | None = getattr(rig, "datasheet", None)
     if datasheet is None and (s.camchain is None or s.imu_yaml is None):
         raise ConfigError(
@@ -197,7 +198,8 @@ def nominal_sensor(s: CollectionOutput, rig: Any) -> SensorTruth:
     if T_cam_imu is None:
         raise ConfigError(f"guess.camchain={s.camchain} holds no T_cam_imu; write the nominal extrinsic into it")
     noise = read_imu_yaml(s.imu_yaml) if s.imu_yaml is not None else datasheet.imu_noise
-    return SensorTruth(camera, T_cam_imu, shift or 0.0, noise)
+    grade = declared_grade(s, rig)  # none declared: what vical-calibrate will count, a real IMU's default
+    return SensorTruth(camera, T_cam_imu, shift or 0.0, noise, imu_grade=grade or imu_grade(REAL_DATA_GRADE))
 
 
 def declared_grade(s: CollectionOutput, rig: Any) -> ImuGrade | None:
@@ -285,7 +287,7 @@ def build_collector(
     writer = None if recording is None else EurocStreamWriter(
         recording, sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz, nominal.imu_noise)  # fmt: skip
     guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise,
-                  mdp.information.pixel_sigma, lens_spread(cfg, mdp, nominal))  # fmt: skip
+                  mdp.information.pixel_sigma, lens_spread(cfg, mdp, nominal), nominal.imu_grade)  # fmt: skip
     if progress is None:
         progress = print if cfg.get("progress") else (lambda line: None)
     return Collector(rig.arm, sensor, policy, mdp, s.task, board(cfg, rig), guess, writer, s.align, s.limits,

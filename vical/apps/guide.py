@@ -186,7 +186,7 @@ def build_guide(
     writer = None if recording is None else EurocStreamWriter(
         recording, sensor.image_size, sensor.camera_rate_hz, sensor.imu_rate_hz, nominal.imu_noise)  # fmt: skip
     guess = Guess(nominal.camera, nominal.T_cam_imu, nominal.time_offset, nominal.imu_noise,
-                  mdp.information.pixel_sigma, lens_spread(cfg, mdp, nominal))  # fmt: skip
+                  mdp.information.pixel_sigma, lens_spread(cfg, mdp, nominal), nominal.imu_grade)  # fmt: skip
     people = [p for p in (page, holder) if isinstance(p, Person)]
     if progress is None:
         progress = (lambda line: _say(page, line)) if cfg.get("progress") else (lambda line: None)

@@ -302,7 +302,8 @@ class CalibrationEnv(gym.Env):
         return self.task.calibrate if self.task.calibrate in TASK_GROUPS else "joint"
 
     def _guess(self) -> Guess:
-        """The information state's linearisation point: the episode's product datasheet (not the truth).
+        """The information state's linearisation point: the episode's product datasheet (not the truth), with the
+        IMU grade it declares.
 
         In the extrinsic task the intrinsics are given to the calibrator, so they are known here too.
         """
@@ -310,7 +311,8 @@ class CalibrationEnv(gym.Env):
         camera = self.truth.camera if self.task.calibrate == "extrinsic" else guess.camera
         settings = self.config.information
         return Guess(camera, guess.T_cam_imu, guess.time_offset, guess.imu_noise, settings.pixel_sigma,
-                     declared_lens_spread(settings, camera, self.product.sampling.camera, self.task))  # fmt: skip
+                     declared_lens_spread(settings, camera, self.product.sampling.camera, self.task),
+                     guess.imu_grade)  # fmt: skip
 
     def _observation(self) -> np.ndarray:
         return self.state.observation(self._offset, self._steps)

@@ -51,10 +51,12 @@ from scipy.stats import chi2
 from vical.calib.metrics import corner_ray
 from vical.calib.solve.corner_factors import CornerFactors, CornerKeys
 from vical.calib.solve.imu_integration import interpolate, interval_segments, preintegrate, preintegration_params
+from vical.calib.solve.imu_model_error import ACCEL, GYRO, mean_readings, reading_jacobian
 from vical.calib.solve.initialization import MIN_INIT_CORNERS, pnp
 from vical.calib.solve.observations import FrameObservation
 from vical.calib.solve.outliers import robust_sigma_of_norms
 from vical.data import ImuNoise, ImuSamples, Target
+from vical.data.imu_grade import ImuGrade
 from vical.geometry import CameraModel, invert_transform
 
 GROUPS = ("focal", "principal_point", "distortion", "rotation", "translation", "time_offset")
@@ -91,6 +93,7 @@ OFFSET_WEIGHTS = np.array([wa * wb for a, wa in zip(_NODES_1D, _WEIGHTS_1D, stri
 E_KEY, D_KEY, K_KEY, G_KEY = (gtsam.symbol(c, 0) for c in "edkg")
 X_KEY, V_KEY, B_KEY = (gtsam.symbol(c, 0) for c in "xvb")  # the current state (one at a time)
 X1_KEY, V1_KEY, B1_KEY = (gtsam.symbol(c, 1) for c in "xvb")  # the next one
+CONSIDERED = ("C", "M")  # shared columns never estimated: a decentred lens's misfit, the IMU grade's terms
 
 
 @dataclass(frozen=True)
@@ -102,6 +105,8 @@ class Guess:
         imu_noise: the IMU's declared noise densities; pixel_sigma: [px] corner noise, None to
             measure it from the PnP residuals; lens_spread: how far the real lens may be from the
             camera model's (``LensSpread``), considered in the prediction; None: the model is exact.
+        imu_grade: the IMU's declared scale and misalignment 1-sigma (``vical.data.imu_grade``), considered in the
+            prediction as the calibrator counts it; None or ``calibrated``: exact readings.
     """
 
     camera: CameraModel
@@ -110,6 +115,7 @@ class Guess:
     imu_noise: ImuNoise
     pixel_sigma: float | None = None
     lens_spread: LensSpread | None = None
+    imu_grade: ImuGrade | None = None
 
 
 @dataclass(frozen=True)
@@ -165,6 +171,10 @@ class InformationTracker:
             self._lens = guess.lens_spread.checked(guess.camera)
             self.shared_dims["C"] = self._lens.columns(guess.camera)
             self.shared.append("C")  # last: the estimated parameters keep their columns
+        self._grade_sigmas = _grade_sigmas(guess.imu_grade) if self.uses_imu else None
+        if self._grade_sigmas is not None:
+            self.shared_dims["M"] = len(self._grade_sigmas)
+            self.shared.append("M")  # considered as "C" is: the IMU's scales and misalignments
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -188,8 +198,8 @@ class InformationTracker:
 
     @property
     def estimated(self) -> list[str]:
-        """The shared parameters the calibration estimates (all but the considered offset)."""
-        return [name for name in self.shared if name != "C"]
+        """The shared parameters the calibration estimates (all but the considered lens and IMU terms)."""
+        return [name for name in self.shared if name not in CONSIDERED]
 
     @property
     def _shared_size(self) -> int:
@@ -272,6 +282,21 @@ class InformationTracker:
         q = (obs.points - T_target_cam[:3, 3]) @ T_target_cam[:3, :3]  # the corners in the camera frame
         misfit = lens_misfits(self.guess.camera, q, self._lens) / self.pixel_sigma
         _accumulate(block, linear, layout, extra=(misfit, self._lens_columns))
+
+    @property
+    def _grade_columns(self) -> slice:
+        start = sum(self.shared_dims[n] for n in self.shared if n != "M")
+        return slice(start, start + self.shared_dims["M"])
+
+    def _grade_terms(self, factor, linear, imu: ImuSamples, t_prev: float, t: float) -> np.ndarray:
+        """(15, 12) the IMU factor's whitened error per 1-sigma of each of the grade's terms (the gyro's six,
+        then the accelerometer's; ``vical.calib.solve.imu_model_error.reading_jacobian``): their effect, never
+        estimated, considered as the lens misfit's columns are."""
+        A, _ = gtsam.JacobianFactor(linear).jacobian()
+        t_imu, ends = (imu.t - self._t0) / 1e9, np.array([t_prev, t])
+        parts = [reading_jacobian(factor, A, mean_readings(t_imu, readings, ends)[0], sensor.bias_columns)
+                 for sensor, readings in ((GYRO, imu.gyro), (ACCEL, imu.accel))]  # fmt: skip
+        return np.hstack(parts) * self._grade_sigmas
 
     @property
     def _lens_columns(self) -> slice:
@@ -371,7 +396,11 @@ class InformationTracker:
         n = self._shared_size + 2 * IMU_DIM
         block = np.zeros((n, n))
         block[: self._joint.shape[0], : self._joint.shape[0]] = self._joint
-        _accumulate(block, factor.linearize(values), layout)
+        linear = factor.linearize(values)
+        terms = (
+            None if "M" not in self.shared else (self._grade_terms(factor, linear, imu, t_prev, t), self._grade_columns)
+        )
+        _accumulate(block, linear, layout, extra=terms)
         T_target_cam = T_imu @ invert_transform(self.guess.T_cam_imu)
         self._add_corners(block, obs, self._frame_keys(X1_KEY, V1_KEY, omega), values, layout, T_target_cam)
         self._joint = _marginalise(block, layout[X_KEY].start, layout[B_KEY].stop)  # the next state is now current
@@ -391,11 +420,12 @@ class InformationTracker:
         a declared lens spread's bias added)."""
         marginal = self._marginal()
         names = [name for name in self.estimated for _ in range(self.shared_dims[name])]
-        if "C" not in self.shared:
+        if not set(CONSIDERED) & set(self.shared):
             return names, np.linalg.inv(marginal)
         p = len(names)
         cov = np.linalg.inv(marginal[:p, :p])
         bias = cov @ marginal[:p, p:]  # (P, columns): each column's bias, weighted so that bias @ bias.T sums them
+        # (the lens misfit's and the IMU grade's alike: each column is one considered term at its 1-sigma)
         return names, cov + bias @ bias.T
 
     def sigmas(self) -> dict[str, float]:
@@ -432,6 +462,13 @@ class InformationTracker:
         _, _, d_params = self.guess.camera.project_jacobians(corner_ray(self.guess.camera))
         J = d_params[0][:, 4:]
         return float(np.sqrt(0.5 * np.trace(J @ cov @ J.T)))
+
+
+def _grade_sigmas(grade: ImuGrade | None) -> np.ndarray | None:
+    """(12,) the grade's 1-sigma of the gyro's six terms, then the accelerometer's; None for no or a perfect grade."""
+    if grade is None or grade.perfect:
+        return None
+    return np.sqrt(np.r_[np.diag(GYRO.prior(grade)), np.diag(ACCEL.prior(grade))])
 
 
 def _accumulate(block: np.ndarray, linear: gtsam.GaussianFactor, layout: dict[int, slice], extra=None) -> None:

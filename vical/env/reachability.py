@@ -57,13 +57,22 @@ REMEDIES = {
 # the unfinished joint runs as among the finished (docs/evaluation.md).
 APRILGRID = "an aprilgrid instead of the checkerboard (detected in part, so its views can reach the image's borders)"
 BOARD_LIMITED = ("focal", "principal_point", "distortion", "rotation", "translation")
+# An IMU grade's scales and misalignments leave the extrinsic an error no more data shrink (the information
+# state's considered terms): an IMU whose terms are calibrated removes it.
+CALIBRATED_IMU = (
+    "an IMU whose scales and misalignments are calibrated (an imu.yaml with Kalibr's scale-misalignment "
+    "intrinsics, or --imu-model scale-misalignment on a long recording)"
+)
+GRADE_LIMITED = ("rotation", "translation")
 
 
-def remedy(group: str, board_kind: str = "") -> str:
-    """What would bring ``group`` within reach on a sensor with a ``board_kind`` board, beside a longer horizon."""
+def remedy(group: str, board_kind: str = "", imu_graded: bool = False) -> str:
+    """What would bring ``group`` within reach on a sensor with a ``board_kind`` board and, where ``imu_graded``,
+    an IMU grade with scale and misalignment terms, beside a longer horizon."""
+    found = REMEDIES[group]
     if board_kind == "checkerboard" and group in BOARD_LIMITED:
-        return f"{APRILGRID}, or {REMEDIES[group]}"
-    return REMEDIES[group]
+        found = f"{APRILGRID}, or {found}"
+    return f"{CALIBRATED_IMU}, or {found}" if imu_graded and group in GRADE_LIMITED else found
 
 
 @dataclass(frozen=True)
@@ -165,11 +174,14 @@ class ReachForecast:
         tolerances: each goal group's tolerance in its own units (``{group: value}``).
         settings: warm-up, margin and rate window.
         board_kind: the sensor's board (``Target.kind``; "" unknown): what the verdict's remedy names.
+        imu_graded: the sensor's IMU declares scale and misalignment terms (a grade other than ``calibrated``): the
+            remedy names a calibrated IMU first.
     """
 
     tolerances: Mapping[str, float]
     settings: ReachSettings = field(default_factory=ReachSettings)
     board_kind: str = ""
+    imu_graded: bool = False
     _times: list[float] = field(default_factory=list)
     _info: list[dict[str, float]] = field(default_factory=list)  # J = ratio^-2 per group, per update
     _needed: list[dict[str, float]] = field(default_factory=list)  # each group's needed_s at each update
@@ -236,7 +248,7 @@ class ReachForecast:
         f = groups[group]
         tolerance = float(self.tolerances[group])
         return OutOfReach(group, tolerance, tolerance * f.ratio_at_horizon, UNITS[group], f.needed_s, horizon_s,
-                          self.time_s, remedy(group, self.board_kind))  # fmt: skip
+                          self.time_s, remedy(group, self.board_kind, self.imu_graded))  # fmt: skip
 
     def _late_for(self, group: str, limit_s: float) -> float:
         """[s] how long ``group`` has been predicted to need more than ``limit_s`` without a break (-1: not now)."""

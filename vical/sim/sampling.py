@@ -218,10 +218,13 @@ class ImuSampling:
         gyro_bias_std: sigma of the initial gyro bias [rad/s] (0: no bias).
         accel_scale_std, gyro_scale_std: sigma of the scale factors' departure from 1 [-].
         accel_misalignment_std: sigma of the accelerometer's axis misalignments [rad].
-        gyro_misalignment_std: sigma of the gyro's axis misalignments and of each component of
-            its rotation from the IMU frame [rad].
+        gyro_misalignment_std: sigma of the gyro's axis misalignments and, unless ``gyro_rotation_std`` is set, of
+            each component of its rotation from the IMU frame [rad].
         g_sensitivity_std: sigma of each entry of the gyro's g-sensitivity [(rad/s)/(m/s^2)].
             All five 0 (the default): exact axes, and nothing is drawn (``vical.data.ImuIntrinsics``).
+        gyro_rotation_std: sigma of each component of the gyro's rotation from the IMU (accelerometer) frame,
+            ``C_gyro_i`` [rad]; None: ``gyro_misalignment_std`` (a product's IMU grade sets 0: a grade declares no
+            such term).
 
     The rate and the four noise values default to ``vical.data.ImuNoise``'s (the paper's IMU, continuous units).
     """
@@ -240,6 +243,7 @@ class ImuSampling:
     gyro_scale_std: float = 0.0
     gyro_misalignment_std: float = 0.0
     g_sensitivity_std: float = 0.0
+    gyro_rotation_std: float | None = None
 
     def __post_init__(self) -> None:
         key = "sensor.imu"
@@ -254,12 +258,15 @@ class ImuSampling:
         require_range(f"{key}.gyro_bias_std", self.gyro_bias_std, 0.0)
         for name in INTRINSIC_STDS:
             require_range(f"{key}.{name}", getattr(self, name), 0.0, 0.1)
+        if self.gyro_rotation_std is not None:
+            require_range(f"{key}.gyro_rotation_std", self.gyro_rotation_std, 0.0, 0.1)
 
     def intrinsics_spread(self) -> np.ndarray:
         """(24,) sigmas of ``ImuIntrinsics.vector(g_sensitivity=True)``."""
+        rotation = self.gyro_misalignment_std if self.gyro_rotation_std is None else self.gyro_rotation_std
         return np.repeat(
             [self.accel_scale_std, self.accel_misalignment_std, self.gyro_scale_std, self.gyro_misalignment_std,
-             self.gyro_misalignment_std, self.g_sensitivity_std],
+             rotation, self.g_sensitivity_std],
             [3, 3, 3, 3, 3, 9],
         )  # fmt: skip
 
@@ -392,8 +399,11 @@ def _one_product(cfg: SensorSampling, products: Products, rng: np.random.Generat
     imu = replace(i, accel_noise=i.accel_noise * scale, accel_random_walk=i.accel_random_walk * scale,
                   gyro_noise=i.gyro_noise * scale, gyro_random_walk=i.gyro_random_walk * scale)  # fmt: skip
     if grade is not None:
+        # a grade declares no term for the gyro triad's rotation from the accelerometer's (C_gyro_i): neither the
+        # calibrator nor the information state counts one, so none is drawn (docs/sensors.md)
         imu = replace(imu, gyro_scale_std=grade.gyro_scale, gyro_misalignment_std=grade.gyro_misalignment,
-                      accel_scale_std=grade.accel_scale, accel_misalignment_std=grade.accel_misalignment)  # fmt: skip
+                      accel_scale_std=grade.accel_scale, accel_misalignment_std=grade.accel_misalignment,
+                      gyro_rotation_std=0.0)  # fmt: skip
     return Product(replace(cfg, camera=camera, imu=imu, products=None), board)
 
 

@@ -174,7 +174,7 @@ def imu_model_error(
     C, Cs = np.zeros((P, m)), np.zeros((P, m))  # A^T B and sum_k s_k A_k^T B_k
     BtB, BtBs, Btb = np.zeros((m, m)), np.zeros((m, m)), np.zeros(m)
     window_pulls = np.zeros((system.gradients.shape[1], m))
-    means = _mean_readings(imu[0], imu[1], state_times)
+    means = mean_readings(imu[0], imu[1], state_times)
     for n, factor, _ in imu_factors:
         A, b = linear.at(n).jacobian()
         B = reading_jacobian(factor, A, means[n], sensor.bias_columns)
@@ -232,7 +232,7 @@ def evidence_threshold(windows: int | None) -> float:
     return float(p * (windows - 1) / (windows - p) * quantile)
 
 
-def _mean_readings(t: np.ndarray, readings: np.ndarray, state_times: np.ndarray) -> np.ndarray:
+def mean_readings(t: np.ndarray, readings: np.ndarray, state_times: np.ndarray) -> np.ndarray:
     """(S - 1, 3) the mean raw reading between consecutive states (trapezoid integral)."""
     integral = interpolate(t, cumulative_angle(t, readings), state_times)
     return np.diff(integral, axis=0) / np.diff(state_times)[:, None]
