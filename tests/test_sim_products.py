@@ -107,16 +107,13 @@ def test_the_unit_drawn_from_a_seed_does_not_depend_on_its_product_draw():
     assert unit.time_offset == plain.time_offset
 
 
-GRADED = [
-    {"grade": "industrial", "weight": 0.4},
-    {"grade": "consumer", "weight": 0.4},
-    {"grade": "calibrated", "weight": 0.2},
-]
+GRADED = composed("evaluate", ["sensor=practitioner_graded"])["sensor"]
 
 
 def test_an_imu_grade_is_drawn_per_product_its_units_terms_from_it_and_its_datasheet_declares_it():
-    plain, graded = SensorSampling.from_config(PRACTITIONER), products(imu_grades=GRADED)
+    plain, graded = SensorSampling.from_config(PRACTITIONER), SensorSampling.from_config(GRADED)
     drawn = [draw_product(graded, seed) for seed in SEEDS]
+    assert graded.products.lenses == plain.products.lenses and graded.products.boards == plain.products.boards
     for name, weight in (("industrial", 0.4), ("consumer", 0.4), ("calibrated", 0.2)):
         share = sum(p.datasheet.imu_grade == GRADES[name] for p in drawn) / len(drawn)
         assert abs(share - weight) < 4 * np.sqrt(weight * (1 - weight) / len(drawn))
