@@ -288,13 +288,16 @@ class InformationTracker:
         start = sum(self.shared_dims[n] for n in self.shared if n != "M")
         return slice(start, start + self.shared_dims["M"])
 
-    def _grade_terms(self, factor, linear, imu: ImuSamples, t_prev: float, t: float) -> np.ndarray:
+    def _grade_terms(self, factor, linear, imu: ImuSamples, t_imu: np.ndarray, t_prev: float, t: float) -> np.ndarray:
         """(15, 12) the IMU factor's whitened error per 1-sigma of each of the grade's terms (the gyro's six,
         then the accelerometer's; ``vical.calib.solve.imu_model_error.reading_jacobian``): their effect, never
-        estimated, considered as the lens misfit's columns are."""
+        estimated, considered as the lens misfit's columns are. The mean readings come from the samples around
+        the interval only (``t_imu`` [s]: every sample so far, which grows with the recording)."""
         A, _ = gtsam.JacobianFactor(linear).jacobian()
-        t_imu, ends = (imu.t - self._t0) / 1e9, np.array([t_prev, t])
-        parts = [reading_jacobian(factor, A, mean_readings(t_imu, readings, ends)[0], sensor.bias_columns)
+        around = slice(max(int(np.searchsorted(t_imu, t_prev, "right")) - 1, 0), int(np.searchsorted(t_imu, t)) + 1)
+        ends = np.array([t_prev, t])
+        parts = [reading_jacobian(factor, A, mean_readings(t_imu[around], readings[around], ends)[0],
+                                  sensor.bias_columns)
                  for sensor, readings in ((GYRO, imu.gyro), (ACCEL, imu.accel))]  # fmt: skip
         return np.hstack(parts) * self._grade_sigmas
 
@@ -397,9 +400,9 @@ class InformationTracker:
         block = np.zeros((n, n))
         block[: self._joint.shape[0], : self._joint.shape[0]] = self._joint
         linear = factor.linearize(values)
-        terms = (
-            None if "M" not in self.shared else (self._grade_terms(factor, linear, imu, t_prev, t), self._grade_columns)
-        )
+        terms = None
+        if "M" in self.shared:
+            terms = (self._grade_terms(factor, linear, imu, t_imu, t_prev, t), self._grade_columns)
         _accumulate(block, linear, layout, extra=terms)
         T_target_cam = T_imu @ invert_transform(self.guess.T_cam_imu)
         self._add_corners(block, obs, self._frame_keys(X1_KEY, V1_KEY, omega), values, layout, T_target_cam)

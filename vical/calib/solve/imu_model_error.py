@@ -90,9 +90,9 @@ class ImuModelError:
         estimate: (6,) the step from the ideal sensor: scales - 1 (x, y, z), misalignments (yx, zx, zy) [rad].
         covariance: (6, 6) its covariance.
         statistic: ``estimate^T covariance^-1 estimate``.
-        threshold: the statistic an ideal gyro exceeds with probability ``FALSE_ALARM`` (``evidence_threshold``).
+        threshold: the statistic an ideal sensor exceeds with probability ``FALSE_ALARM`` (``evidence_threshold``).
         sensitivity: (K, 6) the first-order shift of the solve's variables (the keys' tangent columns) per unit of
-            the gyro's entries, were they corrected.
+            the sensor's entries, were they corrected.
         prior: (6, 6) the IMU grade's covariance of the entries (``Sensor.prior``; zero: ``calibrated``).
     """
 

@@ -173,15 +173,20 @@ def group_of(name: str) -> str | None:
     return next((group for group, names in GROUPS.items() if name in names), None)
 
 
+def correlation_matrix(covariance: np.ndarray) -> np.ndarray:
+    """(P, P) the correlations of ``covariance`` (not finite where a parameter's variance is 0 or not finite)."""
+    sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return covariance / np.outer(sigma, sigma)
+
+
 def correlations(names: list[str], covariance: np.ndarray, limit: int = 5) -> list[Correlation]:
     """The ``limit`` strongest correlations between parameters of different groups, strongest first.
 
     Args:
         names: parameter names (P,); covariance: (P, P) their covariance.
     """
-    sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rho = covariance / np.outer(sigma, sigma)
+    rho = correlation_matrix(covariance)
     pairs = []
     for i, a in enumerate(names):
         for j in range(i + 1, len(names)):
@@ -219,10 +224,8 @@ def principal_point_frame_warning(camera: CameraModel, names: list[str], covaria
     centre = np.array([[camera.cx, camera.cy], [camera.cx + 1.0, camera.cy], [camera.cx, camera.cy + 1.0]])
     rays, _ = camera.bearings(centre)
     turn = np.degrees(np.arccos(np.clip(rays[1:] @ rays[0], -1.0, 1.0)))
-    sigma = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
-    at = {n: i for i, n in enumerate(names)}
-    with np.errstate(divide="ignore", invalid="ignore"):
-        rho = [covariance[at[a], at[b]] / (sigma[at[a]] * sigma[at[b]]) for a, b in (("cx", "rot_y"), ("cy", "rot_x"))]
+    at, correlation = {n: i for i, n in enumerate(names)}, correlation_matrix(covariance)
+    rho = [correlation[at[a], at[b]] for a, b in (("cx", "rot_y"), ("cy", "rot_x"))]
     return (
         f"the camera-IMU rotation is relative to this calibration's principal point: moving cx by 1 px turns it "
         f"{turn[0]:.3f} deg about y, cy by 1 px {turn[1]:.3f} deg about x (in this data rho = {rho[0]:+.2f} and "
