@@ -197,6 +197,12 @@ class InformationTracker:
         self.last_pose: np.ndarray | None = None  # T_target_cam (4, 4) of the last frame added (PnP, guessed camera)
 
     @property
+    def counts_imu_grade(self) -> bool:
+        """Whether the prediction considers an IMU grade's terms (a camera + IMU task, a grade other than
+        ``calibrated``)."""
+        return "M" in self.shared
+
+    @property
     def estimated(self) -> list[str]:
         """The shared parameters the calibration estimates (all but the considered lens and IMU terms)."""
         return [name for name in self.shared if name not in CONSIDERED]

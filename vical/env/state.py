@@ -115,9 +115,8 @@ class EpisodeState:
             self.information = InformationTracker(task, self.target, guess)
             self._update_ratios()
             tolerances = self.config.information.tolerances
-            graded = guess.imu_grade is not None and not guess.imu_grade.perfect
             self.reach = ReachForecast({g: tolerances.of(g) for g in self.goal_ratios}, board_kind=self.target.kind,
-                                       imu_graded=graded)  # fmt: skip
+                                       imu_graded=self.information.counts_imu_grade)  # fmt: skip
             if self.config.information.sensor_context:
                 self._sensor = sensor_features(self.target, guess)
 

@@ -339,14 +339,14 @@ def read_imu_grade(path: str | os.PathLike) -> ImuGrade | None:
     given = {name: key for name, key in GRADE_KEYS.items() if key in entry}
     if GRADE_NAME_KEY not in entry and not given:
         return None
-    terms = {}
-    for name, key in [(None, GRADE_NAME_KEY), *given.items()]:
+    try:
+        base = imu_grade(str(entry.get(GRADE_NAME_KEY, REAL_DATA_GRADE)))
+    except DataError as exc:
+        raise KalibrFormatError(f"{where}: {GRADE_NAME_KEY}: {exc}") from exc
+    terms = {name: float(as_floats(entry[key], 1, key, where, KalibrFormatError)[0]) for name, key in given.items()}
+    for name, key in given.items():
         try:
-            if name is None:
-                base = imu_grade(str(entry.get(GRADE_NAME_KEY, REAL_DATA_GRADE)))
-            else:
-                terms[name] = float(as_floats(entry[key], 1, key, where, KalibrFormatError)[0])
-                ImuGrade(**{name: terms[name]})  # refused by its own key
+            ImuGrade(**{name: terms[name]})  # refused by its own key
         except DataError as exc:
             raise KalibrFormatError(f"{where}: {key}: {exc}") from exc
     return replace(base, **terms)

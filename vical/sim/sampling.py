@@ -275,6 +275,14 @@ class ImuSampling:
         return ImuGrade(self.gyro_scale_std, self.gyro_misalignment_std, self.accel_scale_std,
                         self.accel_misalignment_std)  # fmt: skip
 
+    def made_to(self, grade: ImuGrade) -> ImuSampling:
+        """This IMU with its scales and misalignments drawn from ``grade`` (``grade()`` gives it back). A grade
+        declares no term for the gyro triad's rotation from the accelerometer's (C_gyro_i): neither the calibrator
+        nor the information state counts one, so none is drawn (docs/sensors.md)."""
+        return replace(self, gyro_scale_std=grade.gyro_scale, gyro_misalignment_std=grade.gyro_misalignment,
+                       accel_scale_std=grade.accel_scale, accel_misalignment_std=grade.accel_misalignment,
+                       gyro_rotation_std=0.0)  # fmt: skip
+
     def kalibr_noise(self) -> ImuNoise:
         """The noise model as Kalibr densities (converting per-sample sigmas when ``discrete``)."""
         if self.noise_units == "continuous":
@@ -399,11 +407,7 @@ def _one_product(cfg: SensorSampling, products: Products, rng: np.random.Generat
     imu = replace(i, accel_noise=i.accel_noise * scale, accel_random_walk=i.accel_random_walk * scale,
                   gyro_noise=i.gyro_noise * scale, gyro_random_walk=i.gyro_random_walk * scale)  # fmt: skip
     if grade is not None:
-        # a grade declares no term for the gyro triad's rotation from the accelerometer's (C_gyro_i): neither the
-        # calibrator nor the information state counts one, so none is drawn (docs/sensors.md)
-        imu = replace(imu, gyro_scale_std=grade.gyro_scale, gyro_misalignment_std=grade.gyro_misalignment,
-                      accel_scale_std=grade.accel_scale, accel_misalignment_std=grade.accel_misalignment,
-                      gyro_rotation_std=0.0)  # fmt: skip
+        imu = imu.made_to(grade)
     return Product(replace(cfg, camera=camera, imu=imu, products=None), board)
 
 
